@@ -1,0 +1,1 @@
+"""directgeo ground app: flight store, trajectory re-processing and the final adjustment."""

@@ -1,0 +1,1 @@
+"""Hardware behind small interfaces: byte streams, edge sources, clocks (real and fake back-ends)."""

@@ -1,0 +1,1 @@
+"""The receiver boundary: framing, decoding (the only pyubx2/pyrtcm users) and configuration."""

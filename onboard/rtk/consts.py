@@ -1,0 +1,20 @@
+"""Physical and GPS constants (IS-GPS-200, WGS 84)."""
+
+CLIGHT_M_S = 299_792_458.0
+"""Speed of light in vacuum, m/s."""
+MU_GPS_M3_S2 = 3.986005e14
+"""Earth's gravitational constant used by GPS, m³/s²."""
+OMEGA_E_RAD_S = 7.2921151467e-5
+"""Earth rotation rate (WGS 84), rad/s."""
+FREQ_L1_HZ = 1_575_420_000.0
+"""GPS L1 carrier frequency, Hz."""
+LAMBDA_L1_M = CLIGHT_M_S / FREQ_L1_HZ
+"""GPS L1 carrier wavelength, m (≈ 0.1903 m)."""
+WGS84_A_M = 6_378_137.0
+"""WGS 84 semi-major axis, m."""
+WGS84_F = 1.0 / 298.257223563
+"""WGS 84 flattening."""
+WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
+"""WGS 84 first eccentricity squared."""
+F_REL_S_SQRT_M = -4.442807633e-10
+"""Relativistic clock-correction constant F = −2√μ/c², s/√m (IS-GPS-200 20.3.3.3.3.1)."""

@@ -1,0 +1,183 @@
+"""Satellite position, velocity and clock from GPS LNAV broadcast ephemerides.
+
+Follows IS-GPS-200 20.3.3.4.3 and RTKLIB ephemeris.c eph2pos()/eph2clk()/satposs().
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from onboard.gnsstime import GpsTime
+from onboard.rtk.consts import CLIGHT_M_S, F_REL_S_SQRT_M, MU_GPS_M3_S2, OMEGA_E_RAD_S
+from onboard.rtk.types import Ephemeris
+
+MAX_EPH_AGE_S = 7200.0 + 60.0
+"""Largest |t − toe| for which an ephemeris is used (RTKLIB MAXDTOE for GPS, s)."""
+
+# URA index → σ (m), IS-GPS-200 20.3.3.3.1.3
+_URA_M = (2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0, 1536.0, 3072.0, 6144.0)
+
+
+def ura_sigma_m(ura_index: int) -> float:
+    """User range accuracy σ (m) for a URA index (6144 m and beyond for 15 = no accuracy prediction)."""
+    return _URA_M[ura_index] if 0 <= ura_index < len(_URA_M) else 6144.0
+
+
+def eph_clock_s(eph: Ephemeris, t: GpsTime) -> float:
+    """Satellite clock bias (s) at GPS time `t` without relativity or TGD (RTKLIB eph2clk, one iteration)."""
+    dt = t.diff_s(eph.toc)
+    for _ in range(2):
+        dt = dt - (eph.af0_s + eph.af1_s_s * dt + eph.af2_s_s2 * dt * dt)
+    return eph.af0_s + eph.af1_s_s * dt + eph.af2_s_s2 * dt * dt
+
+
+def eph_position(eph: Ephemeris, t: GpsTime) -> tuple[npt.NDArray[np.float64], float]:
+    """Satellite antenna position (ECEF m, at transmission time `t`, frame of `t`) and clock bias (s).
+
+    The clock bias includes the relativistic eccentricity term, not the TGD (apply −TGD for L1 C/A).
+    """
+    tk = t.diff_s(eph.toe)
+    a = eph.sqrt_a * eph.sqrt_a
+    n = np.sqrt(MU_GPS_M3_S2 / (a * a * a)) + eph.delta_n_rad_s
+    mk = eph.m0_rad + n * tk
+    ek = mk
+    for _ in range(30):
+        e_next = mk + eph.e * np.sin(ek)
+        if abs(e_next - ek) < 1e-14:
+            ek = e_next
+            break
+        ek = e_next
+    sin_e, cos_e = np.sin(ek), np.cos(ek)
+    u = np.arctan2(np.sqrt(1.0 - eph.e * eph.e) * sin_e, cos_e - eph.e) + eph.omega_rad
+    r = a * (1.0 - eph.e * cos_e)
+    inc = eph.i0_rad + eph.idot_rad_s * tk
+    sin2u, cos2u = np.sin(2.0 * u), np.cos(2.0 * u)
+    u += eph.cus_rad * sin2u + eph.cuc_rad * cos2u
+    r += eph.crs_m * sin2u + eph.crc_m * cos2u
+    inc += eph.cis_rad * sin2u + eph.cic_rad * cos2u
+    x, y = r * np.cos(u), r * np.sin(u)
+    omega = eph.omega0_rad + (eph.omega_dot_rad_s - OMEGA_E_RAD_S) * tk - OMEGA_E_RAD_S * eph.toe_s
+    cos_o, sin_o, cos_i = np.cos(omega), np.sin(omega), np.cos(inc)
+    pos = np.array([x * cos_o - y * cos_i * sin_o, x * sin_o + y * cos_i * cos_o, y * np.sin(inc)])
+    dts = eph_clock_s(eph, t) + F_REL_S_SQRT_M * eph.e * eph.sqrt_a * sin_e
+    return pos, float(dts)
+
+
+def eph_position_velocity(
+    eph: Ephemeris, t: GpsTime, dt_s: float = 1e-3
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], float, float]:
+    """Position (ECEF m), velocity (m/s), clock bias (s) and clock drift (s/s) at transmission time `t`.
+
+    Velocity and drift by a forward difference over `dt_s`, as RTKLIB satpos() does.
+    """
+    p0, c0 = eph_position(eph, t)
+    p1, c1 = eph_position(eph, t.add_s(dt_s))
+    return p0, (p1 - p0) / dt_s, c0, (c1 - c0) / dt_s
+
+
+@dataclass
+class SatState:
+    """Satellite states for one epoch, arrays aligned with the requested PRNs.
+
+    `pos_m` (n,3) ECEF at transmission time (not yet rotated for the signal travel time), `vel_m_s` (n,3),
+    `clock_s` (n,) bias incl. relativity and −TGD (L1 C/A), `drift_s_s` (n,), `var_m2` (n,) URA variance,
+    `ok` (n,) False where no usable ephemeris exists or the satellite is unhealthy.
+    """
+
+    prn: npt.NDArray[np.int16]
+    pos_m: npt.NDArray[np.float64]
+    vel_m_s: npt.NDArray[np.float64]
+    clock_s: npt.NDArray[np.float64]
+    drift_s_s: npt.NDArray[np.float64]
+    var_m2: npt.NDArray[np.float64]
+    ok: npt.NDArray[np.bool_]
+
+
+class EphemerisStore:
+    """Latest broadcast ephemerides per PRN; picks the one whose toe is closest to the requested time."""
+
+    def __init__(self, ephemerides: Iterable[Ephemeris] = ()) -> None:
+        self._by_prn: dict[int, list[Ephemeris]] = {}
+        for eph in ephemerides:
+            self.add(eph)
+
+    def add(self, eph: Ephemeris) -> bool:
+        """Store `eph`; returns False when an identical (prn, iode, toe) set is already held."""
+        lst = self._by_prn.setdefault(eph.prn, [])
+        for i, old in enumerate(lst):
+            if old.toe == eph.toe and old.iode == eph.iode:
+                if old == eph:
+                    return False
+                lst[i] = eph
+                return True
+        lst.append(eph)
+        lst.sort(key=lambda e: e.toe)
+        return True
+
+    def __len__(self) -> int:
+        return sum(len(v) for v in self._by_prn.values())
+
+    def prns(self) -> list[int]:
+        """PRNs for which at least one ephemeris is held."""
+        return sorted(self._by_prn)
+
+    def select(self, prn: int, t: GpsTime) -> Ephemeris | None:
+        """The ephemeris of `prn` with toe nearest `t` within MAX_EPH_AGE_S, or None."""
+        best, best_dt = None, MAX_EPH_AGE_S
+        for eph in self._by_prn.get(prn, ()):
+            dt = abs(t.diff_s(eph.toe))
+            if dt <= best_dt:
+                best, best_dt = eph, dt
+        return best
+
+    def all(self) -> list[Ephemeris]:
+        """Every held ephemeris, by PRN then toe."""
+        return [e for prn in sorted(self._by_prn) for e in self._by_prn[prn]]
+
+
+def satellite_states(
+    store: EphemerisStore, prns: npt.ArrayLike, t_rx: GpsTime, pr_m: npt.ArrayLike
+) -> SatState:
+    """Satellite states at signal transmission for receiver time `t_rx` and pseudoranges `pr_m` (m).
+
+    Transmission time = t_rx − pr/c − satellite clock (RTKLIB satposs()); the result is in the ECEF frame
+    of the transmission instant (the caller rotates for Earth rotation during travel, see geometric_range).
+    """
+    prn_arr = np.asarray(prns, dtype=np.int16)
+    pr = np.asarray(pr_m, dtype=float)
+    n = prn_arr.shape[0]
+    pos = np.zeros((n, 3))
+    vel = np.zeros((n, 3))
+    clk = np.zeros(n)
+    drift = np.zeros(n)
+    var = np.zeros(n)
+    ok = np.zeros(n, dtype=bool)
+    for i in range(n):
+        t_tx = t_rx.add_s(-pr[i] / CLIGHT_M_S)
+        eph = store.select(int(prn_arr[i]), t_tx)
+        if eph is None or eph.health != 0:
+            continue
+        t_tx = t_tx.add_s(-eph_clock_s(eph, t_tx))
+        p, v, c, d = eph_position_velocity(eph, t_tx)
+        pos[i], vel[i], clk[i], drift[i] = p, v, c - eph.tgd_s, d
+        var[i] = ura_sigma_m(eph.ura_index) ** 2
+        ok[i] = True
+    return SatState(prn_arr, pos, vel, clk, drift, var, ok)
+
+
+def geometric_range(
+    sat_pos_m: npt.NDArray[np.float64], rcv_pos_m: npt.NDArray[np.float64]
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Range (m) with the Sagnac correction and unit line-of-sight vectors (receiver → satellite).
+
+    `sat_pos_m` (n,3), `rcv_pos_m` (3,), both ECEF; follows RTKLIB geodist().
+    """
+    d = sat_pos_m - rcv_pos_m
+    r = np.linalg.norm(d, axis=1)
+    e = d / r[:, None]
+    sagnac = OMEGA_E_RAD_S * (sat_pos_m[:, 0] * rcv_pos_m[1] - sat_pos_m[:, 1] * rcv_pos_m[0]) / CLIGHT_M_S
+    return r + sagnac, e

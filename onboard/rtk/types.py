@@ -1,0 +1,148 @@
+"""Typed inputs shared by the decoders, the RTK engine, the RINEX writer and the simulator.
+
+Everything downstream of the parsing boundary sees these, never pyubx2/pyrtcm attribute names.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from onboard.gnsstime import GpsTime
+
+# u-blox gnssId values (RXM-RAWX); RXM-RAW carries GPS (1–32) and SBAS (120–158) only.
+GNSS_GPS = 0
+GNSS_SBAS = 1
+GNSS_GALILEO = 2
+GNSS_BEIDOU = 3
+GNSS_QZSS = 5
+GNSS_GLONASS = 6
+
+LLI_SLIP = 0x01
+"""RINEX LLI bit 0: lost lock between the previous and this observation (possible cycle slip)."""
+LLI_HALF_CYCLE = 0x02
+"""RINEX LLI bit 1: half-cycle ambiguity possible (phase not yet resolved to a full cycle)."""
+
+
+@dataclass(frozen=True)
+class ObsEpoch:
+    """Raw single-frequency (L1) observations of one receiver epoch.
+
+    `time` is the receiver time tag (receiver clock, not yet corrected: u-blox tags sit at …999 ms or
+    …992 ms). Arrays are all shape (n,), one entry per tracked signal:
+    `gnss_id` u-blox gnssId, `sv_id` satellite number within it (GPS PRN 1–32, SBAS 120–158),
+    `pr_m` pseudorange (m), `cp_cyc` carrier phase (cycles, NaN when invalid), `dop_hz` Doppler (Hz),
+    `cn0_dbhz` carrier-to-noise density (dB-Hz), `lock_ms` lock time (ms, NaN when the receiver has none,
+    e.g. RXM-RAW), `lli` RINEX loss-of-lock bits (LLI_SLIP | LLI_HALF_CYCLE), `half_cyc_sub` 1 where the
+    receiver already subtracted a half cycle (RXM-RAWX trkStat bit 3), `pr_std_m`, `cp_std_cyc` receiver
+    precision estimates (NaN where unknown). `clock_reset` is True when the receiver reported a clock reset
+    (RXM-RAWX recStat bit 1); `leap_s` the GPS−UTC leap seconds it reported (None if unknown).
+    """
+
+    time: GpsTime
+    gnss_id: npt.NDArray[np.int8]
+    sv_id: npt.NDArray[np.int16]
+    pr_m: npt.NDArray[np.float64]
+    cp_cyc: npt.NDArray[np.float64]
+    dop_hz: npt.NDArray[np.float64]
+    cn0_dbhz: npt.NDArray[np.float64]
+    lock_ms: npt.NDArray[np.float64]
+    lli: npt.NDArray[np.uint8]
+    half_cyc_sub: npt.NDArray[np.uint8] = field(default_factory=lambda: np.zeros(0, np.uint8))
+    pr_std_m: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    cp_std_cyc: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    clock_reset: bool = False
+    leap_s: int | None = None
+
+    def __len__(self) -> int:
+        return int(self.sv_id.shape[0])
+
+    def gps_only(self) -> ObsEpoch:
+        """The same epoch restricted to GPS satellites (gnssId 0, PRN 1–32)."""
+        keep = (self.gnss_id == GNSS_GPS) & (self.sv_id >= 1) & (self.sv_id <= 32)
+        return self.select(keep)
+
+    def select(self, keep: npt.NDArray[np.bool_]) -> ObsEpoch:
+        """The same epoch keeping only the entries where `keep` is True."""
+
+        def pick(a: np.ndarray) -> np.ndarray:
+            return a[keep] if a.shape[0] == keep.shape[0] else a
+
+        return ObsEpoch(
+            time=self.time, gnss_id=pick(self.gnss_id), sv_id=pick(self.sv_id), pr_m=pick(self.pr_m),
+            cp_cyc=pick(self.cp_cyc), dop_hz=pick(self.dop_hz), cn0_dbhz=pick(self.cn0_dbhz),
+            lock_ms=pick(self.lock_ms), lli=pick(self.lli), half_cyc_sub=pick(self.half_cyc_sub),
+            pr_std_m=pick(self.pr_std_m), cp_std_cyc=pick(self.cp_std_cyc),
+            clock_reset=self.clock_reset, leap_s=self.leap_s,
+        )
+
+
+@dataclass(frozen=True)
+class Ephemeris:
+    """GPS LNAV broadcast ephemeris and clock of one satellite (IS-GPS-200 subframes 1–3).
+
+    Angles in radians (semicircles converted at the boundary), rates in rad/s, harmonic corrections in
+    m or rad, clock terms in s, s/s, s/s². `toe`/`toc` carry the full GPS week.
+    """
+
+    prn: int
+    week: int
+    toe: GpsTime
+    toc: GpsTime
+    iode: int
+    iodc: int
+    sqrt_a: float
+    e: float
+    i0_rad: float
+    omega0_rad: float
+    omega_rad: float
+    m0_rad: float
+    delta_n_rad_s: float
+    omega_dot_rad_s: float
+    idot_rad_s: float
+    cuc_rad: float
+    cus_rad: float
+    crc_m: float
+    crs_m: float
+    cic_rad: float
+    cis_rad: float
+    af0_s: float
+    af1_s_s: float
+    af2_s_s2: float
+    tgd_s: float
+    ura_index: int = 0
+    health: int = 0
+    fit_interval_h: float = 4.0
+    code_on_l2: int = 1
+    l2p_flag: int = 0
+
+    @property
+    def toe_s(self) -> float:
+        """Time of ephemeris, seconds of week."""
+        return self.toe.tow_s
+
+    @property
+    def toc_s(self) -> float:
+        """Time of clock, seconds of week."""
+        return self.toc.tow_s
+
+
+@dataclass(frozen=True)
+class CameraMark:
+    """One TIM-TM2 report (or GPIO edge) mapped to GPS time.
+
+    `channel` EXTINT index (0 flash, 1 trigger where wired); `edge` "falling"/"rising"; `count` the
+    receiver's rising-edge counter; `time` the edge in GPS time (None when the receiver said it was not valid);
+    `acc_est_ns` accuracy estimate; `time_base` 0 receiver, 1 GNSS, 2 UTC; `source` "tim-tm2" or "gpio".
+    """
+
+    channel: int
+    edge: str
+    count: int
+    time: GpsTime | None
+    acc_est_ns: int
+    time_base: int
+    valid: bool
+    source: str = "tim-tm2"
