@@ -94,6 +94,7 @@ class StreamFramer:
         self.frames = 0
         self.skipped_bytes = 0
         self.bad_checksums = 0
+        self.torn_tail_bytes = 0
 
     def feed(self, data: bytes) -> list[Frame]:
         """Append `data` and return every complete, checksum-valid frame now available."""
@@ -175,14 +176,24 @@ class StreamFramer:
         """Bytes held back waiting for the rest of a frame (a torn tail if the stream has ended)."""
         return len(self._buf)
 
-    def flush(self) -> bytes:
-        """End of stream: return (and forget) the torn tail that never completed."""
-        tail = bytes(self._buf)
-        self.skipped_bytes += len(tail)
-        self._base += len(tail)
-        self._buf.clear()
-        return tail
+    def flush(self) -> list[Frame]:
+        """End of stream: recover any complete frames hidden behind a false sync, drop the torn tail.
 
+        A stray sync pattern with a plausible length makes the framer wait for bytes that will never come;
+        at the end of the stream we skip it one byte at a time and re-scan. Returns the frames recovered;
+        the unrecoverable bytes are counted in `skipped_bytes` and `torn_tail_bytes`.
+        """
+        out: list[Frame] = []
+        while self._buf:
+            del self._buf[:1]
+            self._base += 1
+            self.skipped_bytes += 1
+            self.torn_tail_bytes += 1
+            found = self.feed(b"")
+            if found:
+                self.torn_tail_bytes = 0
+            out += found
+        return out
 
 def _nmea_valid(sentence: bytes) -> bool:
     star = sentence.rfind(b"*")
@@ -200,4 +211,5 @@ def _nmea_valid(sentence: bytes) -> bool:
 
 def iter_frames(data: bytes, protocols: frozenset[Protocol] = frozenset(Protocol)) -> list[Frame]:
     """Every valid frame in a complete byte string (a torn tail is ignored)."""
-    return StreamFramer(protocols).feed(data)
+    framer = StreamFramer(protocols)
+    return framer.feed(data) + framer.flush()
