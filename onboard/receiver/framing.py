@@ -184,15 +184,13 @@ class StreamFramer:
         the unrecoverable bytes are counted in `skipped_bytes` and `torn_tail_bytes`.
         """
         out: list[Frame] = []
+        held = len(self._buf)
         while self._buf:
             del self._buf[:1]
             self._base += 1
             self.skipped_bytes += 1
-            self.torn_tail_bytes += 1
-            found = self.feed(b"")
-            if found:
-                self.torn_tail_bytes = 0
-            out += found
+            out += self.feed(b"")
+        self.torn_tail_bytes = held - sum(len(f.raw) for f in out)
         return out
 
 def _nmea_valid(sentence: bytes) -> bool:
