@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 
@@ -40,3 +41,28 @@ class SystemClock:
     def wall_ns(self) -> int:
         """CLOCK_REALTIME in ns (jumps when chrony steps it: never use for timeouts)."""
         return time.time_ns()
+
+
+@dataclass(frozen=True, slots=True)
+class Edge:
+    """One logic-level change on an input line.
+
+    `line` names the input (e.g. "trigger", a BCM pin number as text); `rising` True for low→high;
+    `monotonic_ns` when it happened on the host monotonic clock (kernel line-event timestamp on a Pi).
+    """
+
+    line: str
+    rising: bool
+    monotonic_ns: int
+
+
+@runtime_checkable
+class EdgeSource(Protocol):
+    """Timestamped edges from an input line (GPIO or a test double).
+
+    `get` returns the next edge in order, waiting up to `timeout_s`, or None when none arrived.
+    """
+
+    def get(self, timeout_s: float) -> Edge | None: ...
+
+    def close(self) -> None: ...
