@@ -1,0 +1,389 @@
+"""RTCM3 for the base link: decoding (through pyrtcm) to our types, and encoding of what a base sends.
+
+Decoded: GPS observations from 1002/1004 (legacy L1) and 1074/1077 (MSM4/MSM7, signal 1C) → `ObsEpoch`;
+base antenna reference point from 1005/1006 → `BasePosition`; GPS ephemerides from 1019 → `Ephemeris`.
+Encoded (for `python -m onboard base`): 1002, 1004, 1005, 1006 and 1019 from declarative bit layouts below —
+pyrtcm 1.2.1 parses but cannot build messages, so we pack the bits here and tests parse them back with pyrtcm.
+
+RTCM epochs carry no GPS week: the decoder resolves it from a reference time (the rover's, or the host clock).
+Phase-minus-pseudorange fields (DF012) wrap every 1500 cycles; the decoder unwraps them per satellite, as any
+RTCM 3 decoder must, so carrier phase stays continuous across a wrap.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from pyrtcm import RTCMMessage, RTCMReader, parse_msm
+from pyrtcm.exceptions import RTCMMessageError, RTCMParseError, RTCMStreamError, RTCMTypeError
+
+from onboard.gnsstime import GpsTime, resolve_week
+from onboard.receiver.framing import Frame, Protocol, crc24q
+from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M
+from onboard.rtk.geodesy import enu_to_ecef
+from onboard.rtk.types import GNSS_GPS, LLI_HALF_CYCLE, LLI_SLIP, Ephemeris, ObsEpoch
+
+log = logging.getLogger(__name__)
+
+PRUNIT_GPS_M = 299_792.458
+"""RTCM pseudorange modulus (one light-millisecond), m."""
+PPR_WRAP_CYC = 1500.0
+"""The phase-minus-pseudorange field is defined modulo this many L1 cycles."""
+SC2RAD = math.pi
+"""Semicircles → radians."""
+
+RTCM_GPS_OBS = frozenset({1002, 1004, 1074, 1077})
+
+
+@dataclass(frozen=True)
+class BasePosition:
+    """Base antenna reference point (ECEF m) and antenna height above it (m; 0 for 1005)."""
+
+    station_id: int
+    arp_ecef_m: tuple[float, float, float]
+    antenna_height_m: float = 0.0
+
+    @property
+    def phase_centre_ecef_m(self) -> np.ndarray:
+        """ARP raised by the antenna height along the ellipsoidal normal (L1 PCO not modelled)."""
+        arp = np.array(self.arp_ecef_m)
+        if self.antenna_height_m == 0.0:
+            return arp
+        return enu_to_ecef(np.array([0.0, 0.0, self.antenna_height_m]), arp)
+
+
+# --- lock-time indicators → minimum lock time (ms) ---------------------------------------------------------
+
+
+def lock_ms_from_df013(indicator: int) -> float:
+    """Legacy 1002/1004 L1 lock time indicator (DF013, 7 bits) → minimum lock time in ms."""
+    i = int(indicator)
+    if i < 24:
+        s = i
+    elif i < 48:
+        s = 2 * i - 24
+    elif i < 72:
+        s = 4 * i - 120
+    elif i < 96:
+        s = 8 * i - 408
+    elif i < 120:
+        s = 16 * i - 1176
+    elif i < 127:
+        s = 32 * i - 3096
+    else:
+        s = 937
+    return s * 1000.0
+
+
+def df013_from_lock_ms(lock_ms: float) -> int:
+    """Minimum lock time (ms) → legacy lock time indicator DF013 (largest indicator not exceeding it)."""
+    best = 0
+    for i in range(128):
+        if lock_ms_from_df013(i) <= lock_ms:
+            best = i
+    return best
+
+
+def lock_ms_from_df402(indicator: int) -> float:
+    """MSM4 lock time indicator (DF402, 4 bits) → minimum lock time in ms."""
+    i = int(indicator)
+    return 0.0 if i == 0 else float(2 ** (i + 4))
+
+
+def lock_ms_from_df407(indicator: int) -> float:
+    """MSM7 extended lock time indicator (DF407, 10 bits) → minimum lock time in ms."""
+    i = int(indicator)
+    if i < 64:
+        return float(i)
+    if i >= 704:
+        return 67_108_864.0
+    k = (i - 64) // 32 + 1
+    start_i = 64 + 32 * (k - 1)
+    start_t = 64 + sum(2**j * 32 for j in range(1, k))
+    return float(start_t + 2**k * (i - start_i))
+
+
+# --- decoding ------------------------------------------------------------------------------------------
+
+
+class RtcmDecoder:
+    """Stateful RTCM3 decoder: resolves GPS weeks from a reference and unwraps DF012 per satellite.
+
+    `decode(frame, reference)` returns an `ObsEpoch`, `BasePosition`, `Ephemeris`, or None (other messages
+    or undecodable payloads, counted in `errors`). Never raises on bad input.
+    """
+
+    def __init__(self) -> None:
+        self._ppr_cyc: dict[int, float] = {}
+        self._last_lock_ms: dict[int, float] = {}
+        self.errors = 0
+        self.decoded = 0
+
+    def decode(self, frame: Frame, reference: GpsTime) -> ObsEpoch | BasePosition | Ephemeris | None:
+        """Decode one RTCM3 frame; `reference` is any GPS time within half a week of the message."""
+        if frame.protocol is not Protocol.RTCM3:
+            return None
+        if frame.msg_id not in (1002, 1004, 1005, 1006, 1019, 1074, 1077):
+            return None
+        try:
+            msg = RTCMReader.parse(frame.raw)
+            out = self._decode_message(msg, frame.msg_id, reference)
+        except (RTCMParseError, RTCMMessageError, RTCMTypeError, RTCMStreamError, ValueError, KeyError,
+                AttributeError, TypeError, IndexError) as exc:
+            self.errors += 1
+            log.debug("undecodable RTCM %s: %s", frame.msg_id, exc)
+            return None
+        if out is not None:
+            self.decoded += 1
+        return out
+
+    def _decode_message(
+        self, msg: RTCMMessage, number: int, reference: GpsTime
+    ) -> ObsEpoch | BasePosition | Ephemeris | None:
+        if number in (1005, 1006):
+            return BasePosition(
+                station_id=int(msg.DF003),
+                arp_ecef_m=(float(msg.DF025), float(msg.DF026), float(msg.DF027)),
+                antenna_height_m=float(getattr(msg, "DF028", 0.0)),
+            )
+        if number == 1019:
+            return _ephemeris_from_1019(msg, reference)
+        if number in (1002, 1004):
+            return self._legacy_obs(msg, reference)
+        return self._msm_obs(msg, number, reference)
+
+    def _unwrap(self, prn: int, ppr_cyc: float) -> float:
+        prev = self._ppr_cyc.get(prn)
+        if prev is not None:
+            ppr_cyc += PPR_WRAP_CYC * round((prev - ppr_cyc) / PPR_WRAP_CYC)
+        self._ppr_cyc[prn] = ppr_cyc
+        return ppr_cyc
+
+    def _slip_bits(self, prn: int, lock_ms: float) -> int:
+        prev = self._last_lock_ms.get(prn)
+        self._last_lock_ms[prn] = lock_ms
+        return LLI_SLIP if prev is not None and lock_ms < prev else 0
+
+    def _legacy_obs(self, msg: RTCMMessage, reference: GpsTime) -> ObsEpoch:
+        time = resolve_week(int(msg.DF004) / 1000.0, reference)
+        n = int(msg.DF006)
+        rows = []
+        for k in range(1, n + 1):
+            sfx = f"_{k:02d}"
+            prn = int(getattr(msg, "DF009" + sfx))
+            if not 1 <= prn <= 32:
+                continue
+            pr = float(getattr(msg, "DF011" + sfx)) + int(getattr(msg, "DF014" + sfx, 0)) * PRUNIT_GPS_M
+            ppr_m = float(getattr(msg, "DF012" + sfx))
+            lock_ms = lock_ms_from_df013(int(getattr(msg, "DF013" + sfx)))
+            cp = math.nan
+            if abs(ppr_m) < 262.0:  # 0x80000 (−262.144 m) marks an invalid phase
+                cp = (pr + self._unwrap(prn, ppr_m / LAMBDA_L1_M) * LAMBDA_L1_M) / LAMBDA_L1_M
+            cn0 = float(getattr(msg, "DF015" + sfx, 0.0))
+            rows.append((prn, pr, cp, math.nan, cn0, lock_ms, self._slip_bits(prn, lock_ms)))
+        return _obs_epoch(time, rows)
+
+    def _msm_obs(self, msg: RTCMMessage, number: int, reference: GpsTime) -> ObsEpoch:
+        time = resolve_week(int(msg.DF004) / 1000.0, reference)
+        parsed = parse_msm(msg)
+        if not parsed:
+            raise ValueError("MSM message without cells")
+        _meta, sats, cells = parsed
+        rough = {int(s["PRN"]): s for s in sats}
+        rows = []
+        for cell in cells:
+            if cell["CELLSIG"] != "1C":
+                continue
+            prn = int(cell["CELLPRN"])
+            sat = rough.get(prn)
+            if sat is None or not 1 <= prn <= 32:
+                continue
+            rough_ms = float(sat["DF397"]) + float(sat.get("DF398", 0.0))
+            if number == 1077:
+                fine_pr, fine_cp = cell.get("DF405"), cell.get("DF406")
+                lock_ms = lock_ms_from_df407(int(cell.get("DF407", 0)))
+                cn0 = float(cell.get("DF408", 0.0))
+                rate = float(sat.get("DF399", 0.0)) + float(cell.get("DF404", 0.0))
+                dop = -rate / LAMBDA_L1_M
+            else:
+                fine_pr, fine_cp = cell.get("DF400"), cell.get("DF401")
+                lock_ms = lock_ms_from_df402(int(cell.get("DF402", 0)))
+                cn0 = float(cell.get("DF403", 0.0))
+                dop = math.nan
+            if fine_pr is None or sat["DF397"] == 255:
+                continue
+            pr = (rough_ms + float(fine_pr)) * CLIGHT_M_S / 1000.0
+            cp = math.nan
+            if fine_cp is not None and abs(float(fine_cp)) < 1.0 / 512.0:  # invalid: −2^-9 ms (MSM4) / −2^-8 (MSM7)
+                cp = (rough_ms + float(fine_cp)) * CLIGHT_M_S / 1000.0 / LAMBDA_L1_M
+            lli = self._slip_bits(prn, lock_ms)
+            if int(cell.get("DF420", 0)):
+                lli |= LLI_HALF_CYCLE
+            rows.append((prn, pr, cp, dop, cn0, lock_ms, lli))
+        return _obs_epoch(time, rows)
+
+
+def _obs_epoch(time: GpsTime, rows: list[tuple[int, float, float, float, float, float, int]]) -> ObsEpoch:
+    rows.sort(key=lambda r: r[0])
+    n = len(rows)
+    col = list(zip(*rows)) if rows else [()] * 7
+    return ObsEpoch(
+        time=time,
+        gnss_id=np.full(n, GNSS_GPS, np.int8),
+        sv_id=np.array(col[0], np.int16),
+        pr_m=np.array(col[1], float),
+        cp_cyc=np.array(col[2], float),
+        dop_hz=np.array(col[3], float),
+        cn0_dbhz=np.array(col[4], float),
+        lock_ms=np.array(col[5], float),
+        lli=np.array(col[6], np.uint8),
+        half_cyc_sub=np.zeros(n, np.uint8),
+        pr_std_m=np.full(n, math.nan),
+        cp_std_cyc=np.full(n, math.nan),
+    )
+
+
+def _ephemeris_from_1019(msg: RTCMMessage, reference: GpsTime) -> Ephemeris:
+    # The 10-bit week is ambiguous; an ephemeris in use is at most hours from the reference time.
+    toe = resolve_week(float(msg.DF093), reference)
+    toc = resolve_week(float(msg.DF081), reference)
+    return Ephemeris(
+        prn=int(msg.DF009), week=toe.week, toe=toe, toc=toc, iode=int(msg.DF071), iodc=int(msg.DF085),
+        sqrt_a=float(msg.DF092), e=float(msg.DF090), i0_rad=float(msg.DF097) * SC2RAD,
+        omega0_rad=float(msg.DF095) * SC2RAD, omega_rad=float(msg.DF099) * SC2RAD,
+        m0_rad=float(msg.DF088) * SC2RAD, delta_n_rad_s=float(msg.DF087) * SC2RAD,
+        omega_dot_rad_s=float(msg.DF100) * SC2RAD, idot_rad_s=float(msg.DF079) * SC2RAD,
+        cuc_rad=float(msg.DF089), cus_rad=float(msg.DF091), crc_m=float(msg.DF098), crs_m=float(msg.DF086),
+        cic_rad=float(msg.DF094), cis_rad=float(msg.DF096), af0_s=float(msg.DF084), af1_s_s=float(msg.DF083),
+        af2_s_s2=float(msg.DF082), tgd_s=float(msg.DF101), ura_index=int(msg.DF077), health=int(msg.DF102),
+        fit_interval_h=6.0 if int(msg.DF137) else 4.0, code_on_l2=int(msg.DF078), l2p_flag=int(msg.DF103),
+    )
+
+
+# --- encoding ------------------------------------------------------------------------------------------
+
+# (field, bits, signed, scale): value_in_units / scale is rounded to an integer of `bits` bits.
+_HEADER_1002 = (("DF002", 12, False, 1), ("DF003", 12, False, 1), ("DF004", 30, False, 1),
+                ("DF005", 1, False, 1), ("DF006", 5, False, 1), ("DF007", 1, False, 1), ("DF008", 3, False, 1))
+_SAT_1002 = (("DF009", 6, False, 1), ("DF010", 1, False, 1), ("DF011", 24, False, 0.02),
+             ("DF012", 20, True, 0.0005), ("DF013", 7, False, 1), ("DF014", 8, False, 1),
+             ("DF015", 8, False, 0.25))
+_SAT_1004_L2 = (("DF016", 2, False, 1), ("DF017", 14, True, 0.02), ("DF018", 20, True, 0.0005),
+                ("DF019", 7, False, 1), ("DF020", 8, False, 0.25))
+_BODY_1005 = (("DF002", 12, False, 1), ("DF003", 12, False, 1), ("DF021", 6, False, 1), ("DF022", 1, False, 1),
+              ("DF023", 1, False, 1), ("DF024", 1, False, 1), ("DF141", 1, False, 1),
+              ("DF025", 38, True, 0.0001), ("DF142", 1, False, 1), ("DF001", 1, False, 1),
+              ("DF026", 38, True, 0.0001), ("DF364", 2, False, 1), ("DF027", 38, True, 0.0001))
+_BODY_1019 = (("DF002", 12, False, 1), ("DF009", 6, False, 1), ("DF076", 10, False, 1), ("DF077", 4, False, 1),
+              ("DF078", 2, False, 1), ("DF079", 14, True, 2**-43), ("DF071", 8, False, 1),
+              ("DF081", 16, False, 2**4), ("DF082", 8, True, 2**-55), ("DF083", 16, True, 2**-43),
+              ("DF084", 22, True, 2**-31), ("DF085", 10, False, 1), ("DF086", 16, True, 2**-5),
+              ("DF087", 16, True, 2**-43), ("DF088", 32, True, 2**-31), ("DF089", 16, True, 2**-29),
+              ("DF090", 32, False, 2**-33), ("DF091", 16, True, 2**-29), ("DF092", 32, False, 2**-19),
+              ("DF093", 16, False, 2**4), ("DF094", 16, True, 2**-29), ("DF095", 32, True, 2**-31),
+              ("DF096", 16, True, 2**-29), ("DF097", 32, True, 2**-31), ("DF098", 16, True, 2**-5),
+              ("DF099", 32, True, 2**-31), ("DF100", 24, True, 2**-43), ("DF101", 8, True, 2**-31),
+              ("DF102", 6, False, 1), ("DF103", 1, False, 1), ("DF137", 1, False, 1))
+
+Layout = Sequence[tuple[str, int, bool, float]]
+
+
+class BitWriter:
+    """Big-endian bit packer for RTCM3 payloads."""
+
+    def __init__(self) -> None:
+        self._value = 0
+        self.bits = 0
+
+    def put(self, value: int, bits: int, signed: bool = False) -> None:
+        """Append `value` in `bits` bits (two's complement when `signed`); raises if it does not fit."""
+        lo, hi = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
+        if not lo <= value <= hi:
+            raise ValueError(f"{value} does not fit in {bits} {'signed' if signed else 'unsigned'} bits")
+        self._value = (self._value << bits) | (value & ((1 << bits) - 1))
+        self.bits += bits
+
+    def put_fields(self, layout: Layout, values: dict[str, float]) -> None:
+        """Append each field of `layout` from `values` (in the field's physical units)."""
+        for name, bits, signed, scale in layout:
+            self.put(round(values[name] / scale), bits, signed)
+
+    def to_bytes(self) -> bytes:
+        """The payload, zero-padded to whole bytes."""
+        pad = (-self.bits) % 8
+        return (self._value << pad).to_bytes((self.bits + pad) // 8, "big")
+
+
+def rtcm3_frame(payload: bytes) -> bytes:
+    """A complete RTCM3 transport frame: preamble, 10-bit length, payload, CRC-24Q."""
+    if len(payload) > 1023:
+        raise ValueError("RTCM3 payload longer than 1023 bytes")
+    head = bytes((0xD3, len(payload) >> 8, len(payload) & 0xFF)) + payload
+    return head + crc24q(head).to_bytes(3, "big")
+
+
+def encode_gps_observations(epoch: ObsEpoch, station_id: int, message: int = 1004, synchronous: bool = False) -> bytes:
+    """RTCM 1002 or 1004 frame with the GPS L1 C/A observations of `epoch` (L2 fields marked invalid in 1004).
+
+    `epoch.time` must be GPS time (the base's receiver time tag corrected to GPS, or the tag itself: the rover
+    engine corrects for the age either way). Satellites without a valid pseudorange are left out.
+    """
+    if message not in (1002, 1004):
+        raise ValueError("GPS observation message must be 1002 or 1004")
+    gps = epoch.gps_only()
+    keep = np.isfinite(gps.pr_m) & (gps.pr_m > 0)
+    gps = gps.select(keep)
+    w = BitWriter()
+    w.put_fields(_HEADER_1002, {"DF002": message, "DF003": station_id, "DF004": (gps.time.tow_ns // 1_000_000),
+                                "DF005": int(synchronous), "DF006": len(gps), "DF007": 0, "DF008": 0})
+    for k in range(len(gps)):
+        pr = float(gps.pr_m[k])
+        amb = int(pr // PRUNIT_GPS_M)
+        pr_mod = pr - amb * PRUNIT_GPS_M
+        cp = float(gps.cp_cyc[k])
+        if math.isfinite(cp):
+            ppr_cyc = cp - pr / LAMBDA_L1_M
+            ppr_cyc -= PPR_WRAP_CYC * round(ppr_cyc / PPR_WRAP_CYC)
+            ppr_m = ppr_cyc * LAMBDA_L1_M
+        else:
+            ppr_m = -262.144  # 0x80000: invalid
+        lock = float(gps.lock_ms[k]) if math.isfinite(gps.lock_ms[k]) else 0.0
+        cn0 = float(np.clip(gps.cn0_dbhz[k], 0.0, 63.75)) if math.isfinite(gps.cn0_dbhz[k]) else 0.0
+        w.put_fields(_SAT_1002, {"DF009": int(gps.sv_id[k]), "DF010": 0, "DF011": round(pr_mod / 0.02) * 0.02,
+                                 "DF012": ppr_m, "DF013": df013_from_lock_ms(lock), "DF014": amb, "DF015": cn0})
+        if message == 1004:
+            w.put_fields(_SAT_1004_L2, {"DF016": 0, "DF017": -8192 * 0.02, "DF018": -262.144, "DF019": 0,
+                                        "DF020": 0})
+    return rtcm3_frame(w.to_bytes())
+
+
+def encode_base_position(position: BasePosition, with_height: bool = True) -> bytes:
+    """RTCM 1006 (with antenna height) or 1005 frame for the base antenna reference point."""
+    w = BitWriter()
+    x, y, z = position.arp_ecef_m
+    w.put_fields(_BODY_1005, {"DF002": 1006 if with_height else 1005, "DF003": position.station_id, "DF021": 0,
+                              "DF022": 1, "DF023": 0, "DF024": 0, "DF141": 0, "DF025": x, "DF142": 1,
+                              "DF001": 0, "DF026": y, "DF364": 0, "DF027": z})
+    if with_height:
+        w.put(round(position.antenna_height_m / 0.0001), 16)
+    return rtcm3_frame(w.to_bytes())
+
+
+def encode_ephemeris(eph: Ephemeris) -> bytes:
+    """RTCM 1019 frame for one GPS LNAV ephemeris."""
+    w = BitWriter()
+    w.put_fields(_BODY_1019, {
+        "DF002": 1019, "DF009": eph.prn, "DF076": eph.toe.week % 1024, "DF077": eph.ura_index,
+        "DF078": eph.code_on_l2, "DF079": eph.idot_rad_s / SC2RAD, "DF071": eph.iode, "DF081": eph.toc.tow_s,
+        "DF082": eph.af2_s_s2, "DF083": eph.af1_s_s, "DF084": eph.af0_s, "DF085": eph.iodc, "DF086": eph.crs_m,
+        "DF087": eph.delta_n_rad_s / SC2RAD, "DF088": eph.m0_rad / SC2RAD, "DF089": eph.cuc_rad, "DF090": eph.e,
+        "DF091": eph.cus_rad, "DF092": eph.sqrt_a, "DF093": eph.toe.tow_s, "DF094": eph.cic_rad,
+        "DF095": eph.omega0_rad / SC2RAD, "DF096": eph.cis_rad, "DF097": eph.i0_rad / SC2RAD, "DF098": eph.crc_m,
+        "DF099": eph.omega_rad / SC2RAD, "DF100": eph.omega_dot_rad_s / SC2RAD, "DF101": eph.tgd_s,
+        "DF102": eph.health, "DF103": eph.l2p_flag, "DF137": 1 if eph.fit_interval_h > 4.0 else 0,
+    })
+    return rtcm3_frame(w.to_bytes())
