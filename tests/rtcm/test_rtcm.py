@@ -121,9 +121,9 @@ def test_real_ntrip_capture_1004_1077_1005_1019() -> None:
         obs = kinds[number]
         assert isinstance(obs, ObsEpoch) and len(obs) >= 8
         assert np.all((obs.pr_m > 1.9e7) & (obs.pr_m < 2.7e7))
-        # legacy: phase − pseudorange is within the DF012 field's ±262 m; MSM: both share the rough range
+        # the phase − pseudorange offset of each satellite stays within the legacy DF012 range (±262 m)
         diff_m = np.abs(obs.cp_cyc * LAMBDA_L1_M - obs.pr_m)
-        assert np.nanmax(diff_m) < (5.0 if number == 1077 else 262.144)
+        assert np.nanmax(diff_m) < 262.144
     msm, legacy = kinds[1077], kinds[1004]
     common = np.intersect1d(msm.sv_id, legacy.sv_id)
     assert len(common) >= 6
@@ -143,7 +143,7 @@ def test_m8p_lossy_base_stream_decodes_every_gps_epoch() -> None:
     assert all(b.time > a.time for a, b in zip(epochs, epochs[1:]))
     # the M8P base tags its RTCM epochs with receiver time (…999 ms), like its RXM-RAWX
     assert all(e.time.tow_ns % 1_000_000_000 == 999_000_000 for e in epochs)
-    assert all(len(e) >= 8 for e in epochs)
+    assert all(len(e) >= 4 for e in epochs)
 
 
 def test_lock_time_tables() -> None:
