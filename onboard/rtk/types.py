@@ -146,3 +146,32 @@ class CameraMark:
     time_base: int
     valid: bool
     source: str = "tim-tm2"
+
+
+Q_NONE = 0
+Q_FIX = 1
+Q_FLOAT = 2
+Q_SINGLE = 5
+"""Solution quality flags, RTKLIB's .pos `Q` column (1 fixed, 2 float, 5 single point, 0 none)."""
+
+
+@dataclass(frozen=True)
+class Solution:
+    """One epoch's position solution (the RTK engine's output, one per rover epoch).
+
+    `time` GPS time of the solution (receiver time tag minus the estimated receiver clock bias, as RTKLIB),
+    `pos_ecef_m` (3,) rover antenna L1 phase centre, `vel_ecef_m_s` (3,) (NaN when not estimated),
+    `q` Q_FIX/Q_FLOAT/Q_SINGLE/Q_NONE, `ns` satellites used, `cov_pos_m2` (3,3) ECEF position covariance,
+    `cov_vel_m2_s2` (3,3) velocity covariance, `age_s` age of the base data (rover − base time, s),
+    `ratio` the ambiguity ratio-test value (0 when no search ran).
+    """
+
+    time: GpsTime
+    pos_ecef_m: npt.NDArray[np.float64]
+    vel_ecef_m_s: npt.NDArray[np.float64]
+    q: int
+    ns: int
+    cov_pos_m2: npt.NDArray[np.float64]
+    cov_vel_m2_s2: npt.NDArray[np.float64]
+    age_s: float = 0.0
+    ratio: float = 0.0

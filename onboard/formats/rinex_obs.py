@@ -1,0 +1,318 @@
+"""RINEX 2.11 / 3.0x observation files → header + `ObsEpoch` stream (single-frequency L1 C/A).
+
+Keeps, per satellite, the L1 C/A pseudorange, carrier phase, Doppler and C/N0 (v3 codes C1C/L1C/D1C/S1C;
+v2 C1/L1/D1/S1, with P1 as pseudorange fallback), the phase LLI bits, and nothing else. Values keep RINEX's
+sign conventions (the ones `ObsEpoch` documents). gzip-compressed files are accepted.
+Special event records (flags 2–5, e.g. TIM-TM2 marks written by convbin) and cycle-slip records (flag 6)
+are skipped; power-failure epochs (flag 1) are read with every phase flagged as slipped.
+"""
+
+from __future__ import annotations
+
+import gzip
+import logging
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from onboard.errors import InputError
+from onboard.gnsstime import GpsTime, gpst_from_calendar
+from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
+from onboard.rtk.types import (
+    GNSS_BEIDOU, GNSS_GALILEO, GNSS_GLONASS, GNSS_GPS, GNSS_QZSS, GNSS_SBAS, LLI_SLIP, ObsEpoch,
+)
+
+log = logging.getLogger(__name__)
+
+SYSTEM_GNSS_ID = {"G": GNSS_GPS, " ": GNSS_GPS, "R": GNSS_GLONASS, "E": GNSS_GALILEO, "C": GNSS_BEIDOU,
+                  "J": GNSS_QZSS, "S": GNSS_SBAS}
+"""RINEX system letter → u-blox gnssId."""
+
+# Preferred observation codes for the L1 C/A signal, best first (per quantity).
+_V3_CODES = {
+    "pr": ("C1C",),
+    "cp": ("L1C",),
+    "dop": ("D1C",),
+    "cn0": ("S1C",),
+}
+_V3_FALLBACK = {  # Galileo E1 / BeiDou B1 / QZSS use other attribute letters; harmless for GPS
+    "pr": ("C1X", "C1Z", "C2I"),
+    "cp": ("L1X", "L1Z", "L2I"),
+    "dop": ("D1X", "D1Z", "D2I"),
+    "cn0": ("S1X", "S1Z", "S2I"),
+}
+_V2_CODES = {"pr": ("C1", "P1"), "cp": ("L1",), "dop": ("D1",), "cn0": ("S1",)}
+
+
+@dataclass
+class RinexObsHeader:
+    """What the RTK engine needs from an observation header.
+
+    `approx_pos_ecef_m` APPROX POSITION XYZ (marker, m; None if absent or zero), `antenna_delta_hen_m`
+    ANTENNA: DELTA H/E/N (m, antenna reference point above the marker), `interval_s` (None if absent).
+    `obs_types` maps system letter → list of observation codes as written.
+    """
+
+    version: float
+    marker_name: str = ""
+    approx_pos_ecef_m: np.ndarray | None = None
+    antenna_delta_hen_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    antenna_type: str = ""
+    receiver_type: str = ""
+    interval_s: float | None = None
+    obs_types: dict[str, list[str]] = field(default_factory=dict)
+
+    def antenna_position_ecef_m(self) -> np.ndarray | None:
+        """APPROX POSITION plus the ANTENNA DELTA H/E/N rotated into ECEF (None without a position)."""
+        if self.approx_pos_ecef_m is None:
+            return None
+        h, e, n = self.antenna_delta_hen_m
+        lat, lon, _ = ecef_to_llh(self.approx_pos_ecef_m)
+        return self.approx_pos_ecef_m + np.array([e, n, h]) @ enu_rotation(lat, lon)
+
+
+@dataclass
+class RinexObsFile:
+    """A read observation file: header and epochs in file order."""
+
+    header: RinexObsHeader
+    epochs: list[ObsEpoch]
+
+
+def _open_lines(path: Path) -> list[str]:
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read observation file {path}: {exc}") from exc
+    if raw[:2] == b"\x1f\x8b":
+        try:
+            raw = gzip.decompress(raw)
+        except (OSError, EOFError) as exc:
+            raise InputError(f"{path}: corrupt gzip data: {exc}") from exc
+    return raw.decode("ascii", errors="replace").splitlines()
+
+
+def _float(text: str) -> float:
+    text = text.strip()
+    return float(text) if text else math.nan
+
+
+def _parse_header(path: Path, lines: list[str]) -> tuple[RinexObsHeader, int]:
+    if not lines or "RINEX VERSION" not in lines[0]:
+        raise InputError(f"{path}: not a RINEX file (no 'RINEX VERSION / TYPE' header line)")
+    try:
+        version = float(lines[0][:9])
+    except ValueError as exc:
+        raise InputError(f"{path}: unreadable RINEX version {lines[0][:9]!r}") from exc
+    if lines[0][20:21] not in ("O", "o"):
+        raise InputError(f"{path}: not an observation file (type {lines[0][20:21]!r})")
+    hdr = RinexObsHeader(version=version)
+    v2_types: list[str] = []
+    v2_count = 0
+    cur_sys = ""
+    cur_count = 0
+    for i, line in enumerate(lines[1:], start=1):
+        label = line[60:].strip()
+        try:
+            if label == "END OF HEADER":
+                if v2_types:
+                    hdr.obs_types["G"] = v2_types[:v2_count] if v2_count else v2_types
+                return hdr, i + 1
+            if label == "MARKER NAME":
+                hdr.marker_name = line[:60].strip()
+            elif label == "APPROX POSITION XYZ":
+                pos = np.array([float(line[k : k + 14]) for k in (0, 14, 28)])
+                hdr.approx_pos_ecef_m = pos if np.any(pos != 0.0) else None
+            elif label == "ANTENNA: DELTA H/E/N":
+                hdr.antenna_delta_hen_m = tuple(float(line[k : k + 14]) for k in (0, 14, 28))  # type: ignore[assignment]
+            elif label == "ANT # / TYPE":
+                hdr.antenna_type = line[20:40].strip()
+            elif label == "REC # / TYPE / VERS":
+                hdr.receiver_type = line[20:40].strip()
+            elif label == "INTERVAL":
+                hdr.interval_s = float(line[:10])
+            elif label == "# / TYPES OF OBSERV":
+                if line[:6].strip():
+                    v2_count = int(line[:6])
+                v2_types += line[6:60].split()
+            elif label == "SYS / # / OBS TYPES":
+                if line[0] != " ":
+                    cur_sys = line[0]
+                    cur_count = int(line[3:6])
+                    hdr.obs_types[cur_sys] = []
+                hdr.obs_types[cur_sys] += line[7:60].split()
+                hdr.obs_types[cur_sys] = hdr.obs_types[cur_sys][:cur_count]
+        except ValueError as exc:
+            raise InputError(f"{path}:{i + 1}: malformed header line {label!r}: {exc}") from exc
+    raise InputError(f"{path}: no END OF HEADER")
+
+
+def _column_indices(types: list[str], version: float) -> dict[str, int]:
+    """Column index of each kept quantity (pr, cp, dop, cn0) in a system's observation list, −1 if absent."""
+    out: dict[str, int] = {}
+    for key in ("pr", "cp", "dop", "cn0"):
+        codes = _V2_CODES[key] if version < 3.0 else _V3_CODES[key] + _V3_FALLBACK[key]
+        out[key] = next((types.index(c) for c in codes if c in types), -1)
+    return out
+
+
+class _EpochBuilder:
+    """Accumulates one epoch's rows and turns them into an ObsEpoch."""
+
+    def __init__(self) -> None:
+        self.gnss: list[int] = []
+        self.sv: list[int] = []
+        self.pr: list[float] = []
+        self.cp: list[float] = []
+        self.dop: list[float] = []
+        self.cn0: list[float] = []
+        self.lli: list[int] = []
+
+    def add(self, sys_letter: str, prn: int, values: list[tuple[float, int]], cols: dict[str, int],
+            force_slip: bool) -> None:
+        def val(key: str) -> tuple[float, int]:
+            k = cols[key]
+            return values[k] if 0 <= k < len(values) else (math.nan, 0)
+
+        pr, _ = val("pr")
+        cp, lli = val("cp")
+        if math.isnan(pr) and math.isnan(cp):
+            return
+        self.gnss.append(SYSTEM_GNSS_ID.get(sys_letter, -1))
+        self.sv.append(prn)
+        self.pr.append(pr if pr != 0.0 else math.nan)
+        self.cp.append(cp if cp != 0.0 else math.nan)
+        self.dop.append(val("dop")[0])
+        self.cn0.append(val("cn0")[0])
+        self.lli.append((lli | LLI_SLIP) if force_slip else lli)
+
+    def build(self, time: GpsTime) -> ObsEpoch:
+        n = len(self.sv)
+        return ObsEpoch(
+            time=time, gnss_id=np.array(self.gnss, np.int8), sv_id=np.array(self.sv, np.int16),
+            pr_m=np.array(self.pr, float), cp_cyc=np.array(self.cp, float), dop_hz=np.array(self.dop, float),
+            cn0_dbhz=np.array(self.cn0, float), lock_ms=np.full(n, np.nan), lli=np.array(self.lli, np.uint8),
+            half_cyc_sub=np.zeros(n, np.uint8), pr_std_m=np.full(n, np.nan), cp_std_cyc=np.full(n, np.nan),
+        )
+
+
+def _split_values(text: str, count: int) -> list[tuple[float, int]]:
+    """Fixed 16-column fields (F14.3 + LLI + SSI) → list of (value, lli)."""
+    out = []
+    for k in range(count):
+        f = text[16 * k : 16 * k + 16]
+        v = _float(f[:14])
+        lli_c = f[14:15].strip()
+        out.append((v, int(lli_c) if lli_c.isdigit() else 0))
+    return out
+
+
+def _iter_v3(path: Path, lines: list[str], start: int, hdr: RinexObsHeader) -> Iterator[ObsEpoch]:
+    cols = {s: _column_indices(t, hdr.version) for s, t in hdr.obs_types.items()}
+    i = start
+    while i < len(lines):
+        line = lines[i]
+        if not line.startswith(">"):
+            i += 1
+            continue
+        try:
+            year, mo, dd, hh, mi = (int(line[k : k + w]) for k, w in ((2, 4), (7, 2), (10, 2), (13, 2), (16, 2)))
+            sec = float(line[18:29])
+            flag = int(line[31:32] or 0)
+            nsat = int(line[32:35])
+        except ValueError as exc:
+            raise InputError(f"{path}:{i + 1}: malformed epoch line: {exc}") from exc
+        body = lines[i + 1 : i + 1 + nsat]
+        i += 1 + nsat
+        if flag > 1:
+            continue
+        if len(body) < nsat:
+            log.warning("%s: truncated last epoch dropped", path)
+            return
+        b = _EpochBuilder()
+        for row in body:
+            sys_letter = row[0:1]
+            if sys_letter not in cols:
+                continue
+            try:
+                prn = int(row[1:3])
+            except ValueError as exc:
+                raise InputError(f"{path}: malformed satellite id {row[:3]!r}") from exc
+            try:
+                values = _split_values(row[3:], len(hdr.obs_types[sys_letter]))
+            except ValueError as exc:
+                raise InputError(f"{path}: malformed observation for {row[:3]}: {exc}") from exc
+            b.add(sys_letter, prn, values, cols[sys_letter], flag == 1)
+        yield b.build(gpst_from_calendar(year, mo, dd, hh, mi, round(sec * 1e9)))
+
+
+def _iter_v2(path: Path, lines: list[str], start: int, hdr: RinexObsHeader) -> Iterator[ObsEpoch]:
+    types = hdr.obs_types.get("G", [])
+    ntypes = len(types)
+    cols = _column_indices(types, hdr.version)
+    lines_per_sat = (ntypes + 4) // 5
+    i = start
+    while i < len(lines):
+        line = lines[i]
+        if not line.strip():
+            i += 1
+            continue
+        try:
+            flag = int(line[28:29] or 0)
+            nsat = int(line[29:32])
+        except ValueError as exc:
+            raise InputError(f"{path}:{i + 1}: malformed epoch line: {exc}") from exc
+        if flag > 1:  # special record: nsat = number of following header lines
+            i += 1 + nsat
+            continue
+        try:
+            yy, mo, dd, hh, mi = (int(line[k : k + 3]) for k in (0, 3, 6, 9, 12))
+            sec = float(line[15:26])
+        except ValueError as exc:
+            raise InputError(f"{path}:{i + 1}: malformed epoch line: {exc}") from exc
+        year = yy + (2000 if yy < 80 else 1900)
+        sats_text = line[32:68].ljust(36)
+        i += 1
+        for _ in range((nsat - 1) // 12):  # continuation lines carry 12 satellites each
+            sats_text = sats_text.ljust(36) + (lines[i][32:68] if i < len(lines) else "")
+            i += 1
+        sats = [sats_text[3 * k : 3 * k + 3] for k in range(nsat)]
+        body = lines[i : i + nsat * lines_per_sat]
+        i += nsat * lines_per_sat
+        if len(body) < nsat * lines_per_sat:
+            log.warning("%s: truncated last epoch dropped", path)
+            return
+        b = _EpochBuilder()
+        for k, sat in enumerate(sats):
+            sys_letter = sat[0] if sat[0] != " " else "G"
+            try:
+                prn = int(sat[1:3])
+            except ValueError as exc:
+                raise InputError(f"{path}: malformed satellite id {sat!r}") from exc
+            text = "".join(ln.ljust(80)[:80] for ln in body[k * lines_per_sat : (k + 1) * lines_per_sat])
+            try:
+                values = _split_values(text, ntypes)
+            except ValueError as exc:
+                raise InputError(f"{path}: malformed observation for {sat}: {exc}") from exc
+            b.add(sys_letter, prn, values, cols, flag == 1)
+        yield b.build(gpst_from_calendar(year, mo, dd, hh, mi, round(sec * 1e9)))
+
+
+def read_rinex_obs(path: str | Path) -> RinexObsFile:
+    """Read a RINEX 2.1x or 3.0x observation file (gzip accepted) into a header and a list of epochs.
+
+    Raises `InputError` naming the file and line for anything unreadable.
+    """
+    path = Path(path)
+    lines = _open_lines(path)
+    hdr, start = _parse_header(path, lines)
+    if hdr.version >= 3.0:
+        epochs = list(_iter_v3(path, lines, start, hdr))
+    else:
+        if not hdr.obs_types.get("G"):
+            raise InputError(f"{path}: no '# / TYPES OF OBSERV' in the header")
+        epochs = list(_iter_v2(path, lines, start, hdr))
+    return RinexObsFile(header=hdr, epochs=epochs)

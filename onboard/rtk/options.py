@@ -1,0 +1,111 @@
+"""RTK engine options: one frozen dataclass (units in field names) and the TOML key → field table."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+AR_MODES = ("fix-and-hold", "continuous", "instantaneous", "off")
+
+
+@dataclass(frozen=True)
+class RtkOptions:
+    """Options of the L1 relative-positioning engine (defaults: RTKLIB demo5-like, tuned for L1 drones).
+
+    Noise terms follow RTKLIB prcopt_t: phase σ = a + b/sin(el) per zero-difference (m), code σ = that ×
+    `code_phase_ratio`. Process noises are spectral densities (per √s).
+    """
+
+    elmask_deg: float = 15.0
+    ar_elmask_deg: float = 15.0
+    hold_elmask_deg: float = 15.0
+    ar_mode: str = "fix-and-hold"
+    ratio_threshold: float = 3.0
+    min_lock_epochs: int = 0
+    min_fix_sats: int = 4
+    min_hold_epochs: int = 5
+    min_amb_dd: int = 4
+    """Fewest double-difference ambiguities a (partial) fix may rest on."""
+    partial_ar: bool = True
+    max_partial_drop: int = 6
+    phase_sigma_a_m: float = 0.003
+    phase_sigma_b_m: float = 0.003
+    code_phase_ratio: float = 300.0
+    doppler_sigma_m_s: float = 0.1
+    use_doppler: bool = True
+    initial_bias_sigma_cyc: float = 30.0 / 0.19029367279836487
+    bias_process_noise_cyc: float = 1e-4
+    accel_h_sigma_m_s2: float = 3.0
+    accel_v_sigma_m_s2: float = 1.0
+    initial_pos_sigma_m: float = 30.0
+    initial_vel_sigma_m_s: float = 10.0
+    hold_sigma_cyc: float = 0.001
+    max_outage_epochs: int = 5
+    slip_threshold_cyc: float = 2.0
+    """Doppler-predicted phase jump beyond which a slip is declared (cycles, scaled with the gap)."""
+    max_innovation_phase_m: float = 0.5
+    max_innovation_code_m: float = 30.0
+    validation_sigma_factor: float = 4.0
+    max_age_s: float = 30.0
+    pair_tolerance_s: float = 0.025
+    static_start: bool = False
+    """Hold the rover static (no process noise) until its Doppler speed exceeds takeoff_speed_m_s."""
+    takeoff_speed_m_s: float = 0.5
+    init_pos_sigma_m: float = 0.005
+    """σ given to a known take-off position (Daakir 2015 known-point initialisation)."""
+    max_iterations: int = 2
+    spp_max_gdop: float = 30.0
+    spp_outlier_m: float = 60.0
+
+    @property
+    def elmask_rad(self) -> float:
+        return math.radians(self.elmask_deg)
+
+    def __post_init__(self) -> None:
+        if self.ar_mode not in AR_MODES:
+            raise ValueError(f"ar_mode must be one of {AR_MODES}, not {self.ar_mode!r}")
+        if not 0.0 <= self.elmask_deg < 90.0:
+            raise ValueError(f"elmask_deg out of range: {self.elmask_deg}")
+        if self.ratio_threshold < 1.0:
+            raise ValueError("ratio_threshold must be ≥ 1")
+
+
+# TOML key → (field, converter). Keys carry RTKLIB-like names; units convert here, at the boundary.
+TOML_KEYS: dict[str, tuple[str, Any]] = {
+    "elevation_mask_deg": ("elmask_deg", float),
+    "ar_elevation_mask_deg": ("ar_elmask_deg", float),
+    "ar_mode": ("ar_mode", str),
+    "ratio_threshold": ("ratio_threshold", float),
+    "min_lock_epochs": ("min_lock_epochs", int),
+    "min_fix_sats": ("min_fix_sats", int),
+    "min_hold_epochs": ("min_hold_epochs", int),
+    "partial_ar": ("partial_ar", bool),
+    "phase_sigma_mm": ("phase_sigma_a_m", lambda v: float(v) / 1000.0),
+    "phase_sigma_el_mm": ("phase_sigma_b_m", lambda v: float(v) / 1000.0),
+    "code_phase_ratio": ("code_phase_ratio", float),
+    "accel_h_sigma_m_s2": ("accel_h_sigma_m_s2", float),
+    "accel_v_sigma_m_s2": ("accel_v_sigma_m_s2", float),
+    "max_age_s": ("max_age_s", float),
+    "max_outage_epochs": ("max_outage_epochs", int),
+    "static_start": ("static_start", bool),
+    "takeoff_speed_m_s": ("takeoff_speed_m_s", float),
+    "use_doppler": ("use_doppler", bool),
+}
+
+
+def options_from_mapping(values: Mapping[str, Any], base: RtkOptions | None = None) -> RtkOptions:
+    """Options from a parsed TOML table; unknown keys raise ValueError naming the key."""
+    changes: dict[str, Any] = {}
+    for key, value in values.items():
+        if key not in TOML_KEYS:
+            raise ValueError(f"unknown RTK option {key!r} (known: {', '.join(sorted(TOML_KEYS))})")
+        name, conv = TOML_KEYS[key]
+        changes[name] = conv(value)
+    return replace(base or RtkOptions(), **changes)
+
+
+def option_names() -> list[str]:
+    """Field names of RtkOptions (for help texts)."""
+    return [f.name for f in fields(RtkOptions)]

@@ -1,0 +1,142 @@
+"""Single-point positioning from L1 C/A pseudoranges and Doppler (follows RTKLIB pntpos.c).
+
+Iterative weighted least squares for position and receiver clock with Saastamoinen + Klobuchar corrections,
+elevation mask and a RAIM-like exclusion of the worst satellite while residuals stay too large; then the
+receiver velocity and clock drift from Doppler.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
+from onboard.rtk.ephemeris import SatState, geometric_range
+from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
+from onboard.rtk.models import klobuchar_m, saastamoinen_m
+
+Arr = npt.NDArray[np.float64]
+
+ERR_CODE_BASE_M = 0.3
+"""Pseudorange σ at zenith for SPP weighting (m; RTKLIB err[1..2] × eratio order of magnitude)."""
+
+
+@dataclass
+class SppSolution:
+    """Single-point result. `pos_ecef_m` (3,), `clock_bias_m` receiver clock × c (m), `vel_ecef_m_s` (3,)
+    (NaN without Doppler), `clock_drift_m_s`, `used` (n,) mask of satellites in the fix, `az_rad`/`el_rad`
+    (n,) at the solution, `ok` whether a solution was found, `gdop`, `residual_rms_m`."""
+
+    pos_ecef_m: Arr
+    clock_bias_m: float
+    vel_ecef_m_s: Arr
+    clock_drift_m_s: float
+    used: npt.NDArray[np.bool_]
+    az_rad: Arr
+    el_rad: Arr
+    ok: bool
+    gdop: float
+    residual_rms_m: float
+    message: str = ""
+
+
+def sat_az_el(rcv_ecef_m: Arr, e_ecef: Arr) -> tuple[Arr, Arr]:
+    """Azimuth/elevation (rad) from unit line-of-sight vectors (n,3) at receiver position (3,)."""
+    lat, lon, _ = ecef_to_llh(rcv_ecef_m)
+    enu = e_ecef @ enu_rotation(lat, lon).T
+    return np.arctan2(enu[:, 0], enu[:, 1]) % (2 * np.pi), np.arcsin(np.clip(enu[:, 2], -1.0, 1.0))
+
+
+def _atmosphere_m(pos: Arr, az: Arr, el: Arr, tow_s: float, iono: tuple | None) -> Arr:
+    lat, lon, h = ecef_to_llh(pos)
+    alpha, beta = (iono if iono is not None else (None, None))
+    return saastamoinen_m(lat, h, el) + klobuchar_m(tow_s, lat, lon, az, el, alpha, beta)
+
+
+def pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: Arr | None = None,
+           iono: tuple | None = None, x0_ecef_m: Arr | None = None, max_iter: int = 10,
+           outlier_m: float = 60.0, max_gdop: float = 30.0) -> SppSolution:
+    """Position and clock (m) from pseudoranges `pr_m` (n,) with satellite states `sats` (aligned).
+
+    `tow_s` receiver time (s of week) for the ionosphere model, `iono` (alpha, beta) Klobuchar coefficients.
+    Follows RTKLIB pntpos() estpos()/raim_fde(): drops the satellite with the largest normalised residual
+    while the residual RMS exceeds `outlier_m`/… and at least 5 remain.
+    """
+    n = pr_m.shape[0]
+    base_ok = sats.ok & np.isfinite(pr_m)
+    x = np.zeros(4) if x0_ecef_m is None else np.r_[x0_ecef_m, 0.0]
+    excluded = np.zeros(n, bool)
+    az = np.zeros(n)
+    el = np.zeros(n)
+    for _attempt in range(n):
+        use = base_ok & ~excluded
+        converged = False
+        for it in range(max_iter):
+            r, e = geometric_range(sats.pos_m, x[:3])
+            if np.linalg.norm(x[:3]) > 1e6:
+                az, el = sat_az_el(x[:3], e)
+                corr = _atmosphere_m(x[:3], az, el, tow_s, iono)
+                mask = use & (el >= elmask_rad)
+            else:
+                az, el = np.zeros(n), np.full(n, np.pi / 2)
+                corr = np.zeros(n)
+                mask = use.copy()
+            if mask.sum() < 4:
+                return SppSolution(x[:3], x[3], np.full(3, np.nan), np.nan, mask, az, el, False, np.inf, np.inf,
+                                   f"only {int(mask.sum())} usable satellites")
+            res = pr_m - (r + x[3] - CLIGHT_M_S * sats.clock_s + corr)
+            h = np.c_[-e, np.ones(n)][mask]
+            sig = ERR_CODE_BASE_M / np.sin(np.maximum(el[mask], np.radians(5.0))) if it > 0 else np.ones(mask.sum())
+            w = 1.0 / sig
+            dx, *_ = np.linalg.lstsq(h * w[:, None], res[mask] * w, rcond=None)
+            x = x + dx
+            if np.linalg.norm(dx) < 1e-4:
+                converged = True
+                break
+        r, e = geometric_range(sats.pos_m, x[:3])
+        az, el = sat_az_el(x[:3], e)
+        corr = _atmosphere_m(x[:3], az, el, tow_s, iono)
+        mask = use & (el >= elmask_rad)
+        res = pr_m - (r + x[3] - CLIGHT_M_S * sats.clock_s + corr)
+        h = np.c_[-e, np.ones(n)][mask]
+        try:
+            gdop = float(np.sqrt(np.trace(np.linalg.inv(h.T @ h))))
+        except np.linalg.LinAlgError:
+            gdop = np.inf
+        rms = float(np.sqrt(np.mean(res[mask] ** 2))) if mask.any() else np.inf
+        dof = int(mask.sum()) - 4
+        if converged and (rms <= outlier_m / 3.0 or dof < 2):
+            vel, drift = doppler_velocity(dop_hz, sats, e, x[:3], mask)
+            ok = gdop <= max_gdop and rms <= outlier_m
+            return SppSolution(x[:3].copy(), float(x[3]), vel, drift, mask, az, el, ok, gdop, rms,
+                               "" if ok else f"gdop {gdop:.1f} / rms {rms:.1f} m too large")
+        if dof < 2:
+            break
+        # RAIM-like: exclude the worst residual and try again
+        worst = np.flatnonzero(mask)[np.argmax(np.abs(res[mask]) * np.sin(el[mask]))]
+        excluded[worst] = True
+    return SppSolution(x[:3], float(x[3]), np.full(3, np.nan), np.nan, np.zeros(n, bool), az, el, False, np.inf,
+                       np.inf, "no consistent solution")
+
+
+def doppler_velocity(dop_hz: Arr | None, sats: SatState, e: Arr, pos: Arr,
+                     mask: npt.NDArray[np.bool_]) -> tuple[Arr, float]:
+    """Receiver velocity (ECEF m/s) and clock drift (m/s) from Doppler (RTKLIB estvel/resdop), NaN if < 4."""
+    dop = dop_hz
+    if dop is None:
+        return np.full(3, np.nan), np.nan
+    m = mask & np.isfinite(dop)
+    if m.sum() < 4:
+        return np.full(3, np.nan), np.nan
+    rate_obs = -LAMBDA_L1_M * dop[m]
+    vs = sats.vel_m_s[m]
+    ps = sats.pos_m[m]
+    # range-rate model incl. Sagnac rate (RTKLIB resdop())
+    sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, 1] * pos[0] - vs[:, 0] * pos[1])
+    em = e[m]
+    h = np.c_[-em, np.ones(m.sum())]
+    y = rate_obs - (np.einsum("ij,ij->i", em, vs) + sag - CLIGHT_M_S * sats.drift_s_s[m])
+    x, *_ = np.linalg.lstsq(h, y, rcond=None)
+    return x[:3], float(x[3])
