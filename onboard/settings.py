@@ -1,0 +1,231 @@
+"""Recorder settings: one frozen dataclass, layered package defaults → TOML file → `ONBOARD_*` env → CLI flags.
+
+Keys are `section.key` names in the TOML file (documented, every key commented, in
+`onboard/default_config.toml`); the environment spells them `ONBOARD_SECTION_KEY`
+(e.g. `ONBOARD_PORT_DEVICE=/dev/ttyACM0`). The `[receiver]` section takes, besides `model` and `configure`,
+every field of `onboard.receiver.profiles.ReceiverOptions` by its name. Unknown keys and bad values raise
+`ConfigFileError` naming the key.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+from onboard.errors import ConfigFileError
+
+ENV_PREFIX = "ONBOARD_"
+
+
+@dataclass(frozen=True, slots=True)
+class Settings:
+    """Everything the recorder daemon is configured with (units in names; see default_config.toml)."""
+
+    port_device: str = "/dev/ttyAMA0"
+    port_baud: int = 115200
+    port_read_timeout_s: float = 0.1
+    port_reopen_min_s: float = 0.5
+    port_reopen_max_s: float = 10.0
+    receiver_model: str = "auto"
+    receiver_configure: bool = True
+    receiver_options: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    data_dir: Path = Path("/var/lib/directgeo")
+    journal_sync_interval_s: float = 0.5
+    journal_segment_max_mb: float = 64.0
+    journal_segment_max_s: float = 3600.0
+    disk_floor_mb: float = 200.0
+    disk_check_interval_s: float = 1.0
+    status_path: Path = Path("/run/directgeo/status.json")
+    status_interval_s: float = 1.0
+    watchdog_writer_stall_s: float = 10.0
+    gpio_trigger_pin: int = -1
+    gpio_pin_factory: str = "lgpio"
+
+
+# TOML key -> Settings field. `receiver.<ReceiverOptions field>` keys are handled separately.
+KEYS: Mapping[str, str] = MappingProxyType(
+    {
+        "port.device": "port_device",
+        "port.baud": "port_baud",
+        "port.read_timeout_s": "port_read_timeout_s",
+        "port.reopen_min_s": "port_reopen_min_s",
+        "port.reopen_max_s": "port_reopen_max_s",
+        "receiver.model": "receiver_model",
+        "receiver.configure": "receiver_configure",
+        "journal.data_dir": "data_dir",
+        "journal.sync_interval_s": "journal_sync_interval_s",
+        "journal.segment_max_mb": "journal_segment_max_mb",
+        "journal.segment_max_s": "journal_segment_max_s",
+        "journal.disk_floor_mb": "disk_floor_mb",
+        "journal.disk_check_interval_s": "disk_check_interval_s",
+        "status.path": "status_path",
+        "status.interval_s": "status_interval_s",
+        "watchdog.writer_stall_s": "watchdog_writer_stall_s",
+        "gpio.trigger_pin": "gpio_trigger_pin",
+        "gpio.pin_factory": "gpio_pin_factory",
+    }
+)
+MODELS = ("auto", "lea6t", "m8t")
+PIN_FACTORIES = ("lgpio", "mock")
+
+
+def _field_types() -> dict[str, Any]:
+    return {f.name: f.type for f in dataclasses.fields(Settings)}
+
+
+def _receiver_option_fields() -> dict[str, Any]:
+    from onboard.receiver.profiles import ReceiverOptions
+
+    return {f.name: f.default for f in dataclasses.fields(ReceiverOptions)}
+
+
+def _convert(key: str, value: Any, kind: Any, from_text: bool) -> Any:
+    """Convert a TOML or environment value to the field's type; ConfigFileError naming `key` if it cannot."""
+    kind_name = kind if isinstance(kind, str) else getattr(kind, "__name__", str(kind))
+    try:
+        if kind_name == "bool":
+            if isinstance(value, bool):
+                return value
+            if from_text and str(value).lower() in ("1", "true", "yes", "on", "0", "false", "no", "off"):
+                return str(value).lower() in ("1", "true", "yes", "on")
+            raise ValueError("expected true or false")
+        if kind_name == "int":
+            if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
+                raise ValueError("expected an integer")
+            return int(value)
+        if kind_name == "float":
+            if isinstance(value, bool):
+                raise ValueError("expected a number")
+            return float(value)
+        if kind_name == "Path":
+            if not isinstance(value, str) or not value:
+                raise ValueError("expected a path")
+            return Path(value)
+        if kind_name == "str":
+            if not isinstance(value, str):
+                raise ValueError("expected a string")
+            return value
+    except (TypeError, ValueError) as exc:
+        raise ConfigFileError(f"{key}: bad value {value!r}: {exc}") from exc
+    raise ConfigFileError(f"{key}: unsupported type {kind_name}")
+
+
+def _flatten(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in table.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out.update(_flatten(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+def _apply(values: dict[str, Any], receiver: dict[str, Any], flat: Mapping[str, Any], source: str,
+           from_text: bool) -> None:
+    types = _field_types()
+    options = _receiver_option_fields()
+    for key, raw in flat.items():
+        if key in KEYS:
+            name = KEYS[key]
+            values[name] = _convert(key, raw, types[name], from_text)
+        elif key.startswith("receiver.") and key.split(".", 1)[1] in options:
+            opt = key.split(".", 1)[1]
+            receiver[opt] = _convert(key, raw, type(options[opt]).__name__, from_text)
+        else:
+            raise ConfigFileError(f"{source}: unknown key {key!r}")
+
+
+def load_toml(path: Path) -> dict[str, Any]:
+    """Read a TOML file into flat `section.key` values (ConfigFileError if unreadable or malformed)."""
+    try:
+        with open(path, "rb") as f:
+            return _flatten(tomllib.load(f))
+    except OSError as exc:
+        raise ConfigFileError(f"cannot read configuration file {path}: {exc}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigFileError(f"{path}: not valid TOML: {exc}") from exc
+
+
+def env_values(environ: Mapping[str, str]) -> dict[str, str]:
+    """`ONBOARD_SECTION_KEY` variables as flat `section.key` values (unknown ONBOARD_ names are errors,
+    except the test hooks `ONBOARD_TEST_*`)."""
+    known = {ENV_PREFIX + k.upper().replace(".", "_"): k for k in KEYS}
+    known.update(
+        {ENV_PREFIX + "RECEIVER_" + opt.upper(): f"receiver.{opt}" for opt in _receiver_option_fields()}
+    )
+    out: dict[str, str] = {}
+    for name, value in environ.items():
+        if not name.startswith(ENV_PREFIX) or name.startswith(ENV_PREFIX + "TEST_"):
+            continue
+        if name not in known:
+            raise ConfigFileError(f"environment: unknown variable {name}")
+        out[known[name]] = value
+    return out
+
+
+def default_config_path() -> Path:
+    """The packaged, documented default configuration file."""
+    return Path(str(resources.files("onboard").joinpath("default_config.toml")))
+
+
+def load_settings(
+    config_file: Path | None = None,
+    environ: Mapping[str, str] | None = None,
+    overrides: Mapping[str, Any] | None = None,
+) -> Settings:
+    """Build the settings: dataclass defaults → `config_file` → `ONBOARD_*` environment → `overrides`.
+
+    `overrides` uses `section.key` names (the CLI flags map onto them). Raises ConfigFileError.
+    """
+    values: dict[str, Any] = {}
+    receiver: dict[str, Any] = {}
+    if config_file is not None:
+        _apply(values, receiver, load_toml(Path(config_file)), str(config_file), from_text=False)
+    _apply(values, receiver, env_values(os.environ if environ is None else environ), "environment",
+           from_text=True)
+    if overrides:
+        _apply(values, receiver, {k: v for k, v in overrides.items() if v is not None}, "command line",
+               from_text=False)
+    settings = Settings(**values, receiver_options=MappingProxyType(receiver))
+    validate(settings)
+    return settings
+
+
+def validate(s: Settings) -> None:
+    """Cross-field checks (ConfigFileError naming the key)."""
+    if s.receiver_model not in MODELS:
+        raise ConfigFileError(f"receiver.model: must be one of {MODELS}, got {s.receiver_model!r}")
+    if s.gpio_pin_factory not in PIN_FACTORIES:
+        raise ConfigFileError(f"gpio.pin_factory: must be one of {PIN_FACTORIES}, got {s.gpio_pin_factory!r}")
+    for key, name in KEYS.items():
+        value = getattr(s, name)
+        if name.endswith("_s") and value <= 0 and name != "journal_segment_max_s":
+            raise ConfigFileError(f"{key}: must be > 0, got {value}")
+    if s.journal_sync_interval_s > 1.0:
+        raise ConfigFileError(f"journal.sync_interval_s: must be ≤ 1 s (fsync at least once a second), "
+                              f"got {s.journal_sync_interval_s}")
+    if s.port_reopen_max_s < s.port_reopen_min_s:
+        raise ConfigFileError("port.reopen_max_s: must be ≥ port.reopen_min_s")
+    if s.disk_floor_mb < 0 or s.journal_segment_max_mb < 0 or s.journal_segment_max_s < 0:
+        raise ConfigFileError("journal sizes and disk floor must be ≥ 0")
+    try:
+        receiver_options(s)
+    except (TypeError, ValueError) as exc:
+        raise ConfigFileError(f"receiver: {exc}") from exc
+
+
+def receiver_options(s: Settings) -> Any:
+    """The `ReceiverOptions` built from the `[receiver]` section (baud defaults to `port.baud`)."""
+    from onboard.receiver.profiles import ReceiverOptions
+
+    opts = dict(s.receiver_options)
+    opts.setdefault("baud", s.port_baud)
+    return ReceiverOptions(**opts)

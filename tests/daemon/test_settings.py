@@ -1,0 +1,89 @@
+"""Settings: documented defaults, layering file → env → CLI, unknown keys and bad values are errors."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+from onboard.errors import ConfigFileError
+from onboard.settings import (
+    KEYS,
+    Settings,
+    default_config_path,
+    load_settings,
+    load_toml,
+    receiver_options,
+)
+
+
+def test_default_file_documents_every_key_with_the_real_default() -> None:
+    """The packaged TOML holds every key, each preceded by a comment, with the dataclass's default value."""
+    path = default_config_path()
+    flat = load_toml(path)
+    from onboard.receiver.profiles import ReceiverOptions
+
+    option_keys = {f"receiver.{f.name}" for f in dataclasses.fields(ReceiverOptions)}
+    assert set(flat) == set(KEYS) | option_keys
+    defaults = Settings()
+    for key, name in KEYS.items():
+        got = flat[key]
+        want = getattr(defaults, name)
+        assert (str(want) if isinstance(want, Path) else want) == got, key
+    for f in dataclasses.fields(ReceiverOptions):
+        assert flat[f"receiver.{f.name}"] == f.default, f.name
+    lines = path.read_text().splitlines()
+    for i, line in enumerate(lines):
+        if "=" in line and not line.startswith("#"):
+            j = i - 1  # a comment above (possibly shared by a group of keys)
+            while j >= 0 and "=" in lines[j] and not lines[j].startswith("#"):
+                j -= 1
+            assert lines[j].startswith("#"), f"key without a comment: {line}"
+    # and loading the default file changes nothing
+    s = load_settings(path, environ={})
+    assert s.port_device == defaults.port_device and s.data_dir == defaults.data_dir
+
+
+def test_layering_file_env_cli(tmp_path: Path) -> None:
+    cfg = tmp_path / "r.toml"
+    cfg.write_text('[port]\ndevice = "/dev/ttyACM0"\nbaud = 38400\n[journal]\ndata_dir = "/data"\n'
+                   '[receiver]\nmeas_rate_ms = 1000\n')
+    env = {"ONBOARD_PORT_BAUD": "9600", "ONBOARD_RECEIVER_CAMERA_PERIOD_S": "2.0", "HOME": "/x"}
+    s = load_settings(cfg, environ=env, overrides={"journal.data_dir": "/cli", "port.device": None})
+    assert s.port_device == "/dev/ttyACM0"  # file (CLI left it unset)
+    assert s.port_baud == 9600  # env beats file
+    assert s.data_dir == Path("/cli")  # CLI beats file
+    opts = receiver_options(s)
+    assert opts.meas_rate_ms == 1000 and opts.camera_period_s == 2.0
+    assert opts.baud == 9600  # follows port.baud unless set
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("[port]\ndevise = 'x'\n", "unknown key 'port.devise'"),
+        ("[nonsense]\na = 1\n", "unknown key 'nonsense.a'"),
+        ("[port]\nbaud = 'fast'\n", "port.baud: bad value"),
+        ("[journal]\nsync_interval_s = 5.0\n", "sync_interval_s: must be ≤ 1"),
+        ("[receiver]\nmodel = 'zed'\n", "receiver.model"),
+        ("[receiver]\nmeas_rate_ms = 5\n", "receiver: meas_rate_ms"),
+        ("[port\n", "not valid TOML"),
+    ],
+)
+def test_bad_files_name_the_key(tmp_path: Path, text: str, match: str) -> None:
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(text)
+    with pytest.raises(ConfigFileError, match=match):
+        load_settings(cfg, environ={})
+
+
+def test_unknown_env_variable_and_missing_file(tmp_path: Path) -> None:
+    with pytest.raises(ConfigFileError, match="ONBOARD_PORT_DEV"):
+        load_settings(None, environ={"ONBOARD_PORT_DEV": "/dev/x"})
+    with pytest.raises(ConfigFileError, match="bool|true or false"):
+        load_settings(None, environ={"ONBOARD_RECEIVER_CONFIGURE": "maybe"})
+    with pytest.raises(ConfigFileError, match="cannot read"):
+        load_settings(tmp_path / "absent.toml", environ={})
+    # test hooks are not settings
+    assert load_settings(None, environ={"ONBOARD_TEST_SYNC_LOG": "/tmp/x"}).port_baud == 115200
