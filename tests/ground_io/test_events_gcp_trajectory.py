@@ -1,0 +1,190 @@
+"""Events (CSV, events.jsonl, matching), GCP readers (ours, ODM, MicMac) and the .pos → Trajectory boundary."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ground.io import crs as crsmod
+from ground.io.errors import CrsError, FormatError
+from ground.io.events import (
+    Mark,
+    match_marks_to_images,
+    parse_capture_time,
+    read_capture_times,
+    read_events_csv,
+    read_marks_jsonl,
+)
+from ground.io.gcp import (
+    merge_ground_and_relative,
+    read_gcp_csv,
+    read_micmac_gcp,
+    read_odm_gcp_list,
+    to_control_points,
+)
+from ground.io.trajectory import read_trajectory
+from onboard.gnsstime import GpsTime
+from onboard.rtk.geodesy import ecef_to_enu
+from tests.conftest import shared_file
+from tests.ground_io.flightgen import ORIGIN_ECEF, write_synthetic_flight
+
+T0 = GpsTime.from_week_tow_s(2300, 100_000.0)
+
+
+def test_events_csv_reads_week_tow_to_the_ns(tmp_path: Path) -> None:
+    f = tmp_path / "ev.csv"
+    f.write_text("image,week,tow,kind\na.jpg,2300,100000.123456789,flash\nb.jpg,2300,100002.5,\n")
+    ev = read_events_csv(f)
+    assert ev[0].time == GpsTime(2300, 100_000_123_456_789) and ev[0].kind == "flash"
+    assert ev[1].kind == "trigger"
+
+
+@pytest.mark.parametrize(
+    ("content", "match"),
+    [
+        ("image,week\na,1\n", "image,week,tow"),
+        ("image,week,tow\na,2300,700000\n", ":2"),
+        ("image,week,tow\na,2300,1\na,2300,2\n", "twice"),
+        ("image,week,tow\na,2300,abc\n", ":2"),
+    ],
+)
+def test_events_csv_bad_rows(tmp_path: Path, content: str, match: str) -> None:
+    """Missing column, tow beyond a week, duplicated image, non-numeric tow: FormatError with file:line."""
+    f = tmp_path / "ev.csv"
+    f.write_text(content)
+    with pytest.raises(FormatError, match=match):
+        read_events_csv(f)
+
+
+def test_events_jsonl_skips_torn_line_and_non_marks(tmp_path: Path) -> None:
+    """A power cut tears the last line: it is skipped, the marks before it are kept; config records ignored."""
+    f = tmp_path / "events.jsonl"
+    recs = [{"type": "config", "ok": True}]
+    recs += [{"type": "mark", "week": 2300, "tow_ns": 100_000_000_000_000 + i * 2_000_000_000, "count": i}
+             for i in range(3)]
+    f.write_text("\n".join(json.dumps(r) for r in recs) + '\n{"type":"mark","week":23')
+    marks = read_marks_jsonl(f)
+    assert [m.count for m in marks] == [0, 1, 2]
+    assert marks[1].time == GpsTime(2300, 100_002_000_000_000)
+    f.write_text(json.dumps({"type": "config"}) + "\n")
+    with pytest.raises(FormatError, match="no image mark"):
+        read_marks_jsonl(f)
+
+
+def _marks(n: int, drop: tuple[int, ...] = ()) -> list[Mark]:
+    return [Mark(T0.add_s(2.0 * i), count=i) for i in range(n) if i not in drop]
+
+
+def test_match_by_order_and_refusal_on_count_jump() -> None:
+    rep = match_marks_to_images(_marks(4), ["c.jpg", "a.jpg", "b.jpg", "d.jpg"])
+    assert [e.image for e in rep.events] == ["a.jpg", "b.jpg", "c.jpg", "d.jpg"]
+    with pytest.raises(ValueError, match="counter jumps"):
+        match_marks_to_images(_marks(5, drop=(2,)), ["a", "b", "c", "d"])
+
+
+def test_match_by_capture_time_flags_missing_and_extra() -> None:
+    """Camera clock 2 h + 17.4 s off GPS (time zone + drift), 1 s EXIF resolution; one mark lost, one photo missing."""
+    marks = _marks(10, drop=(4,))
+    utc0 = T0.to_gpst_datetime().replace(tzinfo=None) + dt.timedelta(hours=2, seconds=17.4)
+    caps = {f"IMG_{i}.JPG": (utc0 + dt.timedelta(seconds=2.0 * i)).replace(microsecond=0) for i in range(10) if i != 7}
+    rep = match_marks_to_images(marks, sorted(caps) + ["IMG_X.JPG"], caps)
+    assert rep.method == "capture_time"
+    assert {e.image: e.time for e in rep.events}["IMG_5.JPG"] == T0.add_s(10.0)
+    assert len(rep.events) == 8
+    assert rep.missing_marks == ["IMG_4.JPG", "IMG_X.JPG"]
+    assert rep.extra_marks == [T0.add_s(14.0)]
+    assert rep.count_jumps == [(3, 5)]
+    assert rep.clock_offset_s == pytest.approx(7217.4 - 0.0, abs=1.0)
+
+
+def test_capture_times_sidecar(tmp_path: Path) -> None:
+    f = tmp_path / "caps.csv"
+    f.write_text("image,capture_time\na.jpg,2024:05:01 10:00:01.25\nb.jpg,2024-05-01T08:00:03Z\n")
+    caps = read_capture_times(f)
+    assert caps["a.jpg"] == dt.datetime(2024, 5, 1, 10, 0, 1, 250000)
+    assert caps["b.jpg"] == dt.datetime(2024, 5, 1, 8, 0, 3)
+    assert parse_capture_time("garbage") is None
+    f.write_text("image,capture_time\na.jpg,yesterday\n")
+    with pytest.raises(FormatError, match="unreadable"):
+        read_capture_times(f)
+
+
+def test_gcp_csv_to_enu(tmp_path: Path) -> None:
+    write_synthetic_flight(tmp_path, n_lines=1)
+    pts = read_gcp_csv(tmp_path / "gcp.csv")
+    assert [p.role for p in pts] == ["gcp", "gcp", "gcp", "check", "check"]
+    cps = to_control_points(pts, ORIGIN_ECEF)
+    np.testing.assert_allclose(cps[0].ground_enu_m, [20, 10, 0.5], atol=0.03)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("name,role,x_rel,y_rel,z_rel,X,Y,Z\nA,control,1,2,3,4,5,6\n")
+    with pytest.raises(FormatError, match="role"):
+        read_gcp_csv(bad)
+
+
+def test_odm_gcp_lists_real_files() -> None:
+    utm = read_odm_gcp_list(shared_file("orientation/odm/gcp_list_utm16n.txt"))
+    assert len(utm) == 1 and utm[0].crs == "EPSG:32616"
+    labelled = read_odm_gcp_list(shared_file("orientation/odm/gcp_list_with_label.txt"))
+    assert [p.name for p in labelled] == ["gcp1"]
+    feet = read_odm_gcp_list(shared_file("orientation/odm/gcp_list_epsg2251_feet.txt"))
+    lonlat = read_odm_gcp_list(shared_file("orientation/odm/gcp_list_proj4_lonlat.txt"))
+    assert len(lonlat) == 2
+    # the feet CRS is honoured by pyproj: the point lands in Michigan (lon ≈ −85 to −86°, lat ≈ 44–46°)
+    lon, lat, _ = crsmod.ecef_to_lonlat_deg(crsmod.crs_to_ecef(feet[0].ground[None, :], feet[0].crs)[0])
+    assert -90 < lon < -82 and 40 < lat < 48
+    # lon/lat PROJ-string file: ground stays lon, lat, h
+    e = crsmod.crs_to_ecef(lonlat[0].ground[None, :], lonlat[0].crs)[0]
+    assert crsmod.ecef_to_lonlat_deg(e)[0] == pytest.approx(-85.61322729531112, abs=1e-9)
+
+
+def test_micmac_gcp_real_file_merge_with_relative(tmp_path: Path) -> None:
+    pts = read_micmac_gcp(shared_file("orientation/micmac/gcp/MesurePointGround.xml"), crs="EPSG:4978")
+    assert pts[0].name == "P_1_A"
+    np.testing.assert_allclose(pts[0].sigma_m, [1, 1, 1])
+    rel = {"P_1_A": (np.array([1.0, 2.0, 3.0]), "check")}
+    merged = merge_ground_and_relative(pts, rel)
+    assert len(merged) == 1 and merged[0].role == "check"
+
+
+def test_missing_geoid_grid_is_an_error() -> None:
+    """EPSG:2154+5720 (Lambert-93 + NGF-IGN69) needs the RAF20 grid, not installed: error, never ellipsoidal."""
+    with pytest.raises(CrsError, match="geoid grid"):
+        crsmod.ecef_to_crs(crsmod.lonlat_deg_to_ecef(-2.0, 48.0, 80.0), "EPSG:2154+5720")
+
+
+def test_ecef_to_utm_and_back_mm(tmp_path: Path) -> None:
+    p = crsmod.lonlat_deg_to_ecef(120.95, 24.68, 186.0)
+    utm = crsmod.ecef_to_crs(p, "EPSG:32651")
+    np.testing.assert_allclose(crsmod.crs_to_ecef(utm, "EPSG:32651")[0], p, atol=1e-6)
+    assert utm[0, 2] == pytest.approx(186.0, abs=1e-6)  # 2-D projected CRS keeps the ellipsoidal height
+    with pytest.raises(CrsError, match="unknown CRS"):
+        crsmod.ecef_to_crs(p, "EPSG:999999")
+
+
+def test_trajectory_xyz_and_llh_agree(tmp_path: Path) -> None:
+    """Our .pos in xyz and in llh (σ and velocity in n/e/u) give the same Trajectory."""
+    from onboard.formats.pos import read_pos, write_pos
+    from onboard.rtk.types import Solution
+
+    write_synthetic_flight(tmp_path, n_lines=1)
+    xyz = read_trajectory(str(tmp_path / "SOL.pos"))
+    track = read_pos(tmp_path / "SOL.pos")
+    sols = [Solution(time=t, pos_ecef_m=p, vel_ecef_m_s=v, q=int(q), ns=12, cov_pos_m2=np.diag([1e-4, 1e-4, 4e-4]),
+                     cov_vel_m2_s2=np.eye(3) * 1e-4) for t, p, v, q in zip(track.time, track.pos_ecef_m,
+                                                                             track.vel_m_s, track.q)]
+    write_pos(tmp_path / "llh.pos", sols, llh=True, velocity=True, calendar=True)
+    llh = read_trajectory(str(tmp_path / "llh.pos"))
+    np.testing.assert_array_equal(llh.t_ns, xyz.t_ns)
+    np.testing.assert_allclose(ecef_to_enu(llh.pos_ecef_m, ORIGIN_ECEF), ecef_to_enu(xyz.pos_ecef_m, ORIGIN_ECEF),
+                               atol=2e-3)
+    np.testing.assert_allclose(llh.vel_ecef_m_s, xyz.vel_ecef_m_s, atol=2e-3)
+    (tmp_path / "one.pos").write_text("\n".join((tmp_path / "SOL.pos").read_text().splitlines()[:2]) + "\n")
+    with pytest.raises(FormatError, match="at least 2"):
+        read_trajectory(str(tmp_path / "one.pos"))
+    (tmp_path / "bad.pos").write_text("hello\n")
+    with pytest.raises(FormatError):
+        read_trajectory(str(tmp_path / "bad.pos"))
