@@ -1,0 +1,765 @@
+"""The u-blox receiver emulator's state machine: configuration, ACK/NAK, polls, and the output streams.
+
+Pure: no file, port, thread or clock. The shell (`hil_sim.pty_server`) feeds it input frames and the
+simulated GPS time; it returns the bytes the receiver would send. The physics (observations, ephemerides,
+camera events, truth) come from a World (`hil_sim.world.World`, see `WorldLike`).
+
+Modelling choices (each switchable where the documents leave the real behaviour open):
+
+- Factory state: UART1 at 9600 baud 8N1, NMEA GGA/GLL/GSA/GSV/RMC/VTG at 1 per epoch, UBX raw off,
+  measRate 1000 ms, CFG-TP5 as the real NEO-M8T dump `rtkbase_U-Blox_NEO-M8T_rtkbase.txt` (TIMEPULSE flags
+  0xF7: lockedOtherSet with pulseLenRatio 0, so no pulse before valid time; TIMEPULSE2 flags 0xFE, inactive).
+  The LEA-6T uses the same values with flags limited to u-blox 6's 8 bits.
+- Every CFG input is answered at once (well within the 1 s of the spec); the ACK of a CFG-PRT baud change
+  goes out at the new rate (`baud_rate` changes before the ACK is written).
+- NAK: unknown messages and ids, wrong lengths, incomplete CFG-PRT (UART mode without 8N1 bits, unsupported
+  baud), RXM-RAWX on u-blox 6 (or ACK-and-ignore), RXM-RAW on M8 (no such message), CFG-TP on M8, CFG-TP5
+  on LEA-6T (option), rates below the model's minimum (or ACK with a clamped rate applied), bad tpIdx,
+  pulse length ≥ period.
+- Output is limited by the configured baud's byte budget in simulated time (baud/10 B/s, a TX buffer of
+  `tx_buffer_bytes`): a message that does not fit is dropped whole (a raw epoch is lost, as on real ports).
+- TIM-TM2: per EXTINT channel, only the last rising and last falling edge between two navigation epochs are
+  reported, at the next epoch; `count` counts rising edges. The flash pulls the hot-shoe line low (falling
+  edge on channel 0) and the contact opens `contact_closed_s` later (rising). The trigger pulse (TIMEPULSE
+  driving the camera, `camera_tp_idx`) is reported on channel 1 when `trigger_extint` is on.
+- Camera pulses come from `world.camera_events`; the emulator gates them: no pulse (hence no photo) while the
+  camera TIMEPULSE is inactive, or before valid time when it uses lockedOtherSet with pulseLenRatio 0.
+- Subframes 1–3 of each tracked GPS satellite are emitted when each ends (6 s subframes, 30 s frames; 4 and
+  5, almanac pages, are not simulated). An AID-EPH poll is answered with the ephemeris once its three
+  subframes have been received, else with the 8-byte "no ephemeris" reply.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal, Protocol
+
+import numpy as np
+
+from hil_sim import ubx_encode as enc
+from hil_sim.faults import FaultOptions, FaultState, hot_shoe_edges
+from onboard.gnsstime import NS_PER_S, GpsTime
+from onboard.receiver.framing import Frame, Protocol as FrameProtocol
+from onboard.rtk import lnav
+from onboard.rtk.geodesy import ecef_to_llh
+from onboard.rtk.types import GNSS_GPS, Ephemeris, ObsEpoch
+
+log = logging.getLogger(__name__)
+
+ModelName = Literal["lea6t", "m8t"]
+
+# message ids (class, id)
+RXM_RAW = (0x02, 0x10)
+RXM_RAWX = (0x02, 0x15)
+RXM_SFRB = (0x02, 0x11)
+RXM_SFRBX = (0x02, 0x13)
+NAV_SOL = (0x01, 0x06)
+TIM_TP = (0x0D, 0x01)
+TIM_TM2 = (0x0D, 0x03)
+AID_EPH = (0x0B, 0x31)
+MON_VER = (0x0A, 0x04)
+NMEA_IDS = {0x00: "GGA", 0x01: "GLL", 0x02: "GSA", 0x03: "GSV", 0x04: "RMC", 0x05: "VTG"}
+UART1 = 1
+PORT_RATE_INDEX = UART1  # CFG-MSG rates: DDC, UART1, UART2, USB, SPI, reserved
+VALID_BAUDS = (4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800)
+UART_MODE_8N1_MASK = 0x3EC0  # charLen (bits 6-7), parity (9-11), nStopBits (12-13)
+UART_MODE_8N1 = 0x08C0
+
+# CFG-CFG section bits (clear/save/load masks)
+CFG_IOPORT = 0x0001
+CFG_MSGCONF = 0x0002
+CFG_NAVCONF = 0x0008
+
+M8T_TP5_DEFAULTS: tuple[dict[str, int], dict[str, int]] = (
+    # exactly the two CFG-TP5 payloads of the real NEO-M8T dump (rtkbase_U-Blox_NEO-M8T_rtkbase.txt)
+    {"tpIdx": 0, "version": 1, "reserved0": 0, "antCableDelay": 50, "rfGroupDelay": 0,
+     "freqPeriod": 1_000_000, "freqPeriodLock": 1_000_000, "pulseLenRatio": 0, "pulseLenRatioLock": 100_000,
+     "userConfigDelay": 0, "flags": 0xF7},
+    {"tpIdx": 1, "version": 1, "reserved0": 0, "antCableDelay": 50, "rfGroupDelay": 0,
+     "freqPeriod": 4, "freqPeriodLock": 1, "pulseLenRatio": 125_000, "pulseLenRatioLock": 100_000,
+     "userConfigDelay": 0, "flags": 0xFE},
+)
+# legacy CFG-TP factory values (u-blox 6 receiver description: 1 s, 100 ms, positive, UTC, 50 ns cable)
+LEA6T_TP_DEFAULT: dict[str, int] = {"interval": 1_000_000, "length": 100_000, "status": 1, "timeRef": 0,
+                                    "flags": 0, "reserved1": 0, "antennaCableDelay": 50, "rfGroupDelay": 0,
+                                    "userDelay": 0}
+
+TP5_ACTIVE = 0x01
+TP5_LOCKED_OTHER_SET = 0x04
+TP5_IS_FREQ = 0x08
+TP5_IS_LENGTH = 0x10
+TP5_ALIGN_TO_TOW = 0x20
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """What distinguishes the emulated receiver models (strings as the real firmware reports them)."""
+
+    name: ModelName
+    sw_version: str
+    hw_version: str
+    extensions: tuple[str, ...]
+    raw_msg: tuple[int, int]
+    subframe_msg: tuple[int, int]
+    has_cfg_tp: bool
+    min_meas_rate_ms: int
+    tp5_flags_mask: int
+    time_refs: tuple[int, ...]
+
+
+MODELS: dict[str, ModelSpec] = {
+    # LEA-6T FW 7.03 strings as u-blox 6 MON-VER reports them (no extension strings before protocol 14.00)
+    "lea6t": ModelSpec("lea6t", "7.03 (45969)", "00040007", ("PROTVER 14.00",), RXM_RAW, RXM_SFRB, True, 200,
+                       0xFF, (0, 1)),
+    # the real NEO-M8T MON-VER of the rtkbase dump
+    "m8t": ModelSpec("m8t", "EXT CORE 3.01 (111141)", "00080000",
+                     ("ROM BASE 2.01 (75331)", "FWVER=TIM 1.10", "PROTVER=22.00", "MOD=NEO-M8T-0",
+                      "FIS=0xEF4015 (100111)", "GPS;GLO;GAL;BDS", "SBAS;IMES;QZSS"),
+                     RXM_RAWX, RXM_SFRBX, False, 100, 0x3FFF, (0, 1, 2, 3, 4)),
+}
+
+
+@dataclass(frozen=True)
+class ReceiverOptions:
+    """Behaviours of the emulated receiver (documents leave them open, so each is switchable).
+
+    `align_to_tow`: "clear" clears alignToTow for periods that do not divide 1 s, "keep" keeps it.
+    `rawx_on_u6`: "nak" or "ack-ignore" for CFG-MSG enabling RXM-RAWX on a LEA-6T.
+    `tp5_on_u6`: "ack" (FW ≥ 7.0) or "nak" (older firmware) for CFG-TP5 on a LEA-6T.
+    `silent`: never answers any input, streams the factory output.
+    `ack_invalid_rates`: ACK a CFG-RATE below the minimum but apply the minimum instead.
+    `trigger_extint`: the trigger pulse is wired to EXTINT1 (TIM-TM2 channel 1).
+    `camera_tp_idx`: which TIMEPULSE drives the camera. `time_valid_after_s`: simulated time to first fix.
+    `contact_closed_s`: hot-shoe contact closure (falling→rising). `acc_est_ns`: TIM-TM2 accEst.
+    `mark_noise_ns`: σ of the TIM-TM2 time error. `tx_buffer_bytes`: TX buffer (budget burst).
+    `nav_noise_m`: σ of the NAV-SOL/NMEA position around the truth.
+    """
+
+    align_to_tow: Literal["clear", "keep"] = "clear"
+    rawx_on_u6: Literal["nak", "ack-ignore"] = "nak"
+    tp5_on_u6: Literal["ack", "nak"] = "ack"
+    silent: bool = False
+    ack_invalid_rates: bool = False
+    trigger_extint: bool = False
+    camera_tp_idx: int = 1
+    time_valid_after_s: float = 2.0
+    contact_closed_s: float = 0.004
+    acc_est_ns: int = 21
+    mark_noise_ns: float = 7.0
+    tx_buffer_bytes: int = 4096
+    nav_noise_m: float = 1.5
+    receiver: Literal["rover", "base"] = "rover"
+    faults: FaultOptions = field(default_factory=FaultOptions)
+
+
+class WorldLike(Protocol):
+    """What the emulator needs from the simulated world (hil_sim.world.World provides it)."""
+
+    def observe(self, receiver: str, t_rx_nominal: GpsTime) -> ObsEpoch: ...
+
+    def ephemerides(self) -> list[Ephemeris]: ...
+
+    def camera_events(self, t0: GpsTime, t1: GpsTime) -> list[Any]: ...
+
+    def truth(self, t: GpsTime) -> Mapping[str, Any]: ...
+
+
+@dataclass
+class ReceiverStats:
+    """Counters the shell and tests read."""
+
+    frames_in: int = 0
+    acked: int = 0
+    naked: int = 0
+    polls_answered: int = 0
+    epochs_out: int = 0
+    epochs_dropped_budget: int = 0
+    epochs_dropped_fault: int = 0
+    messages_dropped_budget: int = 0
+    subframes_out: int = 0
+    marks_out: int = 0
+    edges_lost: int = 0
+    pulses_suppressed: int = 0
+
+
+class TxBudget:
+    """Token bucket of the UART transmitter in simulated time: baud/10 bytes per second, `capacity_b` burst."""
+
+    def __init__(self, baud: int, capacity_b: int) -> None:
+        self.baud = baud
+        self.capacity_b = capacity_b
+        self.tokens_b = float(capacity_b)
+
+    def refill(self, dt_s: float) -> None:
+        """Add the bytes the line can carry in `dt_s` simulated seconds."""
+        self.tokens_b = min(float(self.capacity_b), self.tokens_b + max(0.0, dt_s) * self.baud / 10.0)
+
+    def take(self, n_bytes: int) -> bool:
+        """True (and spend) when `n_bytes` fit now; False leaves the budget untouched (message dropped)."""
+        if n_bytes > self.tokens_b:
+            return False
+        self.tokens_b -= n_bytes
+        return True
+
+
+class TimeMarkChannel:
+    """One EXTINT input of the time-mark unit: keeps the last rising/falling edge since the last report."""
+
+    def __init__(self, channel: int) -> None:
+        self.channel = channel
+        self.count = 0
+        self.rising: GpsTime | None = None
+        self.falling: GpsTime | None = None
+        self.new_rising = False
+        self.new_falling = False
+        self.edges_since_report = 0
+
+    def edge(self, t: GpsTime, rising: bool) -> None:
+        """Register an edge at GPS time `t` (a later edge of the same polarity overwrites the earlier one)."""
+        self.edges_since_report += 1
+        if rising:
+            self.count = (self.count + 1) & 0xFFFF
+            self.rising, self.new_rising = t, True
+        else:
+            self.falling, self.new_falling = t, True
+
+    def report(self, time_valid: bool, acc_est_ns: int) -> enc.TimeMarkReport | None:
+        """The TIM-TM2 content at a navigation epoch (None when no new edge arrived); clears the 'new' bits."""
+        if not (self.new_rising or self.new_falling):
+            return None
+        rep = enc.TimeMarkReport(self.channel, self.count, self.rising, self.falling, self.new_rising,
+                                 self.new_falling, time_valid, acc_est_ns)
+        self.new_rising = self.new_falling = False
+        self.edges_since_report = 0
+        return rep
+
+
+def _factory_msg_rates() -> dict[tuple[int, int], list[int]]:
+    return {(0xF0, mid): [1, 1, 0, 1, 1, 0] for mid in NMEA_IDS}
+
+
+def _factory_ports() -> dict[int, dict[str, int]]:
+    uart = {"portID": UART1, "reserved0": 0, "txReady": 0, "mode": UART_MODE_8N1, "baudRate": 9600,
+            "inProtoMask": 0x0007, "outProtoMask": 0x0003, "flags": 0, "reserved5": 0}
+    return {0: {**uart, "portID": 0, "mode": 0x84, "baudRate": 0},
+            1: uart,
+            2: {**uart, "portID": 2},
+            3: {**uart, "portID": 3, "mode": 0, "baudRate": 0},
+            4: {**uart, "portID": 4, "mode": 0, "baudRate": 0}}
+
+
+@dataclass
+class Config:
+    """The configuration sections the emulator models (field dicts keyed by the layouts' names)."""
+
+    ports: dict[int, dict[str, int]]
+    msg_rates: dict[tuple[int, int], list[int]]
+    rate: dict[str, int]
+    tp5: dict[int, dict[str, int]]
+    tp: dict[str, int]
+
+    @classmethod
+    def factory(cls, model: ModelSpec) -> Config:
+        tp5 = {i: {**d, "flags": d["flags"] & model.tp5_flags_mask} for i, d in enumerate(M8T_TP5_DEFAULTS)}
+        return cls(_factory_ports(), _factory_msg_rates(), {"measRate": 1000, "navRate": 1, "timeRef": 1},
+                   tp5, dict(LEA6T_TP_DEFAULT))
+
+    def copy(self) -> Config:
+        return Config({k: dict(v) for k, v in self.ports.items()},
+                      {k: list(v) for k, v in self.msg_rates.items()}, dict(self.rate),
+                      {k: dict(v) for k, v in self.tp5.items()}, dict(self.tp))
+
+
+def _period_divides_second(value: int, is_freq: bool) -> bool:
+    if is_freq:
+        return value >= 1
+    return value > 0 and 1_000_000 % value == 0
+
+
+class ReceiverCore:
+    """The receiver: `handle_frame` answers input, `advance` produces the output up to a simulated time.
+
+    `t_start` is the GPS time at power-on (time becomes valid `time_valid_after_s` later).
+    """
+
+    def __init__(self, model: ModelName | str, options: ReceiverOptions, world: WorldLike,
+                 t_start: GpsTime) -> None:
+        if model not in MODELS:
+            raise ValueError(f"unknown receiver model {model!r}; known: {', '.join(MODELS)}")
+        self.model = MODELS[model]
+        self.options = options
+        self.world = world
+        self.t_start = t_start
+        self.config = Config.factory(self.model)
+        self.saved = self.config.copy()
+        self.stats = ReceiverStats()
+        self.faults = FaultState(options.faults)
+        self.budget = TxBudget(self.baud_rate, options.tx_buffer_bytes)
+        self.marks = {0: TimeMarkChannel(0), 1: TimeMarkChannel(1)}
+        self._t_last: GpsTime | None = None
+        self._sf_last: GpsTime | None = None
+        self._next_epoch: GpsTime | None = None
+        self._epoch_index = 0
+        self._events_until: GpsTime = t_start
+        self._pending_edges: list[tuple[GpsTime, int, bool]] = []
+        self._eph_received: dict[int, Ephemeris] = {}
+        self._subframes_seen: dict[int, set[tuple[int, int]]] = {}
+        self._frame_cache: dict[tuple[int, int], list[list[int]]] = {}
+        self._tracked: list[int] = []
+        self._ephs: list[Ephemeris] | None = None
+        self._rng = np.random.default_rng(options.faults.seed + 17)
+        self._handlers: dict[tuple[int, int], Callable[[bytes], list[bytes]]] = {
+            (0x06, 0x00): self._cfg_prt, (0x06, 0x01): self._cfg_msg, (0x06, 0x08): self._cfg_rate,
+            (0x06, 0x31): self._cfg_tp5, (0x06, 0x07): self._cfg_tp, (0x06, 0x09): self._cfg_cfg,
+            MON_VER: self._mon_ver, AID_EPH: self._aid_eph,
+        }
+
+    # ----------------------------------------------------------------------------------------- state
+    @property
+    def baud_rate(self) -> int:
+        """UART1's configured line rate (the rate the client must use)."""
+        return self.config.ports[UART1]["baudRate"]
+
+    def time_valid(self, t: GpsTime) -> bool:
+        """True once the receiver has a fix and valid GPS time."""
+        return t.diff_s(self.t_start) >= self.options.time_valid_after_s
+
+    def _out_ubx(self) -> bool:
+        return bool(self.config.ports[UART1]["outProtoMask"] & 0x1)
+
+    def _out_nmea(self) -> bool:
+        return bool(self.config.ports[UART1]["outProtoMask"] & 0x2)
+
+    def rate_of(self, msg: tuple[int, int]) -> int:
+        """CFG-MSG output rate of `msg` on UART1 (0 = off)."""
+        return self.config.msg_rates.get(msg, [0] * 6)[PORT_RATE_INDEX]
+
+    # ----------------------------------------------------------------------------------------- input
+    def handle_frame(self, frame: Frame) -> list[bytes]:
+        """Answer one input frame: a list of frames to send (ACK/NAK, poll replies), possibly empty."""
+        self.stats.frames_in += 1
+        if self.options.silent or frame.protocol is not FrameProtocol.UBX:
+            return []
+        if not self.config.ports[UART1]["inProtoMask"] & 0x1:
+            return []
+        key = (frame.msg_class, frame.msg_id)
+        handler = self._handlers.get(key)
+        if handler is None:
+            log.info("unknown UBX message 0x%02X 0x%02X: NAK", *key)
+            return [self._nak(key)]
+        return handler(frame.payload)
+
+    def _ack(self, key: tuple[int, int]) -> bytes:
+        self.stats.acked += 1
+        return enc.ack(key[0], key[1], True)
+
+    def _nak(self, key: tuple[int, int]) -> bytes:
+        self.stats.naked += 1
+        return enc.ack(key[0], key[1], False)
+
+    def _poll_reply(self, name: str, head: Mapping[str, Any], rows: Sequence[Mapping[str, Any]] = ()) -> bytes:
+        self.stats.polls_answered += 1
+        return enc.frame(name, head, rows)
+
+    def _cfg_prt(self, payload: bytes) -> list[bytes]:
+        key = (0x06, 0x00)
+        if len(payload) == 0:
+            return [self._poll_reply("CFG-PRT", self.config.ports[UART1]), self._ack(key)]
+        if len(payload) == 1:
+            if payload[0] not in self.config.ports:
+                return [self._nak(key)]
+            return [self._poll_reply("CFG-PRT", self.config.ports[payload[0]]), self._ack(key)]
+        if len(payload) != 20:
+            return [self._nak(key)]
+        new, _ = enc.unpack(enc.LAYOUTS["CFG-PRT"], payload)
+        port = new["portID"]
+        if port not in self.config.ports:
+            return [self._nak(key)]
+        if port in (1, 2):
+            if new["mode"] & UART_MODE_8N1_MASK != UART_MODE_8N1 or new["baudRate"] not in VALID_BAUDS:
+                log.info("CFG-PRT incomplete or unsupported (mode 0x%X, baud %d): NAK", new["mode"], new["baudRate"])
+                return [self._nak(key)]
+        self.config.ports[port] = new
+        if port == UART1:
+            self.budget.baud = new["baudRate"]
+        # the ACK leaves at the new rate: the shell writes it after reading `baud_rate`
+        return [self._ack(key)]
+
+    def _cfg_msg(self, payload: bytes) -> list[bytes]:
+        key = (0x06, 0x01)
+        if len(payload) == 2:
+            msg = (payload[0], payload[1])
+            rates = self.config.msg_rates.get(msg, [0] * 6)
+            return [self._poll_reply("CFG-MSG", {"msgClass": msg[0], "msgID": msg[1], "rateDDC": rates[0],
+                                                 "rateUART1": rates[1], "rateUART2": rates[2], "rateUSB": rates[3],
+                                                 "rateSPI": rates[4], "reserved": rates[5]}), self._ack(key)]
+        if len(payload) == 3:
+            msg = (payload[0], payload[1])
+            rates = list(self.config.msg_rates.get(msg, [0] * 6))
+            rates[PORT_RATE_INDEX] = payload[2]
+        elif len(payload) == 8:
+            msg = (payload[0], payload[1])
+            rates = list(payload[2:8])
+        else:
+            return [self._nak(key)]
+        if self.model.name == "lea6t" and msg == RXM_RAWX:
+            if self.options.rawx_on_u6 == "nak":
+                return [self._nak(key)]
+            return [self._ack(key)]  # acknowledged, never produced
+        if self.model.name == "m8t" and msg in (RXM_RAW, RXM_SFRB):
+            return [self._nak(key)]
+        self.config.msg_rates[msg] = rates
+        return [self._ack(key)]
+
+    def _cfg_rate(self, payload: bytes) -> list[bytes]:
+        key = (0x06, 0x08)
+        if len(payload) == 0:
+            return [self._poll_reply("CFG-RATE", self.config.rate), self._ack(key)]
+        if len(payload) != 6:
+            return [self._nak(key)]
+        new, _ = enc.unpack(enc.LAYOUTS["CFG-RATE"], payload)
+        if new["timeRef"] not in self.model.time_refs or new["navRate"] == 0:
+            return [self._nak(key)]
+        if new["measRate"] < self.model.min_meas_rate_ms:
+            if not self.options.ack_invalid_rates:
+                return [self._nak(key)]
+            log.info("CFG-RATE measRate %d ms below the minimum: ACKed, %d ms applied", new["measRate"],
+                     self.model.min_meas_rate_ms)
+            new["measRate"] = self.model.min_meas_rate_ms
+        if self.model.name == "lea6t":
+            new["navRate"] = 1  # fixed on u-blox 5/6 whatever is sent
+        self.config.rate = new
+        self._next_epoch = None  # re-grid the epochs on the new rate
+        return [self._ack(key)]
+
+    def _cfg_tp5(self, payload: bytes) -> list[bytes]:
+        key = (0x06, 0x31)
+        if self.model.name == "lea6t" and self.options.tp5_on_u6 == "nak":
+            return [self._nak(key)]
+        if len(payload) in (0, 1):
+            idx = payload[0] if payload else 0
+            if idx not in self.config.tp5:
+                return [self._nak(key)]
+            return [self._poll_reply("CFG-TP5", self.config.tp5[idx]), self._ack(key)]
+        if len(payload) != 32:
+            return [self._nak(key)]
+        new, _ = enc.unpack(enc.LAYOUTS["CFG-TP5"], payload)
+        if new["tpIdx"] not in self.config.tp5:
+            return [self._nak(key)]
+        flags = new["flags"] & self.model.tp5_flags_mask
+        is_freq = bool(flags & TP5_IS_FREQ)
+        pairs = ((new["freqPeriod"], new["pulseLenRatio"]), (new["freqPeriodLock"], new["pulseLenRatioLock"]))
+        if not is_freq and flags & TP5_IS_LENGTH:
+            for period_us, length_us in pairs:
+                if period_us > 0 and length_us >= period_us:
+                    log.info("CFG-TP5 pulse length %d µs ≥ period %d µs: NAK", length_us, period_us)
+                    return [self._nak(key)]
+        if flags & TP5_ALIGN_TO_TOW and self.options.align_to_tow == "clear":
+            used = pairs if flags & TP5_LOCKED_OTHER_SET else pairs[:1]
+            if not all(_period_divides_second(p, is_freq) for p, _ in used):
+                flags &= ~TP5_ALIGN_TO_TOW
+                log.info("CFG-TP5 tpIdx %d: period does not divide 1 s, alignToTow cleared", new["tpIdx"])
+        new["flags"] = flags
+        self.config.tp5[new["tpIdx"]] = new
+        return [self._ack(key)]
+
+    def _cfg_tp(self, payload: bytes) -> list[bytes]:
+        key = (0x06, 0x07)
+        if not self.model.has_cfg_tp:
+            return [self._nak(key)]
+        if len(payload) == 0:
+            return [self._poll_reply("CFG-TP", self.config.tp), self._ack(key)]
+        if len(payload) != 20:
+            return [self._nak(key)]
+        new, _ = enc.unpack(enc.LAYOUTS["CFG-TP"], payload)
+        if new["timeRef"] > 2 or (new["status"] != 0 and new["length"] >= new["interval"]):
+            return [self._nak(key)]
+        self.config.tp = new
+        return [self._ack(key)]
+
+    def _cfg_cfg(self, payload: bytes) -> list[bytes]:
+        key = (0x06, 0x09)
+        if len(payload) not in (12, 13):
+            return [self._nak(key)]
+        head, _ = enc.unpack(enc.LAYOUTS["CFG-CFG"], payload[:12])
+        factory = Config.factory(self.model)
+        sections: tuple[tuple[int, tuple[str, ...]], ...] = (
+            (CFG_IOPORT, ("ports",)), (CFG_MSGCONF, ("msg_rates",)), (CFG_NAVCONF, ("rate", "tp5", "tp")))
+        for bit, names in sections:
+            for name in names:
+                if head["clearMask"] & bit:
+                    setattr(self.saved, name, getattr(factory.copy(), name))
+                if head["saveMask"] & bit:
+                    setattr(self.saved, name, getattr(self.config.copy(), name))
+                if head["loadMask"] & bit:
+                    setattr(self.config, name, getattr(self.saved.copy(), name))
+        self.budget.baud = self.baud_rate
+        return [self._ack(key)]
+
+    def _mon_ver(self, payload: bytes) -> list[bytes]:
+        if payload:
+            return [self._nak(MON_VER)]
+        self.stats.polls_answered += 1
+        return [enc.mon_ver(self.model.sw_version, self.model.hw_version, self.model.extensions)]
+
+    def _aid_eph(self, payload: bytes) -> list[bytes]:
+        if len(payload) == 0:
+            prns: Iterable[int] = range(1, 33)
+        elif len(payload) == 1 and 1 <= payload[0] <= 32:
+            prns = (payload[0],)
+        else:
+            return [self._nak(AID_EPH)]  # a 104-byte AID-EPH *input* (aiding) is not modelled
+        out = []
+        for prn in prns:
+            eph = self._eph_received.get(prn)
+            self.stats.polls_answered += 1
+            if eph is None:
+                out.append(enc.aid_eph(prn))
+            else:
+                how, words = lnav.aid_eph_words(eph)
+                out.append(enc.aid_eph(prn, how, words))
+        return out
+
+    # ----------------------------------------------------------------------------------------- output
+    @property
+    def next_epoch(self) -> GpsTime | None:
+        """The next measurement epoch the receiver will output (None before the first `advance`)."""
+        return self._next_epoch
+
+    def next_epoch_time(self, t: GpsTime) -> GpsTime:
+        """The first measurement epoch (nominal GPS time on the measRate grid) strictly after `t`."""
+        step = self.config.rate["measRate"] * 1_000_000
+        return GpsTime.from_total_ns((t.total_ns // step + 1) * step)
+
+    def advance(self, t: GpsTime) -> list[bytes]:
+        """Everything the receiver sends from the last call up to simulated GPS time `t`, in order."""
+        out: list[bytes] = []
+        if self._t_last is None:
+            self._t_last = t
+            self._next_epoch = self.next_epoch_time(t)
+            return out
+        self.budget.refill(t.diff_s(self._t_last))
+        if self._next_epoch is None:
+            self._next_epoch = self.next_epoch_time(self._t_last)
+        while self._next_epoch <= t:
+            te = self._next_epoch
+            out += self._subframes_until(te)
+            out += self._epoch(te)
+            self._next_epoch = self.next_epoch_time(te)
+        self._t_last = t
+        return out
+
+    def _send(self, out: list[bytes], data: bytes) -> bool:
+        if self.budget.take(len(data)):
+            out.append(data)
+            return True
+        self.stats.messages_dropped_budget += 1
+        return False
+
+    def _epoch(self, t: GpsTime) -> list[bytes]:
+        out: list[bytes] = []
+        self._epoch_index += 1
+        idx = self._epoch_index
+        valid = self.time_valid(t)
+        obs = self.world.observe(self.options.receiver, t)
+        self._tracked = sorted(int(s) for g, s in zip(obs.gnss_id, obs.sv_id, strict=True)
+                               if int(g) == GNSS_GPS and 1 <= int(s) <= 32)
+        self._process_camera(t)
+
+        def due(msg: tuple[int, int]) -> bool:
+            r = self.rate_of(msg)
+            return r > 0 and idx % r == 0
+
+        fix = self._nav_fix(t, len(obs)) if valid else None
+        if self._out_ubx():
+            if due(NAV_SOL):
+                self._send(out, enc.nav_sol(t, *(fix or (None, None)), num_sv=len(obs) if valid else 0,
+                                            p_acc_m=2.5, pdop=1.6))
+            if due(self.model.raw_msg):
+                if self.faults.drop_epoch():
+                    self.stats.epochs_dropped_fault += 1
+                else:
+                    raw = enc.rxm_raw(obs) if self.model.raw_msg == RXM_RAW else enc.rxm_rawx(obs)
+                    if self._send(out, raw):
+                        self.stats.epochs_out += 1
+                    else:
+                        self.stats.epochs_dropped_budget += 1
+            for ch in (0, 1):
+                rep = self.marks[ch].report(valid, self.options.acc_est_ns)
+                if rep is not None and due(TIM_TM2):
+                    if self._send(out, enc.tim_tm2(rep)):
+                        self.stats.marks_out += 1
+            if due(TIM_TP):
+                step = self.config.rate["measRate"] * 1_000_000
+                next_pulse = GpsTime.from_total_ns((t.total_ns // NS_PER_S + 1) * NS_PER_S)
+                if next_pulse.total_ns - t.total_ns <= step and valid:
+                    self._send(out, enc.tim_tp(next_pulse))
+        else:
+            for ch in (0, 1):
+                self.marks[ch].report(valid, self.options.acc_est_ns)
+        if self._out_nmea():
+            for mid, name in NMEA_IDS.items():
+                if due((0xF0, mid)):
+                    self._send(out, _nmea(name, t, fix, obs))
+        return out
+
+    def _nav_fix(self, t: GpsTime, n_sv: int) -> tuple[np.ndarray, np.ndarray] | None:
+        if n_sv < 4:
+            return None
+        pos, vel = antenna_state(self.world.truth(t), self.options.receiver)
+        return pos + self._rng.normal(0.0, self.options.nav_noise_m, 3), vel
+
+    # ---- subframes
+    def _ephemeris_for(self, prn: int, t: GpsTime) -> Ephemeris | None:
+        if self._ephs is None:
+            self._ephs = list(self.world.ephemerides())
+        best: Ephemeris | None = None
+        best_key = math.inf
+        for eph in self._ephs:
+            if eph.prn != prn:
+                continue
+            ahead_s = eph.toe.diff_s(t)
+            # the broadcast set in use has its toe 0–2 h ahead of now; otherwise take the nearest
+            key = ahead_s if 0 <= ahead_s < 7200 else 1e7 + abs(ahead_s)
+            if key < best_key:
+                best, best_key = eph, key
+        return best
+
+    def _subframes_until(self, t: GpsTime) -> list[bytes]:
+        """Subframes 1–3 of every tracked satellite that ended in (last epoch, t]."""
+        out: list[bytes] = []
+        six = 6 * NS_PER_S
+        since = self._sf_last if self._sf_last is not None else t
+        self._sf_last = t
+        first = since.total_ns // six + 1
+        last = t.total_ns // six
+        want = self.rate_of(self.model.subframe_msg) > 0 and self._out_ubx()
+        for k in range(first, last + 1):
+            end = GpsTime.from_total_ns(k * six)
+            sf_id = (round(end.tow_ns / six) - 1) % 5 + 1
+            if sf_id > 3:
+                continue
+            frame_start = end.add_ns(-6 * NS_PER_S * sf_id)
+            for chn, prn in enumerate(self._tracked):
+                eph = self._ephemeris_for(prn, end)
+                if eph is None:
+                    continue
+                ck = (prn, frame_start.total_ns // NS_PER_S)
+                if ck not in self._frame_cache:
+                    try:
+                        self._frame_cache[ck] = lnav.encode_subframes_transmitted(eph, frame_start.tow_ns / NS_PER_S)
+                    except lnav.LnavError as exc:
+                        log.warning("PRN %d: cannot encode subframes (%s)", prn, exc)
+                        continue
+                words30 = self._frame_cache[ck][sf_id - 1]
+                seen = self._subframes_seen.setdefault(prn, set())
+                seen.add((ck[1], sf_id))
+                if all((ck[1], s) in seen for s in (1, 2, 3)):
+                    self._eph_received[prn] = eph
+                if not want:
+                    continue
+                if self.model.subframe_msg == RXM_SFRB:
+                    words24, _ = lnav.words24_from_words30(words30)
+                    data = enc.rxm_sfrb(chn, prn, words24)
+                else:
+                    data = enc.rxm_sfrbx(chn, prn, lnav.sfrbx_from_transmitted(words30))
+                if self._send(out, data):
+                    self.stats.subframes_out += 1
+            if len(self._frame_cache) > 256:
+                self._frame_cache.clear()
+        return out
+
+    # ---- camera
+    def _camera_pulse_enabled(self, t: GpsTime) -> bool:
+        tp = self.config.tp5.get(self.options.camera_tp_idx)
+        if tp is None or not tp["flags"] & TP5_ACTIVE:
+            return False
+        if self.time_valid(t) and tp["flags"] & TP5_LOCKED_OTHER_SET:
+            return tp["pulseLenRatioLock"] > 0
+        if not self.time_valid(t) and tp["flags"] & TP5_LOCKED_OTHER_SET:
+            return tp["pulseLenRatio"] > 0
+        return tp["pulseLenRatio"] > 0
+
+    def _pulse_length_s(self, t: GpsTime) -> float:
+        tp = self.config.tp5[self.options.camera_tp_idx]
+        locked = self.time_valid(t) and tp["flags"] & TP5_LOCKED_OTHER_SET
+        period, length = ((tp["freqPeriodLock"], tp["pulseLenRatioLock"]) if locked
+                          else (tp["freqPeriod"], tp["pulseLenRatio"]))
+        if tp["flags"] & TP5_IS_LENGTH:
+            return length * 1e-6
+        period_s = 1.0 / period if tp["flags"] & TP5_IS_FREQ and period else period * 1e-6
+        return period_s * length / 2**32
+
+    def _process_camera(self, t: GpsTime) -> None:
+        events = self.world.camera_events(self._events_until, t) if t > self._events_until else []
+        self._events_until = t
+        for ev in events:
+            pulse_t: GpsTime = ev.pulse_time
+            if not self._camera_pulse_enabled(pulse_t):
+                self.stats.pulses_suppressed += 1
+                continue
+            if self.options.trigger_extint:
+                self._pending_edges.append((pulse_t, 1, True))
+                self._pending_edges.append((pulse_t.add_s(self._pulse_length_s(pulse_t)), 1, False))
+            flash_t: GpsTime | None = getattr(ev, "flash_time", None)
+            if flash_t is not None:
+                for te, rising in hot_shoe_edges(flash_t, self.options.contact_closed_s, self.faults,
+                                                 extra_bounces=getattr(ev, "bounce_times", ()) or ()):
+                    self._pending_edges.append((te, 0, rising))
+        self._pending_edges.sort(key=lambda e: (e[0], e[1]))
+        keep = []
+        for te, ch, rising in self._pending_edges:
+            if te <= t:
+                noisy = te.add_ns(round(self._rng.normal(0.0, self.options.mark_noise_ns)))
+                self.marks[ch].edge(noisy, rising)
+            else:
+                keep.append((te, ch, rising))
+        self._pending_edges = keep
+
+
+def antenna_state(truth: Mapping[str, Any], receiver: str) -> tuple[np.ndarray, np.ndarray]:
+    """Antenna ECEF position (m) and velocity (m/s) of `receiver` from a World truth record."""
+    for pos_key, vel_key in ((f"{receiver}_ecef_m", f"{receiver}_vel_ecef_m_s"),
+                             ("antenna_ecef_m", "antenna_vel_ecef_m_s")):
+        if pos_key in truth:
+            vel = truth.get(vel_key)
+            return (np.asarray(truth[pos_key], float),
+                    np.asarray(vel, float) if vel is not None else np.zeros(3))
+    raise KeyError(f"truth record has no position for {receiver!r}: keys {sorted(truth)}")
+
+
+def _nmea(name: str, t: GpsTime, fix: tuple[np.ndarray, np.ndarray] | None, obs: ObsEpoch) -> bytes:
+    """One NMEA 0183 sentence (GP talker, as the factory firmware) from the navigation fix."""
+    utc = t.to_utc()
+    hhmmss = utc.strftime("%H%M%S") + f".{utc.microsecond // 10000:02d}"
+    ddmmyy = utc.strftime("%d%m%y")
+    if fix is not None:
+        lat, lon, h = ecef_to_llh(fix[0])
+        lat_d, lon_d = math.degrees(float(lat)), math.degrees(float(lon))
+        la = f"{int(abs(lat_d)):02d}{(abs(lat_d) % 1) * 60:08.5f},{'N' if lat_d >= 0 else 'S'}"
+        lo = f"{int(abs(lon_d)):03d}{(abs(lon_d) % 1) * 60:08.5f},{'E' if lon_d >= 0 else 'W'}"
+        speed_kn = float(np.linalg.norm(fix[1])) * 1.943844
+        ok, q, alt = "A", 1, f"{float(h):.1f}"
+    else:
+        la, lo, speed_kn, ok, q, alt = ",", ",", 0.0, "V", 0, ""
+    n = len(obs) if fix is not None else 0
+    svs = [int(s) for s in obs.sv_id][:12] if fix is not None else []
+    if name == "GGA":
+        body = f"GPGGA,{hhmmss},{la},{lo},{q},{n:02d},1.0,{alt},M,0.0,M,,"
+    elif name == "GLL":
+        body = f"GPGLL,{la},{lo},{hhmmss},{ok},{'A' if fix is not None else 'N'}"
+    elif name == "GSA":
+        body = "GPGSA,A,{},{},1.6,1.0,1.3".format(3 if fix is not None else 1,
+                                                   ",".join([f"{s:02d}" for s in svs] + [""] * (12 - len(svs))))
+    elif name == "GSV":
+        rows = [(int(s), int(round(float(c)))) for s, c in zip(obs.sv_id, obs.cn0_dbhz, strict=True)][:4]
+        sats = ",".join(f"{s:02d},,,{c:02d}" for s, c in rows)
+        body = f"GPGSV,1,1,{len(obs):02d}" + ("," + sats if sats else "")
+    elif name == "RMC":
+        body = f"GPRMC,{hhmmss},{ok},{la},{lo},{speed_kn:.3f},,{ddmmyy},,,{'A' if fix is not None else 'N'}"
+    else:
+        body = f"GPVTG,,T,,M,{speed_kn:.3f},N,{speed_kn * 1.852:.3f},K,{'A' if fix is not None else 'N'}"
+    return enc.nmea_sentence(body)
