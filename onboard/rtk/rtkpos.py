@@ -1,0 +1,611 @@
+"""GPS L1 relative positioning: Kalman filter on double differences, MLAMBDA, fix-and-hold.
+
+Follows RTKLIB rtkpos.c relpos(): time update of the rover position/velocity (udpos) and of the
+single-difference ambiguities (udbias, with slip detection), zero-difference residuals (zdres), double
+differences with an elevation-weighted covariance (ddres), integer resolution with a ratio test and partial
+fixing (resamb_lambda), validation of the fix (valpos) and hold (holdamb). Additions over RTKLIB:
+between-satellite Doppler differences constrain the velocity; every fix is checked against the float
+solution (Mahalanobis distance) and post-fit residuals; a held fix that stops fitting is released; a fix
+must rest on at least `min_amb_dd` + 1 double differences when not held; known-point initialisation
+(Daakir et al. 2015 eq. 2) and a static mode until take-off.
+
+State vector: x[0:3] rover position (ECEF m), x[3:6] velocity (m/s), x[6+prn-1] SD ambiguity of GPS `prn`
+(rover − base, cycles). Pure: no I/O, no clock.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from onboard.gnsstime import GpsTime
+from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
+from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states
+from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
+from onboard.rtk.mlambda import LambdaError, mlambda
+from onboard.rtk.models import phase_variance_m2, saastamoinen_m
+from onboard.rtk.options import RtkOptions
+from onboard.rtk.pntpos import pntpos, sat_az_el
+from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP, Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, ObsEpoch, Solution
+
+log = logging.getLogger(__name__)
+
+Arr = npt.NDArray[np.float64]
+NSAT = 32
+NX0 = 6
+NX = NX0 + NSAT
+_CHI2_3DOF_999 = 16.27
+
+
+class NavData(Protocol):
+    """What the engine needs from navigation data: an ephemeris store and Klobuchar coefficients."""
+
+    store: EphemerisStore
+    iono: tuple | None
+
+
+@dataclass
+class Nav:
+    """Navigation data for the engine: ephemerides and optional Klobuchar (alpha, beta)."""
+
+    store: EphemerisStore
+    iono: tuple | None = None
+
+
+@dataclass
+class _Receiver:
+    """Per-epoch zero-difference data of one receiver on the 32 GPS slots (NaN where absent)."""
+
+    pr_m: Arr
+    cp_cyc: Arr
+    dop_hz: Arr
+    lli: npt.NDArray[np.uint8]
+    sats: SatState  # aligned with the 32 slots
+    has: npt.NDArray[np.bool_]
+
+
+@dataclass
+class RtkState:
+    """Filter state (RTKLIB rtk_t): estimates, covariance, per-satellite counters. Mutated by rtk_pos()."""
+
+    options: RtkOptions
+    x: Arr = field(default_factory=lambda: np.zeros(NX))
+    p: Arr = field(default_factory=lambda: np.zeros((NX, NX)))
+    initialized: bool = False
+    time: GpsTime | None = None
+    lock: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(NSAT, np.int64))
+    outage: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(NSAT, np.int64))
+    half_cycle: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
+    prev_cp_r: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
+    prev_dop_r: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
+    prev_time_r: GpsTime | None = None
+    prev_zb: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
+    prev_time_b: GpsTime | None = None
+    fix_count: int = 0
+    held_prns: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
+    static: bool = False
+    init_pos_ecef_m: Arr | None = None
+    fail_count: int = 0
+    slips: int = 0
+    base_cache: tuple[GpsTime, _Receiver] | None = None
+    last_ratio: float = 0.0
+
+
+def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkState:
+    """A fresh engine state. `init_pos_ecef_m` = surveyed take-off antenna position (known-point start)."""
+    st = RtkState(options=options)
+    st.static = options.static_start or init_pos_ecef_m is not None and options.static_start
+    st.init_pos_ecef_m = None if init_pos_ecef_m is None else np.asarray(init_pos_ecef_m, float)
+    return st
+
+
+def _slots(obs: ObsEpoch, store: EphemerisStore) -> _Receiver:
+    """Scatter a GPS epoch onto 32 PRN slots and compute satellite states at its own time tag (satposs)."""
+    g = obs.gps_only()
+    idx = g.sv_id.astype(int) - 1
+    pr = np.full(NSAT, np.nan)
+    cp = np.full(NSAT, np.nan)
+    dop = np.full(NSAT, np.nan)
+    lli = np.zeros(NSAT, np.uint8)
+    pr[idx], cp[idx], dop[idx], lli[idx] = g.pr_m, g.cp_cyc, g.dop_hz, g.lli
+    has = np.isfinite(pr)
+    prns = np.arange(1, NSAT + 1)
+    sats_part = satellite_states(store, prns[has], g.time, pr[has])
+    pos = np.zeros((NSAT, 3))
+    vel = np.zeros((NSAT, 3))
+    clk = np.zeros(NSAT)
+    drift = np.zeros(NSAT)
+    var = np.zeros(NSAT)
+    ok = np.zeros(NSAT, bool)
+    pos[has], vel[has], clk[has], drift[has] = sats_part.pos_m, sats_part.vel_m_s, sats_part.clock_s, sats_part.drift_s_s
+    var[has], ok[has] = sats_part.var_m2, sats_part.ok
+    sats = SatState(prns.astype(np.int16), pos, vel, clk, drift, var, ok)
+    return _Receiver(pr, cp, dop, lli, sats, has & ok)
+
+
+def _model_range_m(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr, Arr, Arr]:
+    """Modelled range (geometric + Sagnac − sat clock + dry/wet troposphere), LOS, az, el for every slot."""
+    r, e = geometric_range(rcv.sats.pos_m, pos_ecef_m)
+    az, el = sat_az_el(pos_ecef_m, e)
+    lat, _, h = ecef_to_llh(pos_ecef_m)
+    trop = saastamoinen_m(lat, h, el)
+    return r - CLIGHT_M_S * rcv.sats.clock_s + trop, e, az, el
+
+
+def _solution(t: GpsTime, pos: Arr, vel: Arr, q: int, ns: int, cov: Arr, covv: Arr, age: float,
+              ratio: float) -> Solution:
+    return Solution(time=t, pos_ecef_m=np.array(pos, float), vel_ecef_m_s=np.array(vel, float), q=q, ns=ns,
+                    cov_pos_m2=np.array(cov, float), cov_vel_m2_s2=np.array(covv, float), age_s=age,
+                    ratio=ratio)
+
+
+def _reset_amb(st: RtkState, k: npt.NDArray[np.int64]) -> None:
+    """Forget the ambiguities of slots `k` (they are re-initialised from phase − code when next seen)."""
+    j = NX0 + np.asarray(k, int)
+    st.x[j] = 0.0
+    st.p[j, :] = 0.0
+    st.p[:, j] = 0.0
+    st.lock[k] = 0
+    st.held_prns[k] = False
+
+
+def _process_noise(st: RtkState, dt: float, pos: Arr) -> Arr:
+    """Velocity random walk (white acceleration) noise for pos/vel over dt, ENU σ rotated to ECEF."""
+    o = st.options
+    lat, lon, _ = ecef_to_llh(pos)
+    rot = enu_rotation(lat, lon)
+    qa = rot.T @ np.diag([o.accel_h_sigma_m_s2**2, o.accel_h_sigma_m_s2**2, o.accel_v_sigma_m_s2**2]) @ rot
+    adt = abs(dt)
+    q = np.zeros((NX0, NX0))
+    q[:3, :3] = qa * adt**3 / 3.0
+    q[:3, 3:] = qa * adt**2 / 2.0
+    q[3:, :3] = qa * adt**2 / 2.0
+    q[3:, 3:] = qa * adt
+    return q
+
+
+def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr) -> None:
+    """Time update of position/velocity (RTKLIB udpos with dynamics) and ambiguity noise."""
+    o = st.options
+    if not st.initialized:
+        st.x[:] = 0.0
+        st.p[:] = 0.0
+        if st.init_pos_ecef_m is not None:
+            st.x[:3] = st.init_pos_ecef_m
+            st.p[:3, :3] = np.eye(3) * o.init_pos_sigma_m**2
+        else:
+            st.x[:3] = spp_pos
+            st.p[:3, :3] = np.eye(3) * o.initial_pos_sigma_m**2
+        vel = spp_vel if np.all(np.isfinite(spp_vel)) else np.zeros(3)
+        if st.static:
+            vel = np.zeros(3)
+        st.x[3:6] = vel
+        st.p[3:6, 3:6] = np.eye(3) * (1e-8 if st.static else o.initial_vel_sigma_m_s**2)
+        st.initialized = True
+        return
+    f = np.eye(NX0)
+    f[:3, 3:] = np.eye(3) * dt
+    st.x[:NX0] = f @ st.x[:NX0]
+    st.p[:NX0, :] = f @ st.p[:NX0, :]
+    st.p[:, :NX0] = st.p[:, :NX0] @ f.T
+    if not st.static:
+        st.p[:NX0, :NX0] += _process_noise(st, dt, st.x[:3])
+    # a filter that drifted far from the SPP solution is restarted on it (RTKLIB udpos's reset)
+    if np.linalg.norm(st.x[:3] - spp_pos) > 100.0 or st.p[0, 0] > 1e4:
+        log.info("position state reset to SPP (%.1f m off)", np.linalg.norm(st.x[:3] - spp_pos))
+        st.x[:3] = spp_pos
+        st.p[:3, :] = 0.0
+        st.p[:, :3] = 0.0
+        st.p[:3, :3] = np.eye(3) * o.initial_pos_sigma_m**2
+    amb = np.arange(NX0, NX)
+    active = st.p[amb, amb] > 0
+    st.p[amb[active], amb[active]] += o.bias_process_noise_cyc**2 * abs(dt)
+
+
+def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t_r: GpsTime,
+                  t_b: GpsTime, common: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+    """Cycle-slip flags per slot: LLI (RTKLIB detslp_ll), Doppler-predicted rover phase (detslp_dop,
+    clock-common part removed), and the base's geometry residual (static known base: phase − range
+    jumps between its epochs, clock-common part removed)."""
+    o = st.options
+    slip = ((rov.lli & LLI_SLIP) != 0) | ((base.lli & LLI_SLIP) != 0)
+    slip &= common
+    # Doppler-predicted phase on the rover
+    if st.prev_time_r is not None:
+        dt = t_r.diff_s(st.prev_time_r)
+        if 0 < abs(dt) <= 30.0:
+            dop_avg = np.where(np.isfinite(st.prev_dop_r), 0.5 * (rov.dop_hz + st.prev_dop_r), rov.dop_hz)
+            d = (rov.cp_cyc - st.prev_cp_r) + dop_avg * dt  # RINEX: phase follows range, Doppler = −range rate
+            ok = np.isfinite(d) & common
+            if ok.sum() >= 2:
+                d = d - np.median(d[ok])
+                thr = o.slip_threshold_cyc * max(1.0, abs(dt))
+                slip |= ok & (np.abs(d) > thr)
+    # base: phase − geometric range (known static base), differenced in time
+    if st.prev_time_b is not None and t_b != st.prev_time_b:
+        dtb = abs(t_b.diff_s(st.prev_time_b))
+        if dtb <= 30.0:
+            d = base_zb - st.prev_zb
+            ok = np.isfinite(d) & common
+            if ok.sum() >= 3:
+                d = d - np.median(d[ok])
+                thr = 1.0 + 0.05 * dtb  # cycles: atmosphere/orbit changes grow with the gap
+                slip |= ok & (np.abs(d) > thr)
+    return slip
+
+
+def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Arr,
+            valid_phase: npt.NDArray[np.bool_], slip: npt.NDArray[np.bool_]) -> None:
+    """Ambiguity bookkeeping (RTKLIB udbias): reset on slip or long outage, initialise new ones.
+
+    New SD ambiguities come from phase − code; with a known rover position (take-off point) from phase −
+    modelled range instead (Daakir et al. 2015 eq. 2), which lets the first epoch fix.
+    """
+    o = st.options
+    st.outage[~valid_phase] += 1
+    lost = (st.outage > o.max_outage_epochs) & (st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
+    reset = np.flatnonzero(lost | (slip & valid_phase))
+    if reset.size:
+        st.slips += int(np.count_nonzero(slip & valid_phase))
+        _reset_amb(st, reset)
+    st.outage[valid_phase] = 0
+    amb = NX0 + np.arange(NSAT)
+    new = valid_phase & (st.p[amb, amb] <= 0)
+    if np.any(new):
+        if st.init_pos_ecef_m is not None and st.fix_count == 0 and st.p[0, 0] <= (2 * o.init_pos_sigma_m) ** 2:
+            sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b)) / LAMBDA_L1_M
+            var = (0.05 + o.init_pos_sigma_m / LAMBDA_L1_M) ** 2
+        else:
+            sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rov.pr_m - base.pr_m)) / LAMBDA_L1_M
+            var = o.initial_bias_sigma_cyc**2
+        k = np.flatnonzero(new)
+        st.x[NX0 + k] = sd[k]
+        st.p[NX0 + k, NX0 + k] = var
+    st.lock[valid_phase] += 1
+    st.lock[~valid_phase] = 0
+
+
+def _dd_matrix(idx: npt.NDArray[np.int64], ref: int) -> Arr:
+    """Rows i − ref over the slots `idx` (ref excluded): shape (len(idx)−1, len(idx))."""
+    others = [j for j in range(len(idx)) if idx[j] != ref]
+    d = np.zeros((len(others), len(idx)))
+    rpos = int(np.flatnonzero(idx == ref)[0])
+    for r, j in enumerate(others):
+        d[r, j] = 1.0
+        d[r, rpos] = -1.0
+    return d
+
+
+@dataclass
+class _DD:
+    """Double-difference system of one epoch: innovations v, design H (on the full state), covariance R."""
+
+    v: Arr
+    h: Arr
+    r: Arr
+    kind: npt.NDArray[np.int8]  # 0 phase, 1 code, 2 doppler
+    slot: npt.NDArray[np.int64]  # the non-reference satellite of each row
+    ref_phase: int
+
+
+def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, phase_ok: npt.NDArray[np.bool_],
+           code_ok: npt.NDArray[np.bool_], el: Arr, with_doppler: bool) -> tuple[_DD, Arr]:
+    """Double-difference residuals at state `x` (RTKLIB ddres): phase, code, rover Doppler between satellites."""
+    o = st.options
+    rng_r, e, _, _ = _model_range_m(rov, x[:3])
+    var_sd = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m)
+    rows_v: list[Arr] = []
+    rows_h: list[Arr] = []
+    blocks: list[Arr] = []
+    kinds: list[Arr] = []
+    slots: list[Arr] = []
+    ref_phase = -1
+    amb = NX0 + np.arange(NSAT)
+    for kind, ok in ((0, phase_ok), (1, code_ok)):
+        idx = np.flatnonzero(ok)
+        if idx.size < 2:
+            continue
+        ref = int(idx[np.argmax(el[idx])])
+        if kind == 0:
+            ref_phase = ref
+            z = LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b) - LAMBDA_L1_M * x[amb]
+            var = var_sd
+        else:
+            z = (rov.pr_m - base.pr_m) - (rng_r - rng_b)
+            var = var_sd * o.code_phase_ratio**2
+        others = idx[idx != ref]
+        v = z[others] - z[ref]
+        h = np.zeros((others.size, NX))
+        h[:, :3] = -e[others] + e[ref]
+        if kind == 0:
+            h[np.arange(others.size), NX0 + others] = LAMBDA_L1_M
+            h[:, NX0 + ref] = -LAMBDA_L1_M
+        rows_v.append(v)
+        rows_h.append(h)
+        blocks.append(np.diag(var[others]) + var[ref])
+        kinds.append(np.full(others.size, kind, np.int8))
+        slots.append(others)
+    if with_doppler:
+        idx = np.flatnonzero(code_ok & np.isfinite(rov.dop_hz))
+        if idx.size >= 2:
+            ref = int(idx[np.argmax(el[idx])])
+            vs = rov.sats.vel_m_s
+            sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, 1] * x[0] - vs[:, 0] * x[1])
+            rate_model = np.einsum("ij,ij->i", e, vs - x[3:6]) + sag - CLIGHT_M_S * rov.sats.drift_s_s
+            z = -LAMBDA_L1_M * rov.dop_hz - rate_model
+            others = idx[idx != ref]
+            h = np.zeros((others.size, NX))
+            h[:, 3:6] = -e[others] + e[ref]
+            s2 = (o.doppler_sigma_m_s / np.sin(np.maximum(el, 0.1))) ** 2
+            rows_v.append(z[others] - z[ref])
+            rows_h.append(h)
+            blocks.append(np.diag(s2[others]) + s2[ref])
+            kinds.append(np.full(others.size, 2, np.int8))
+            slots.append(others)
+    if not rows_v:
+        return _DD(np.zeros(0), np.zeros((0, NX)), np.zeros((0, 0)), np.zeros(0, np.int8), np.zeros(0, np.int64), -1), e
+    nrow = sum(b.shape[0] for b in blocks)
+    r = np.zeros((nrow, nrow))
+    k = 0
+    for b in blocks:
+        m = b.shape[0]
+        r[k : k + m, k : k + m] = b
+        k += m
+    return _DD(np.concatenate(rows_v), np.vstack(rows_h), r, np.concatenate(kinds), np.concatenate(slots),
+               ref_phase), e
+
+
+def _kf_update(x: Arr, p: Arr, v: Arr, h: Arr, r: Arr) -> tuple[Arr, Arr]:
+    """Kalman measurement update on the active states only (zero-variance states are left alone)."""
+    act = np.flatnonzero(np.diag(p) > 0)
+    ha = h[:, act]
+    pa = p[np.ix_(act, act)]
+    ph = pa @ ha.T
+    s = ha @ ph + r
+    k = np.linalg.solve(s, ph.T).T
+    x = x.copy()
+    x[act] += k @ v
+    pn = pa - k @ ph.T
+    p = p.copy()
+    p[np.ix_(act, act)] = 0.5 * (pn + pn.T)
+    return x, p
+
+
+def _valid_residuals(dd: _DD, factor: float) -> npt.NDArray[np.bool_]:
+    """Rows whose |residual| ≤ factor·σ (RTKLIB valpos), σ from the measurement covariance."""
+    return np.abs(dd.v) <= factor * np.sqrt(np.diag(dd.r))
+
+
+@dataclass
+class _Fix:
+    pos: Arr
+    cov: Arr
+    ratio: float
+    slots: npt.NDArray[np.int64]
+    ref: int
+    ints: Arr
+    nb: int
+
+
+def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el: Arr,
+                   min_dd: int) -> _Fix | None:
+    """Integer ambiguity resolution on the DD ambiguities of `cand` slots (RTKLIB resamb_LAMBDA) with
+    partial fixing: drop the lowest satellite and retry while the ratio test fails."""
+    o = st.options
+    idx = np.flatnonzero(cand)
+    best_ratio = 0.0
+    for _drop in range(o.max_partial_drop + 1 if o.partial_ar else 1):
+        if idx.size < min_dd + 1:
+            break
+        ref = int(idx[np.argmax(el[idx])])
+        others = idx[idx != ref]
+        ja = NX0 + idx
+        d = _dd_matrix(idx, ref)
+        a = d @ x[ja]
+        qa = d @ p[np.ix_(ja, ja)] @ d.T
+        qba = p[:3, ja] @ d.T
+        try:
+            res = mlambda(a, qa)
+        except LambdaError:
+            return None
+        ratio = res.ratio
+        best_ratio = max(best_ratio, ratio)
+        if ratio >= o.ratio_threshold:
+            ints = res.fixed[:, 0]
+            try:
+                gain = np.linalg.solve(qa, qba.T).T
+            except np.linalg.LinAlgError:
+                return None
+            pos = x[:3] - gain @ (a - ints)
+            cov = p[:3, :3] - gain @ qba.T
+            st.last_ratio = ratio
+            return _Fix(pos, cov, ratio, others, ref, ints, others.size)
+        # partial: drop the lowest-elevation non-reference satellite
+        idx = idx[idx != others[np.argmin(el[others])]]
+    st.last_ratio = best_ratio
+    return None
+
+
+def _fixed_ambiguity_state(x: Arr, fix: _Fix) -> Arr:
+    """State with the DD ambiguities of the fix imposed (SD of the reference kept, others = ref + integer)."""
+    xf = x.copy()
+    xf[:3] = fix.pos
+    xf[NX0 + fix.slots] = xf[NX0 + fix.ref] + fix.ints
+    return xf
+
+
+def _holdamb(st: RtkState, fix: _Fix) -> None:
+    """Constrain the float DD ambiguities to the fixed integers (RTKLIB holdamb)."""
+    o = st.options
+    n = fix.slots.size
+    h = np.zeros((n, NX))
+    h[np.arange(n), NX0 + fix.slots] = 1.0
+    h[:, NX0 + fix.ref] = -1.0
+    v = fix.ints - h @ st.x
+    r = np.eye(n) * o.hold_sigma_cyc**2
+    st.x, st.p = _kf_update(st.x, st.p, v, h, r)
+    st.held_prns[:] = False
+    st.held_prns[fix.slots] = True
+    st.held_prns[fix.ref] = True
+
+
+def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
+            base_pos_ecef_m: Arr | None) -> Solution:
+    """Process one rover epoch (RTKLIB rtkpos()/relpos()); returns the epoch's Solution.
+
+    `base` is the base epoch paired with this rover epoch (latest at or before it, see postpro.pair_epochs);
+    `base_pos_ecef_m` the base antenna L1 phase centre. Without base data a single-point solution (Q=5).
+    """
+    o = st.options
+    rov = _slots(rover, nav.store)
+    nan3 = np.full(3, np.nan)
+    spp = pntpos(rov.pr_m, rov.sats, rover.time.tow_s, o.elmask_rad, rov.dop_hz, nav.iono,
+                 x0_ecef_m=st.x[:3] if st.initialized else None, outlier_m=o.spp_outlier_m,
+                 max_gdop=o.spp_max_gdop)
+    if not spp.ok:
+        log.debug("%s: no single-point solution (%s)", rover.time, spp.message)
+        return _solution(rover.time, st.x[:3] if st.initialized else np.zeros(3), nan3, Q_NONE, 0,
+                         np.zeros((3, 3)), np.zeros((3, 3)), 0.0, 0.0)
+    t_sol = rover.time.add_s(-spp.clock_bias_m / CLIGHT_M_S)
+    ns_spp = int(spp.used.sum())
+
+    def single(age: float) -> Solution:
+        cov = np.eye(3) * (spp.gdop * 1.5) ** 2
+        return _solution(t_sol, spp.pos_ecef_m, spp.vel_ecef_m_s, Q_SINGLE, ns_spp, cov, np.eye(3) * 0.01, age, 0.0)
+
+    if st.static and np.all(np.isfinite(spp.vel_ecef_m_s)) and np.linalg.norm(spp.vel_ecef_m_s) > o.takeoff_speed_m_s:
+        log.info("%s: take-off detected (%.2f m/s), leaving static mode", rover.time, np.linalg.norm(spp.vel_ecef_m_s))
+        st.static = False
+        st.p[3:6, 3:6] = np.eye(3) * o.initial_vel_sigma_m_s**2
+    if base is None or base_pos_ecef_m is None:
+        return single(0.0)
+    age = rover.time.diff_s(base.time)
+    if abs(age) > o.max_age_s:
+        return single(age)
+    if st.base_cache is not None and st.base_cache[0] == base.time:
+        bas = st.base_cache[1]
+    else:
+        bas = _slots(base, nav.store)
+        st.base_cache = (base.time, bas)
+    base_pos = np.asarray(base_pos_ecef_m, float)
+
+    dt = rover.time.diff_s(st.time) if st.time is not None else 0.0
+    _udstate(st, dt, spp.pos_ecef_m, spp.vel_ecef_m_s)
+
+    rng_b, _, _, _ = _model_range_m(bas, base_pos)
+    rng_r, _, _, el_r = _model_range_m(rov, st.x[:3])
+    el = el_r
+    common = rov.has & bas.has & (el >= o.elmask_rad) & spp.used
+    phase_ok = common & np.isfinite(rov.cp_cyc) & np.isfinite(bas.cp_cyc)
+    base_zb = LAMBDA_L1_M * bas.cp_cyc - rng_b
+    base_zb_cyc = base_zb / LAMBDA_L1_M
+    slip = _detect_slips(st, rov, bas, base_zb_cyc, rover.time, base.time, phase_ok)
+    half = ((rov.lli & LLI_HALF_CYCLE) != 0) | ((bas.lli & LLI_HALF_CYCLE) != 0)
+    _udbias(st, rov, bas, rng_r, rng_b, phase_ok, slip)
+
+    # remember raw data for next epoch's slip tests
+    st.prev_cp_r = rov.cp_cyc.copy()
+    st.prev_dop_r = rov.dop_hz.copy()
+    st.prev_time_r = rover.time
+    if st.prev_time_b != base.time:
+        st.prev_zb = base_zb_cyc
+        st.prev_time_b = base.time
+    st.time = rover.time
+
+    # measurement update (one iteration, outliers removed and re-run)
+    code_ok = common.copy()
+    use_phase = phase_ok.copy()
+    x_post, p_post = st.x, st.p
+    dd = None
+    for _it in range(4):
+        dd, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, o.use_doppler)
+        if dd.v.size == 0:
+            break
+        # innovation gating with the innovation covariance
+        act = np.flatnonzero(np.diag(st.p) > 0)
+        s = dd.h[:, act] @ st.p[np.ix_(act, act)] @ dd.h[:, act].T + dd.r
+        norm = np.abs(dd.v) / np.sqrt(np.diag(s))
+        bad = norm > 6.0
+        bad &= ~((dd.kind == 0) & (np.abs(dd.v) < o.max_innovation_phase_m * 0.1))
+        if not bad.any():
+            x_post, p_post = _kf_update(st.x, st.p, dd.v, dd.h, dd.r)
+            break
+        worst = int(np.argmax(np.where(bad, norm, -1)))
+        kind, slot = int(dd.kind[worst]), int(dd.slot[worst])
+        if kind == 0:
+            # a phase outlier: treat as a slip of that satellite (or of the reference when most rows fail)
+            phase_bad = bad & (dd.kind == 0)
+            if phase_bad.sum() > max(1, 0.5 * (dd.kind == 0).sum()) and dd.ref_phase >= 0:
+                slot = dd.ref_phase
+            log.debug("%s: phase outlier PRN %d (%.2f m) -> ambiguity reset", rover.time, slot + 1, dd.v[worst])
+            _reset_amb(st, np.array([slot]))
+            use_phase[slot] = False
+            st.slips += 1
+        elif kind == 1:
+            code_ok[slot] = False
+            use_phase[slot] = False
+        else:
+            rov.dop_hz[slot] = np.nan
+    st.x, st.p = x_post, p_post
+    ns = int(use_phase.sum())
+    if dd is None or ns < 2 or not np.any(dd.kind == 0):
+        # no phase double differences at all: report the filter position as float only if it is constrained
+        return _solution(t_sol, st.x[:3], st.x[3:6], Q_FLOAT if ns >= 2 else Q_SINGLE, ns, st.p[:3, :3],
+                         st.p[3:6, 3:6], age, 0.0)
+
+    # post-fit residual check of the float solution
+    dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False)
+    ok_post = _valid_residuals(dd_post, o.validation_sigma_factor)
+    bad_phase = dd_post.slot[(dd_post.kind == 0) & ~ok_post]
+    if bad_phase.size and st.held_prns.any():
+        # the held integer set no longer fits: release it (wrong-fix protection)
+        log.info("%s: held fix released (%d phase residuals out of bounds)", rover.time, bad_phase.size)
+        st.held_prns[:] = False
+        st.fix_count = 0
+        amb = NX0 + np.flatnonzero(st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
+        st.p[amb, amb] += 0.5**2
+        if bad_phase.size >= 1:
+            _reset_amb(st, bad_phase)
+            use_phase[bad_phase] = False
+
+    # ambiguity resolution
+    fix = None
+    if o.ar_mode != "off":
+        amb_var = st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)]
+        cand = use_phase & (el >= np.radians(o.ar_elmask_deg)) & ~half & (st.lock > o.min_lock_epochs) & (amb_var > 0)
+        min_dd = o.min_amb_dd if st.held_prns.any() or st.init_pos_ecef_m is not None else o.min_amb_dd + 1
+        fix = _resamb_lambda(st, st.x, st.p, cand, el, min_dd)
+        if fix is not None:
+            # validate: float-fix consistency and post-fit residuals of the fixed solution
+            dpos = fix.pos - st.x[:3]
+            try:
+                maha = float(dpos @ np.linalg.solve(st.p[:3, :3], dpos))
+            except np.linalg.LinAlgError:
+                maha = np.inf
+            xf = _fixed_ambiguity_state(st.x, fix)
+            use_fix = np.zeros(NSAT, bool)
+            use_fix[fix.slots] = True
+            use_fix[fix.ref] = True
+            dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False)
+            resid_ok = bool(np.all(_valid_residuals(dd_fix, o.validation_sigma_factor)))
+            if maha > _CHI2_3DOF_999 or not resid_ok:
+                log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", rover.time, maha, resid_ok)
+                fix = None
+    if fix is None:
+        st.fix_count = 0
+        st.fail_count += 1
+        return _solution(t_sol, st.x[:3], st.x[3:6], Q_FLOAT, ns, st.p[:3, :3], st.p[3:6, 3:6], age, st.last_ratio)
+    st.fix_count += 1
+    st.fail_count = 0
+    if st.init_pos_ecef_m is not None:
+        st.init_pos_ecef_m = None  # the known point only seeds the first fix
+    sol = _solution(t_sol, fix.pos, st.x[3:6], Q_FIX, ns, fix.cov, st.p[3:6, 3:6], age, fix.ratio)
+    if o.ar_mode == "fix-and-hold" and st.fix_count >= o.min_hold_epochs:
+        _holdamb(st, fix)
+    elif o.ar_mode == "instantaneous":
+        _reset_amb(st, np.arange(NSAT))
+    return sol
