@@ -1,0 +1,62 @@
+"""FastAPI app of the pre-flight check page: `create_app(status_path)`; reads the snapshot on each request."""
+
+from __future__ import annotations
+
+import logging
+import time
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from fastapi import FastAPI
+from fastapi.responses import HTMLResponse
+
+from onboard.status import read_status
+from onboard.web.checks import PreflightOptions, checks_json, overall, preflight_checks
+
+log = logging.getLogger(__name__)
+
+
+def _load(status_path: Path) -> tuple[dict[str, Any] | None, str | None]:
+    try:
+        return read_status(status_path), None
+    except FileNotFoundError:
+        return None, f"{status_path} does not exist"
+    except (ValueError, OSError) as exc:  # half-written by a foreign tool, unreadable, wrong schema
+        return None, str(exc)
+
+
+def create_app(status_path: Path, options: PreflightOptions = PreflightOptions()) -> FastAPI:
+    """The status web app for the snapshot at `status_path`."""
+    app = FastAPI(title="directgeo pre-flight check", version="1")
+    page = resources.files("onboard.web").joinpath("preflight.html").read_text(encoding="utf-8")
+
+    @app.get("/", response_class=HTMLResponse)
+    def index() -> str:
+        """The pre-flight check page (refreshes itself from /api/preflight)."""
+        return page
+
+    @app.get("/api/preflight")
+    def preflight() -> dict[str, Any]:
+        """Checks derived from the current snapshot, their overall level, and the snapshot itself."""
+        status, error = _load(status_path)
+        checks = preflight_checks(status, time.time_ns(), options)
+        return {"overall": overall(checks), "checks": checks_json(checks), "status": status, "error": error}
+
+    @app.get("/api/status")
+    def status() -> dict[str, Any]:
+        """The raw status snapshot (404-like empty object with an error when absent)."""
+        snap, error = _load(status_path)
+        return snap if snap is not None else {"error": error}
+
+    return app
+
+
+def serve(status_path: Path, host: str, port: int) -> None:
+    """Run the page with uvicorn (blocking)."""
+    import uvicorn
+
+    uvicorn.run(create_app(status_path), host=host, port=port, log_level="info")
+
+
+__all__ = ["create_app", "serve"]
