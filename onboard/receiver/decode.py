@@ -234,6 +234,10 @@ _ID_NAV_SOL = (0x01, 0x06)
 _ID_NAV_PVT = (0x01, 0x07)
 _ID_NAV_POSECEF = (0x01, 0x01)
 _CLS_ACK = 0x05
+# Payload lengths of the fixed-size messages we hand to pyubx2 (it silently pads short payloads with zeros).
+_NAV_LENGTHS: dict[tuple[int, int], tuple[int, ...]] = {
+    _ID_NAV_SOL: (52,), _ID_NAV_PVT: (84, 92), _ID_NAV_POSECEF: (20,),
+}
 _CLS_CFG = 0x06
 _ID_CFG_TP = (0x06, 0x07)
 
@@ -574,8 +578,12 @@ def _decode_ubx(frame: Frame, stats: DecodeStats) -> tuple[str, Decoded | None] 
             raise DecodeError(f"ACK payload must be 2 bytes, got {len(payload)}")
         return ("ACK-ACK" if frame.msg_id else "ACK-NAK"), Ack(payload[0], payload[1], frame.msg_id == 1)
     if key == _ID_MON_VER:
+        if len(payload) < 40 or (len(payload) - 40) % 30:
+            raise DecodeError(f"MON-VER payload of {len(payload)} bytes is not 40 + 30·n")
         return "MON-VER", _decode_mon_ver(frame.raw)
-    if key in (_ID_NAV_SOL, _ID_NAV_PVT, _ID_NAV_POSECEF):
+    if key in _NAV_LENGTHS:
+        if len(payload) not in _NAV_LENGTHS[key]:
+            raise DecodeError(f"NAV 0x{frame.msg_id:02X} payload of {len(payload)} bytes, want {_NAV_LENGTHS[key]}")
         fix = _decode_nav(key, frame.raw)
         if fix.week is not None:
             stats.reference_week = fix.week
