@@ -48,6 +48,9 @@ class RtkOptions:
     max_innovation_phase_m: float = 0.5
     max_innovation_code_m: float = 30.0
     validation_sigma_factor: float = 4.0
+    max_fix_sigma_m: float = 0.06
+    """A fixed solution whose 3D σ (from the fixed covariance) exceeds this is reported as float: with too
+    few or badly placed satellites even correct integers do not give a centimetre position."""
     max_age_s: float = 30.0
     pair_tolerance_s: float = 0.025
     static_start: bool = False
@@ -56,7 +59,8 @@ class RtkOptions:
     init_pos_sigma_m: float = 0.005
     """σ given to a known take-off position (Daakir 2015 known-point initialisation)."""
     max_iterations: int = 2
-    spp_max_gdop: float = 30.0
+    spp_max_gdop: float = 100.0
+    """SPP geometry limit; higher than RTKLIB's 30 since the relative filter only needs a rough position."""
     spp_outlier_m: float = 60.0
 
     @property

@@ -140,7 +140,7 @@ def _solution(t: GpsTime, pos: Arr, vel: Arr, q: int, ns: int, cov: Arr, covv: A
               ratio: float) -> Solution:
     return Solution(time=t, pos_ecef_m=np.array(pos, float), vel_ecef_m_s=np.array(vel, float), q=q, ns=ns,
                     cov_pos_m2=np.array(cov, float), cov_vel_m2_s2=np.array(covv, float), age_s=age,
-                    ratio=ratio)
+                    ratio=min(ratio, 999.9))
 
 
 def _reset_amb(st: RtkState, k: npt.NDArray[np.int64]) -> None:
@@ -603,7 +603,9 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     st.fail_count = 0
     if st.init_pos_ecef_m is not None:
         st.init_pos_ecef_m = None  # the known point only seeds the first fix
-    sol = _solution(t_sol, fix.pos, st.x[3:6], Q_FIX, ns, fix.cov, st.p[3:6, 3:6], age, fix.ratio)
+    weak = float(np.sqrt(max(np.trace(fix.cov), 0.0))) > o.max_fix_sigma_m
+    sol = _solution(t_sol, fix.pos, st.x[3:6], Q_FLOAT if weak else Q_FIX, ns, fix.cov, st.p[3:6, 3:6], age,
+                    fix.ratio)
     if o.ar_mode == "fix-and-hold" and st.fix_count >= o.min_hold_epochs:
         _holdamb(st, fix)
     elif o.ar_mode == "instantaneous":
