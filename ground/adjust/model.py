@@ -105,6 +105,10 @@ class AdjustmentOptions:
     max_pair_dt_s: float = 10.0
     #: |ρ| above which a parameter pair is reported as correlated
     correlation_warning: float = 0.9
+    #: inflate the covariance for time-correlated GNSS errors (batch means over flight segments, see
+    #: solve.variance_inflation); segments are runs of images less than segment_gap_s apart
+    inflate_for_time_correlation: bool = True
+    segment_gap_s: float = 3.0
     #: largest fraction of images that may be flagged before the adjustment gives up
     max_outlier_fraction: float = 0.3
 
@@ -230,6 +234,7 @@ class AdjustmentResult:
     gcp_residuals_enu_m: dict[str, tuple[float, float, float]]
     n_observations: int
     relative_control: bool
+    variance_inflation: float = 1.0  # factor applied to Σ for time-correlated residuals (1 = none)
 
     def corrected_positions_enu_m(self, centre_rel: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Map relative-frame points (…,3) into ENU with the estimated similarity."""
@@ -284,5 +289,6 @@ class AdjustmentResult:
             "checkpoint_std_m": dict(self.checkpoint_std_m),
             "n_images": len(self.images),
             "n_observations": int(self.n_observations),
+            "variance_inflation": float(self.variance_inflation),
             "relative_control": bool(self.relative_control),
         }
