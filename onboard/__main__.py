@@ -1,0 +1,97 @@
+"""`python -m onboard <command>`: the onboard command line.
+
+Commands register in `COMMANDS` as "module:function" registrars; adding one (e.g. `rtk`, `base`) is one line. Nothing happens at import: `main()` builds everything.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from onboard.errors import ConfigFileError
+
+log = logging.getLogger("onboard")
+
+EXIT_USAGE = 2
+
+def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:  # type: ignore[type-arg]
+    """Register `run` (the recorder daemon)."""
+    p = subparsers.add_parser("run", help="record: the onboard recorder daemon",
+                              description="Record every byte from the receiver into a crash-safe journal, "
+                                          "configure and monitor the receiver, write a status snapshot.")
+    p.add_argument("--config", type=Path, help="TOML configuration file (see onboard/default_config.toml)")
+    p.add_argument("--port", help="receiver serial device (overrides port.device)")
+    p.add_argument("--baud", type=int, help="line rate to open the port at (overrides port.baud)")
+    p.add_argument("--data-dir", type=Path, help="where flights are recorded (overrides journal.data_dir)")
+    p.add_argument("--status", type=Path, help="status snapshot JSON path (overrides status.path)")
+    p.add_argument("--no-configure", action="store_true", help="record only; never configure the receiver")
+    p.set_defaults(func=_run)
+    return p
+
+
+def _run(args: argparse.Namespace) -> int:
+    from onboard.daemon import EXIT_DISK_FULL, RecorderDeps, run_recorder, serial_port_opener
+    from onboard.logger.files import FileLayer, OsFileLayer, SyncLogFileLayer
+    from onboard.sdnotify import SdNotifier
+    from onboard.settings import load_settings
+
+    overrides = {
+        "port.device": args.port,
+        "port.baud": args.baud,
+        "journal.data_dir": str(args.data_dir) if args.data_dir else None,
+        "status.path": str(args.status) if args.status else None,
+        "receiver.configure": False if args.no_configure else None,
+    }
+    try:
+        settings = load_settings(args.config, overrides=overrides)
+    except ConfigFileError as exc:
+        print(f"configuration error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    # Test hook: a file layer that logs every fsync'd length, so a power-cut test can cut files back to it.
+    sync_log = os.environ.get("ONBOARD_TEST_SYNC_LOG")
+    files: FileLayer = SyncLogFileLayer(Path(sync_log)) if sync_log else OsFileLayer()
+    deps = RecorderDeps(open_port=serial_port_opener(settings), files=files, notifier=SdNotifier())
+    code = run_recorder(settings, deps)
+    if code == EXIT_DISK_FULL:
+        print("recorder stopped: free disk space below journal.disk_floor_mb (see the status snapshot)",
+              file=sys.stderr)
+    return code
+
+
+# Sub-commands: "module:function" registrars, each adding its parser to the sub-parsers and setting
+# `func(args) -> exit code`. Adding a command (`rtk`, `base`, ...) is one line here.
+COMMANDS: tuple[str, ...] = (
+    "onboard.__main__:add_run_parser",
+    "onboard.convert:add_convert_parser",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every registered command."""
+    parser = argparse.ArgumentParser(prog="python -m onboard", description="directgeo onboard tools")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for spec in COMMANDS:
+        module_name, func_name = spec.split(":")
+        getattr(importlib.import_module(module_name), func_name)(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    code: int = args.func(args)
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

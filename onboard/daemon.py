@@ -1,0 +1,580 @@
+"""The recorder daemon: the composition root of `python -m onboard run`.
+
+One process, one asyncio loop, one reader/writer thread:
+
+    reader thread:  port.read → journal.append (bytes are on their way to disk before anything parses them)
+                    → maybe_sync; hands the bytes to the loop; reopens a vanished port with backoff
+    asyncio loop:   framer → decoder → status counters, configuration link frames, time marks (→ fsync now,
+                    events.jsonl); configuration task after every (re)connection; status snapshot every
+                    ~1 s; disk floor; sd_notify READY / STATUS / WATCHDOG.
+
+Parsing and configuration are best effort: an exception there is logged and counted, never stops the reader.
+Exit codes: 0 clean stop (SIGTERM/SIGINT), 1 journal I/O failure, 3 disk below the floor (at start: nothing
+recorded; while recording: the flight is closed cleanly first).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import errno
+import logging
+import os
+import shutil
+import signal
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from onboard.errors import ConfigRejected, DiskFull, LinkLost, ReceiverError
+from onboard.hw.ports import ByteStream, Clock, SystemClock
+from onboard.logger.events import EventLog
+from onboard.logger.files import FileLayer, OsFileLayer
+from onboard.logger.journal import EVENTS_NAME, Journal, JournalOptions, flight_name, read_manifest
+from onboard.receiver.framing import Frame, StreamFramer
+from onboard.sdnotify import SdNotifier, WatchdogGate
+from onboard.settings import Settings, receiver_options
+from onboard.status import SatelliteStatus, StatusSnapshot, write_status
+
+log = logging.getLogger(__name__)
+
+EXIT_OK = 0
+EXIT_IO_ERROR = 1
+EXIT_DISK_FULL = 3
+READ_CHUNK_BYTES = 4096
+TIM_TM2 = (0x0D, 0x03)
+
+
+def disk_free_bytes(path: Path) -> int:
+    """Free bytes available to this user on the file system holding `path`."""
+    return shutil.disk_usage(path).free
+
+
+@dataclass
+class RecorderDeps:
+    """What the composition root passes in (fakes in tests, real hardware in production)."""
+
+    open_port: Callable[[], ByteStream]
+    clock: Clock = field(default_factory=SystemClock)
+    files: FileLayer = field(default_factory=OsFileLayer)
+    disk_free: Callable[[Path], int] = disk_free_bytes
+    notifier: SdNotifier = field(default_factory=lambda: SdNotifier({}))
+
+
+def choose_flight_dir(data_dir: Path, wall_ns: int) -> Path:
+    """The flight to record into: the latest flight if it was not closed cleanly (resume after a crash or
+    power cut, in a new segment), else a new `flight-YYYYmmddTHHMMSSZ` directory."""
+    flights = sorted(p for p in data_dir.iterdir() if p.is_dir() and p.name.startswith("flight-"))
+    if flights:
+        last = flights[-1]
+        manifest = read_manifest(last)
+        if manifest is None or not manifest.closed:
+            return last
+    name = flight_name(wall_ns)
+    candidate = data_dir / name
+    n = 1
+    while candidate.exists():  # two flights in the same second: suffix keeps names sorting in order
+        candidate = data_dir / f"{name}-{n:02d}"
+        n += 1
+    return candidate
+
+
+class Recorder:
+    """The recorder: owns the journal, event log, port thread, decoder hook-up and status."""
+
+    def __init__(self, settings: Settings, deps: RecorderDeps) -> None:
+        self.settings = settings
+        self.deps = deps
+        self.clock = deps.clock
+        self.status = StatusSnapshot(
+            pid=os.getpid(),
+            started_wall_ns=self.clock.wall_ns(),
+            port_device=settings.port_device,
+            disk_floor_bytes=int(settings.disk_floor_mb * 1e6),
+            config_state="pending" if settings.receiver_configure else "disabled",
+        )
+        self.journal: Journal | None = None
+        self.events: EventLog | None = None
+        self.exit_code = EXIT_OK
+        self.stop_reason: str | None = None
+        self._stop_thread = threading.Event()
+        self._stopped: asyncio.Event | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._journal_lock = threading.Lock()
+        self._port: ByteStream | None = None
+        self._reopen_request: tuple[int, asyncio.Future[None]] | None = None
+        self._framer = StreamFramer()
+        self._frames_this_connection = 0
+        self._link: Any = None
+        self._config_task: asyncio.Task[None] | None = None
+        self._gate = WatchdogGate(int(settings.watchdog_writer_stall_s * 1e9))
+        self._decode_stats: Any = None
+        self._decode: Callable[..., Any] | None = None
+        self._marks_handler: Callable[[Any], list[dict[str, Any]]] | None = None
+
+    # -- lifecycle --------------------------------------------------------------------------------------
+    def check_disk(self) -> int:
+        """Free bytes of the data directory; raises DiskFull when below the floor."""
+        free = self.deps.disk_free(self.settings.data_dir)
+        self.status.disk_free_bytes = free
+        if free < self.status.disk_floor_bytes:
+            raise DiskFull(
+                f"{self.settings.data_dir}: {free / 1e6:.1f} MB free, below the floor of "
+                f"{self.settings.disk_floor_mb:.1f} MB"
+            )
+        return free
+
+    async def run(self) -> int:
+        """Record until stopped; returns the process exit code."""
+        self._loop = asyncio.get_running_loop()
+        self._stopped = asyncio.Event()
+        s = self.settings
+        s.data_dir.mkdir(parents=True, exist_ok=True)
+        s.status_path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self.check_disk()
+        except DiskFull as exc:
+            log.error("refusing to record: %s", exc)
+            self.status.state = "disk_full"
+            self.status.message = f"refusing to start: {exc}"
+            self._write_status()
+            self.deps.notifier.notify(STATUS=self.status.message)
+            return EXIT_DISK_FULL
+        flight_dir = choose_flight_dir(s.data_dir, self.clock.wall_ns())
+        options = JournalOptions(
+            sync_interval_s=s.journal_sync_interval_s,
+            segment_max_bytes=int(s.journal_segment_max_mb * 1e6),
+            segment_max_s=s.journal_segment_max_s,
+        )
+        self.journal = Journal(flight_dir, self.clock, options, self.deps.files)
+        self.events = EventLog(flight_dir / EVENTS_NAME, self.clock, s.journal_sync_interval_s, self.deps.files)
+        self.status.flight = flight_dir.name
+        self.status.flight_dir = str(flight_dir)
+        self._setup_decoder()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            try:
+                self._loop.add_signal_handler(sig, self.request_stop, f"signal {sig.name}", EXIT_OK)
+            except (NotImplementedError, RuntimeError):  # not the main thread (tests run us in a thread)
+                pass
+        thread = threading.Thread(target=self._reader_thread, name="recorder-reader", daemon=True)
+        thread.start()
+        self.status.state = "recording"
+        self._write_status()
+        self.deps.notifier.notify(READY=1, STATUS=f"recording {flight_dir.name}")
+        log.info("recording into %s", flight_dir)
+        tasks = [asyncio.create_task(self._status_task()), asyncio.create_task(self._watchdog_task())]
+        await self._stopped.wait()
+        self._stop_thread.set()
+        await asyncio.to_thread(thread.join)
+        for task in [*tasks, self._config_task]:
+            if task is not None:
+                task.cancel()
+        await asyncio.gather(*[t for t in [*tasks, self._config_task] if t is not None], return_exceptions=True)
+        self._close_flight()
+        return self.exit_code
+
+    def request_stop(self, reason: str, exit_code: int = EXIT_OK) -> None:
+        """Stop recording (first reason wins); safe to call from the loop only."""
+        if self.stop_reason is None:
+            self.stop_reason = reason
+            self.exit_code = exit_code
+            log.info("stopping: %s", reason)
+        if self._stopped is not None:
+            self._stopped.set()
+
+    def _request_stop_threadsafe(self, reason: str, exit_code: int) -> None:
+        if self._loop is not None:
+            self._loop.call_soon_threadsafe(self.request_stop, reason, exit_code)
+
+    def _close_flight(self) -> None:
+        reason = self.stop_reason or "stopped"
+        try:
+            if self.events is not None:
+                self.events.close()
+            if self.journal is not None:
+                with self._journal_lock:
+                    self.journal.close(reason)
+        except OSError as exc:
+            # Even a full disk leaves the fsync'd segment intact; the next start recovers the manifest.
+            log.error("closing the flight failed: %s", exc)
+            self.status.message = f"{reason}; closing failed: {exc}"
+        if self._port is not None:
+            self._port.close()
+            self._port = None
+        if self.status.state not in ("disk_full", "error"):
+            self.status.state = "stopped"
+        if self.status.message is None:
+            self.status.message = reason
+        self.status.port_open = False
+        self._write_status()
+        self.deps.notifier.notify(STOPPING=1, STATUS=f"stopped: {reason}")
+
+    # -- reader/writer thread ---------------------------------------------------------------------------
+    def _reader_thread(self) -> None:
+        s = self.settings
+        backoff_s = s.port_reopen_min_s
+        assert self.journal is not None
+        while not self._stop_thread.is_set():
+            self._gate.writer_beat(self.clock.monotonic_ns())
+            port = self._port
+            if port is None:
+                try:
+                    port = self.deps.open_port()
+                except LinkLost as exc:
+                    self._post(self._on_port_error, str(exc))
+                    self._idle_sync()
+                    # Wait in short steps so the writer heartbeat stays fresh while unplugged.
+                    waited = 0.0
+                    while waited < backoff_s and not self._stop_thread.is_set():
+                        self._gate.writer_beat(self.clock.monotonic_ns())
+                        step = min(0.2, backoff_s - waited)
+                        self._stop_thread.wait(step)
+                        waited += step
+                    backoff_s = min(backoff_s * 2, s.port_reopen_max_s)
+                    continue
+                self._port = port
+                backoff_s = s.port_reopen_min_s
+                self._post(self._on_port_open)
+            try:
+                data = port.read(READ_CHUNK_BYTES)
+            except LinkLost as exc:
+                port.close()
+                self._port = None
+                self._post(self._on_port_error, str(exc))
+                continue
+            if data:
+                mono, wall = self.clock.monotonic_ns(), self.clock.wall_ns()
+                if not self._journal_op(lambda: self.journal.append(data, mono, wall)):  # type: ignore[union-attr]
+                    return
+                self._post(self._on_bytes, data)
+            if not self._journal_op(self.journal.maybe_sync):
+                return
+            request = self._reopen_request
+            if request is not None:
+                self._reopen_request = None
+                self._do_reopen(port, *request)
+
+    def _do_reopen(self, port: ByteStream, baud: int, fut: asyncio.Future[None]) -> None:
+        reopen = getattr(port, "reopen", None)
+        try:
+            if reopen is not None:
+                reopen(baud)
+            self._post(_set_future, fut, None)
+        except LinkLost as exc:
+            self._port = None
+            self._post(_set_future, fut, exc)
+
+    def _idle_sync(self) -> None:
+        assert self.journal is not None
+        self._journal_op(self.journal.maybe_sync)
+
+    def _journal_op(self, op: Callable[[], Any]) -> bool:
+        """Run a journal write/sync; on an OS error stop the recorder (ENOSPC → disk full). False if failed."""
+        try:
+            with self._journal_lock:
+                op()
+            return True
+        except OSError as exc:
+            if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+                self._post(self._set_state, "disk_full", f"disk full while recording: {exc}")
+                self._request_stop_threadsafe("disk full", EXIT_DISK_FULL)
+            else:
+                self._post(self._set_state, "error", f"journal write failed: {exc}")
+                self._request_stop_threadsafe(f"journal write failed: {exc}", EXIT_IO_ERROR)
+            log.error("journal: %s", exc)
+            return False
+
+    def _post(self, fn: Callable[..., Any], *args: Any) -> None:
+        loop = self._loop
+        if loop is not None and not loop.is_closed():
+            try:
+                loop.call_soon_threadsafe(fn, *args)
+            except RuntimeError:  # loop closing at shutdown
+                pass
+
+    # -- loop side: port state --------------------------------------------------------------------------
+    def _set_state(self, state: str, message: str) -> None:
+        self.status.state = state
+        self.status.message = message
+
+    def _on_port_error(self, message: str) -> None:
+        was_open = self.status.port_open
+        self.status.port_open = False
+        self.status.port_error = message
+        if self.status.state == "recording" or was_open:
+            self.status.state = "port_lost"
+            self.status.message = f"receiver port unavailable: {message}"
+        if was_open:
+            log.warning("port lost: %s", message)
+        if self._config_task is not None:
+            self._config_task.cancel()
+            self._config_task = None
+        self._link = None
+
+    def _on_port_open(self) -> None:
+        from onboard.receiver.configure import FrameQueueLink
+
+        if self.status.port_error is not None or self.status.state == "port_lost":
+            self.status.port_reconnects += 1
+        self.status.port_open = True
+        self.status.port_error = None
+        if self.status.state == "port_lost":
+            self.status.state = "recording"
+            self.status.message = None
+        self._framer = StreamFramer()  # bytes of the old connection never complete a frame of the new one
+        self._frames_this_connection = 0
+        self._link = FrameQueueLink(self._link_write, self._link_reopen)
+        if self.settings.receiver_configure:
+            self._config_task = asyncio.create_task(self._configure(self._link))
+
+    async def _link_write(self, raw: bytes) -> None:
+        port = self._port
+        if port is None:
+            raise LinkLost("receiver port is not open")
+        await asyncio.to_thread(port.write, raw)
+
+    async def _link_reopen(self, baud: int) -> None:
+        assert self._loop is not None
+        fut: asyncio.Future[None] = self._loop.create_future()
+        self._reopen_request = (baud, fut)
+        await asyncio.wait_for(fut, 5.0)
+
+    # -- loop side: configuration -----------------------------------------------------------------------
+    async def _configure(self, link: Any) -> None:
+        """Detect the receiver, apply and verify the profile; failures go to the status, never stop recording."""
+        from onboard.receiver.configure import apply_profile, detect_receiver, probe_baud
+        from onboard.receiver.profiles import build_profile
+
+        s = self.settings
+        st = self.status
+        try:
+            opts = receiver_options(s)
+            st.config_state = "detecting"
+            st.config_error = None
+            try:
+                info = await detect_receiver(link, opts.ack_timeout_s, opts.retries)
+            except ConfigRejected:
+                # Valid frames at this rate prove the baud is right: the receiver just does not answer.
+                # Only a port that yields no valid frame at all is worth a baud probe.
+                if self._frames_this_connection:
+                    raise
+                baud = await probe_baud(link)
+                if baud is None:
+                    raise
+                info = await detect_receiver(link, opts.ack_timeout_s, opts.retries)
+            st.receiver_model = info.model
+            st.receiver_sw_version = info.sw_version
+            st.receiver_hw_version = info.hw_version
+            st.receiver_extensions = list(info.extensions)
+            model = info.model if s.receiver_model == "auto" else s.receiver_model
+            if s.receiver_model != "auto" and info.model != s.receiver_model:
+                raise ConfigRejected("MON-VER", f"receiver identifies as {info.model!r}, configured model is "
+                                     f"{s.receiver_model!r}", "hwVersion")
+            if model not in ("lea6t", "m8t"):
+                raise ConfigRejected("MON-VER", f"unsupported receiver (hw {info.hw_version}, sw {info.sw_version})",
+                                     "hwVersion")
+            st.config_state = "configuring"
+            profile = build_profile(model, opts)
+            report = await apply_profile(link, profile, opts, receiver=info, current_baud=s.port_baud)
+            st.config_report = report.to_json()
+            if report.ok:
+                st.config_state = "verified"
+            else:
+                st.config_state = "failed"
+                st.config_error = "; ".join(str(e) for e in report.errors)
+            self._record_config(info.to_json(), report.to_json())
+        except (ConfigRejected, ReceiverError, ValueError) as exc:
+            st.config_state = "failed"
+            st.config_error = str(exc)
+            log.error("receiver configuration failed: %s", exc)
+            self._record_config(None, {"ok": False, "errors": [str(exc)]})
+        except (TimeoutError, OSError) as exc:
+            st.config_state = "failed"
+            st.config_error = f"link: {exc}"
+            log.error("receiver configuration interrupted: %s", exc)
+
+    def _record_config(self, receiver: dict[str, Any] | None, report: dict[str, Any]) -> None:
+        if self.journal is not None and not self.journal.closed:
+            with self._journal_lock:
+                try:
+                    self.journal.set_receiver(receiver, report)
+                except OSError as exc:
+                    log.error("manifest write failed: %s", exc)
+        if self.events is not None:
+            self._append_event({"type": "config", "host_wall_ns": self.clock.wall_ns(), "receiver": receiver,
+                                "ok": bool(report.get("ok")), "errors": report.get("errors", [])})
+
+    # -- loop side: bytes → frames → decoded ------------------------------------------------------------
+    def _setup_decoder(self) -> None:
+        from onboard.receiver.decode import DecodeStats, decode_frame
+
+        self._decode = decode_frame
+        self._decode_stats = DecodeStats()
+
+    def _on_bytes(self, data: bytes) -> None:
+        st = self.status
+        st.bytes_recorded += len(data)
+        # No try/except here on purpose: this runs as a loop callback, so even an unexpected parser bug is
+        # logged by asyncio and never reaches the reader thread, which journaled these bytes already.
+        skipped_before = self._framer.skipped_bytes
+        frames = self._framer.feed(data)
+        st.frames += len(frames)
+        st.skipped_bytes += self._framer.skipped_bytes - skipped_before
+        self._frames_this_connection += len(frames)
+        for frame in frames:
+            self._on_frame(frame)
+
+    def _on_frame(self, frame: Frame) -> None:
+        if self._link is not None:
+            self._link.feed(frame)
+        if (frame.msg_class, frame.msg_id) == TIM_TM2:
+            # The time mark is already in the journal: make it durable now, off the loop thread.
+            asyncio.get_running_loop().run_in_executor(None, self._sync_for_mark)
+        if self._decode is None:
+            return
+        item = self._decode(frame, self._decode_stats)  # never raises on content (decode.py contract)
+        self.status.decode_failures = self._decode_stats.failures
+        if item is not None:
+            self._on_decoded(item)
+
+    def _sync_for_mark(self) -> None:
+        assert self.journal is not None
+        self._journal_op(self.journal.sync_now)
+
+    def _on_decoded(self, item: Any) -> None:
+        from onboard.receiver.decode import TimeMarks
+        from onboard.rtk.types import ObsEpoch
+
+        st = self.status
+        if isinstance(item, ObsEpoch):
+            st.epochs += 1
+            st.last_epoch_gpst = str(item.time)
+            st.last_epoch_week = item.time.week
+            st.last_epoch_tow_s = item.time.tow_s
+            st.satellites = [
+                SatelliteStatus(int(g), int(sv), round(float(c), 1))
+                for g, sv, c in zip(item.gnss_id, item.sv_id, item.cn0_dbhz)
+            ]
+        elif isinstance(item, TimeMarks):
+            st.time_marks += len(item.marks)
+            for mark in item.marks:
+                if mark.time is not None:
+                    st.last_mark_gpst = str(mark.time)
+            records = self._marks_handler(item) if self._marks_handler is not None else []
+            for rec in records:
+                self._append_event(rec)
+            if self.events is not None:
+                self._sync_events()
+
+    def _append_event(self, record: dict[str, Any]) -> None:
+        if self.events is None:
+            return
+        try:
+            self.events.append(record)
+            self.status.events = self.events.records
+        except OSError as exc:
+            self._journal_error(exc)
+
+    def _sync_events(self) -> None:
+        assert self.events is not None
+        try:
+            self.events.sync_now()
+        except OSError as exc:
+            self._journal_error(exc)
+
+    def _journal_error(self, exc: OSError) -> None:
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            self._set_state("disk_full", f"disk full while recording: {exc}")
+            self.request_stop("disk full", EXIT_DISK_FULL)
+        else:
+            self._set_state("error", f"event log write failed: {exc}")
+            self.request_stop(f"event log write failed: {exc}", EXIT_IO_ERROR)
+
+    # -- loop side: periodic work -----------------------------------------------------------------------
+    async def _status_task(self) -> None:
+        s = self.settings
+        last_disk_ns = 0
+        while True:
+            now = self.clock.monotonic_ns()
+            self._gate.loop_beat(now)
+            if now - last_disk_ns >= s.disk_check_interval_s * 1e9:
+                last_disk_ns = now
+                try:
+                    self.check_disk()
+                except DiskFull as exc:
+                    log.error("%s: closing the flight", exc)
+                    self._set_state("disk_full", f"disk full: {exc}; flight closed")
+                    self.request_stop("disk full", EXIT_DISK_FULL)
+                    return
+                except OSError as exc:
+                    log.warning("cannot read free space: %s", exc)
+            if self.events is not None:
+                try:
+                    self.events.maybe_sync()
+                except OSError as exc:
+                    self._journal_error(exc)
+            self._write_status()
+            await asyncio.sleep(s.status_interval_s)
+
+    async def _watchdog_task(self) -> None:
+        notifier = self.deps.notifier
+        usec = notifier.watchdog_usec
+        period_s = min(1.0, usec / 2e6) if usec else 1.0
+        last_text = ""
+        while True:
+            now = self.clock.monotonic_ns()
+            self._gate.loop_beat(now)
+            if usec and self._gate.should_pet(now):
+                notifier.notify(WATCHDOG=1)
+            text = self._status_line()
+            if text != last_text:
+                notifier.notify(STATUS=text)
+                last_text = text
+            await asyncio.sleep(period_s)
+
+    def _status_line(self) -> str:
+        st = self.status
+        parts = [st.state, f"{st.bytes_recorded} B", f"{st.epochs} epochs", f"config {st.config_state}"]
+        if st.port_error:
+            parts.append(f"port: {st.port_error}")
+        return ", ".join(parts)
+
+    def _write_status(self) -> None:
+        st = self.status
+        st.updated_wall_ns = self.clock.wall_ns()
+        if self.journal is not None:
+            st.journal_syncs = self.journal.syncs
+            seg = self.journal.current_segment
+            st.segment = seg.name if seg is not None else None
+        try:
+            write_status(self.settings.status_path, st)
+        except OSError as exc:
+            log.warning("status snapshot not written: %s", exc)
+
+
+def _set_future(fut: asyncio.Future[None], exc: BaseException | None) -> None:
+    if fut.done():
+        return
+    if exc is None:
+        fut.set_result(None)
+    else:
+        fut.set_exception(exc)
+
+
+def serial_port_opener(settings: Settings) -> Callable[[], ByteStream]:
+    """The production port factory: pyserial on `settings.port_device`."""
+
+    def open_port() -> ByteStream:
+        from onboard.hw.serial_port import SerialByteStream
+
+        return SerialByteStream(settings.port_device, settings.port_baud, settings.port_read_timeout_s)
+
+    return open_port
+
+
+def run_recorder(settings: Settings, deps: RecorderDeps | None = None) -> int:
+    """Run the recorder to completion in a fresh event loop; returns the exit code."""
+    if deps is None:
+        deps = RecorderDeps(open_port=serial_port_opener(settings), notifier=SdNotifier())
+    return asyncio.run(Recorder(settings, deps).run())
