@@ -1,0 +1,377 @@
+"""Flights: create from a manifest, resumable checksummed file upload, jobs, results and report."""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import logging
+import os
+import threading
+from pathlib import Path
+from typing import Any
+
+from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response, status
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
+from sqlalchemy import select
+
+from ground.api.jobs import JobRunner
+from ground.api.deps import get_settings, get_store, require_token
+from ground.api.schemas import FileOut, FlightCreate, FlightOut, FlightSummary, JobCreate, JobOut
+from ground.api.settings import ApiSettings
+from ground.api.upload import Limits, UploadRejected, check_chunk, check_file_name, check_manifest_files, check_sha256
+from ground.store import Flight, FlightFile, Job, Store, UploadSession
+
+log = logging.getLogger(__name__)
+
+router = APIRouter(prefix="/flights", tags=["flights"], dependencies=[Depends(require_token)])
+
+CHUNK_SHA_HEADER = "X-Chunk-SHA256"
+OFFSET_HEADER = "Upload-Offset"
+LENGTH_HEADER = "Upload-Length"
+
+# one lock per (flight, file): chunk appends to one file are serialised (single-process server)
+_locks: dict[tuple[str, str], threading.Lock] = {}
+_locks_guard = threading.Lock()
+
+
+def _file_lock(flight_id: str, name: str) -> threading.Lock:
+    with _locks_guard:
+        return _locks.setdefault((flight_id, name), threading.Lock())
+
+
+def _limits(s: ApiSettings) -> Limits:
+    return Limits(s.max_file_bytes, s.max_flight_bytes, s.max_chunk_bytes, s.max_files_per_flight)
+
+
+def flight_dir(settings: ApiSettings, flight_id: str) -> Path:
+    """Directory of a flight's raw files."""
+    return settings.flights_dir / flight_id
+
+
+def safe_path(settings: ApiSettings, flight_id: str, name: str) -> Path:
+    """Path of a flight file; the name is validated and the result must stay inside the flight directory."""
+    check_file_name(name)
+    base = flight_dir(settings, flight_id).resolve()
+    p = (base / name).resolve()
+    if p.parent != base:
+        raise UploadRejected(400, f"file name {name!r} escapes the flight directory")
+    return p
+
+
+def _http(exc: UploadRejected) -> HTTPException:
+    return HTTPException(status_code=exc.status, detail=exc.detail)
+
+
+def _file_out(f: FlightFile) -> FileOut:
+    return FileOut(name=f.name, role=f.role, size=f.size, sha256=f.sha256, received=f.received,
+                   status=f.status)  # type: ignore[arg-type]
+
+
+def job_out(j: Job) -> JobOut:
+    """Schema of a job row."""
+    return JobOut(id=j.id, kind=j.kind, status=j.status, params=j.params, message=j.message,  # type: ignore[arg-type]
+                  created_at=j.created_at, started_at=j.started_at, finished_at=j.finished_at)
+
+
+def _flight_out(f: Flight) -> FlightOut:
+    return FlightOut(id=f.id, name=f.name, status=f.status, created_at=f.created_at,
+                     files=[_file_out(x) for x in f.files], jobs=[job_out(j) for j in f.jobs])
+
+
+def _get_flight(store: Store, flight_id: str) -> Flight:
+    with store.session() as s:
+        f = s.get(Flight, flight_id)
+        if f is None:
+            raise HTTPException(status_code=404, detail=f"no flight {flight_id}")
+        f.files, f.jobs  # noqa: B018 - load relationships before the session closes
+        return f
+
+
+@router.post("", response_model=FlightOut, status_code=status.HTTP_201_CREATED,
+             responses={200: {"model": FlightOut, "description": "identical flight already exists (resume)"},
+                        400: {}, 409: {}, 413: {}})
+def create_flight(body: FlightCreate, response: Response, settings: ApiSettings = Depends(get_settings),
+                  store: Store = Depends(get_store)) -> FlightOut:
+    """Create a flight from its upload manifest; the same name and files again returns the existing flight."""
+    try:
+        check_file_name(body.name)
+        triples = [(f.name, f.size, check_sha256(f.sha256)) for f in body.files]
+        check_manifest_files(triples, _limits(settings))
+    except UploadRejected as exc:
+        raise _http(exc) from exc
+    with store.session() as s:
+        existing = s.scalar(select(Flight).where(Flight.name == body.name))
+        if existing is not None:
+            same = sorted((f.name, f.size, f.sha256) for f in existing.files) == sorted(triples)
+            if not same:
+                raise HTTPException(status_code=409, detail=f"flight {body.name!r} exists with other files")
+            response.status_code = status.HTTP_200_OK
+            existing.files, existing.jobs  # noqa: B018
+            return _flight_out(existing)
+        flight = Flight(name=body.name, manifest=body.model_dump())
+        for f in body.files:
+            flight.files.append(FlightFile(name=f.name, size=f.size, sha256=f.sha256.lower(), role=f.role,
+                                           status="pending" if f.size else "partial"))
+        s.add(flight)
+        s.commit()
+        flight_dir(settings, flight.id).mkdir(parents=True, exist_ok=True)
+        for f in flight.files:
+            if f.size == 0:  # nothing to send: verify the empty file's hash now
+                _finish_file(settings, s, flight, f, safe_path(settings, flight.id, f.name))
+        s.commit()
+        log.info("flight %s (%s) created with %d files", flight.id, flight.name, len(flight.files))
+        return _flight_out(flight)
+
+
+@router.get("", response_model=list[FlightSummary])
+def list_flights(store: Store = Depends(get_store)) -> list[FlightSummary]:
+    """All flights, newest first."""
+    with store.session() as s:
+        rows = s.scalars(select(Flight).order_by(Flight.created_at.desc())).all()
+        return [FlightSummary(id=f.id, name=f.name, status=f.status, created_at=f.created_at, files=len(f.files),
+                              bytes_total=sum(x.size for x in f.files), bytes_received=sum(x.received for x in f.files))
+                for f in rows]
+
+
+@router.get("/{flight_id}", response_model=FlightOut)
+def get_flight(flight_id: str, store: Store = Depends(get_store)) -> FlightOut:
+    """A flight with its files and jobs."""
+    return _flight_out(_get_flight(store, flight_id))
+
+
+def _lookup_file(s: Any, flight_id: str, name: str) -> tuple[Flight, FlightFile]:
+    flight = s.get(Flight, flight_id)
+    if flight is None:
+        raise HTTPException(status_code=404, detail=f"no flight {flight_id}")
+    f = s.scalar(select(FlightFile).where(FlightFile.flight_id == flight_id, FlightFile.name == name))
+    if f is None:
+        raise HTTPException(status_code=404, detail=f"{name!r} is not in this flight's manifest")
+    return flight, f
+
+
+@router.get("/{flight_id}/files/{name}/content", response_class=FileResponse)
+def download_file(flight_id: str, name: str, settings: ApiSettings = Depends(get_settings),
+                  store: Store = Depends(get_store)) -> FileResponse:
+    """The bytes of a completely uploaded file."""
+    try:
+        path = safe_path(settings, flight_id, name)
+    except UploadRejected as exc:
+        raise _http(exc) from exc
+    with store.session() as s:
+        _, f = _lookup_file(s, flight_id, name)
+        if f.status != "complete":
+            raise HTTPException(status_code=409, detail=f"{name} is not completely uploaded")
+    return FileResponse(path, media_type="application/octet-stream", filename=name)
+
+
+@router.head("/{flight_id}/files/{name:path}")
+def file_offset_head(flight_id: str, name: str, settings: ApiSettings = Depends(get_settings),
+                     store: Store = Depends(get_store)) -> Response:
+    """Upload-Offset (bytes received, where to resume) and Upload-Length (promised size) as headers."""
+    out = file_status(flight_id, name, settings, store)
+    return Response(status_code=200, headers={OFFSET_HEADER: str(out.received), LENGTH_HEADER: str(out.size)})
+
+
+@router.get("/{flight_id}/files/{name:path}", response_model=FileOut)
+def file_status(flight_id: str, name: str, settings: ApiSettings = Depends(get_settings),
+                store: Store = Depends(get_store)) -> FileOut:
+    """Upload state of one file (received bytes = where an interrupted upload resumes)."""
+    try:
+        safe_path(settings, flight_id, name)
+    except UploadRejected as exc:
+        raise _http(exc) from exc
+    with store.session() as s:
+        _, f = _lookup_file(s, flight_id, name)
+        return _file_out(f)
+
+
+async def _read_body_capped(request: Request, limit: int) -> bytes:
+    declared = request.headers.get("content-length")
+    if declared is not None and declared.isdigit() and int(declared) > limit:
+        raise HTTPException(status_code=413, detail=f"chunk of {declared} bytes > limit {limit}")
+    buf = bytearray()
+    async for part in request.stream():
+        buf.extend(part)
+        if len(buf) > limit:
+            raise HTTPException(status_code=413, detail=f"chunk larger than the limit {limit}")
+    return bytes(buf)
+
+
+@router.put("/{flight_id}/files/{name:path}", response_model=FileOut,
+            responses={400: {}, 404: {}, 409: {}, 413: {}, 422: {}},
+            openapi_extra={"requestBody": {"content": {"application/octet-stream": {"schema": {
+                "type": "string", "format": "binary"}}}, "required": True}})
+async def put_chunk(
+    flight_id: str,
+    name: str,
+    request: Request,
+    offset: int = Query(ge=0, description="byte offset of this chunk in the file (= bytes received so far)"),
+    settings: ApiSettings = Depends(get_settings),
+    store: Store = Depends(get_store),
+) -> FileOut:
+    """Append one chunk at `offset`. Header `X-Chunk-SHA256` (hex) must match the body or the chunk is refused.
+
+    409 when `offset` is not the received length (resume from HEAD's Upload-Offset); 413 for an oversized chunk
+    or one past the promised size; 422 when the completed file's SHA-256 differs from the manifest (the partial
+    data is discarded and the file restarts at 0).
+    """
+    try:
+        path = safe_path(settings, flight_id, name)
+    except UploadRejected as exc:
+        raise _http(exc) from exc
+    body = await _read_body_capped(request, settings.max_chunk_bytes)
+    claimed = request.headers.get(CHUNK_SHA_HEADER)
+    if claimed is None:
+        raise HTTPException(status_code=400, detail=f"missing {CHUNK_SHA_HEADER} header")
+    client = request.client.host if request.client else ""
+    return await run_in_threadpool(_append_chunk, settings, store, flight_id, name, path, offset, body,
+                                   claimed, client, request.app.state.jobs)
+
+
+def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str, path: Path, offset: int,
+                  body: bytes, claimed: str, client: str, jobs: JobRunner) -> FileOut:
+    with _file_lock(flight_id, name), store.session() as s:
+        flight, f = _lookup_file(s, flight_id, name)
+        if f.status == "complete":
+            raise HTTPException(status_code=409, detail=f"{name} is already complete")
+        part = path.with_name(path.name + ".part")
+        on_disk = part.stat().st_size if part.exists() else 0
+        if on_disk != f.received:  # a crash between write and commit: the disk is the truth
+            log.warning("%s/%s: received %d in DB but %d on disk; using the disk", flight_id, name, f.received,
+                        on_disk)
+            f.received = on_disk
+        sess = s.scalar(select(UploadSession).where(UploadSession.file_id == f.id, UploadSession.client == client)
+                        .order_by(UploadSession.id.desc()))
+        if sess is None or sess.start_offset + sess.bytes_received != offset:
+            sess = UploadSession(file_id=f.id, client=client, start_offset=offset)
+            s.add(sess)
+        try:
+            check_sha256(claimed)
+            if hashlib.sha256(body).hexdigest() != claimed.strip().lower():
+                raise UploadRejected(422, f"chunk at offset {offset} is corrupted: SHA-256 mismatch, not stored")
+            check_chunk(offset, f.received, len(body), f.size, _limits(settings))
+        except UploadRejected as exc:
+            sess.rejected_chunks += 1
+            s.commit()
+            raise _http(exc) from exc
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(part, "ab") as fh:
+            fh.write(body)
+            fh.flush()
+            os.fsync(fh.fileno())
+        f.received = offset + len(body)
+        f.status = "partial"
+        sess.bytes_received += len(body)
+        sess.chunks += 1
+        sess.updated_at = dt.datetime.now(dt.timezone.utc)
+        if f.received == f.size:
+            _finish_file(settings, s, flight, f, path)
+        s.commit()
+        out = _file_out(f)
+        if f.status != "complete" and f.received == 0:
+            raise HTTPException(status_code=422, detail=f"{name}: whole-file SHA-256 differs from the manifest; "
+                                                        "the data was discarded, upload again from offset 0")
+    if flight.status == "complete":
+        _maybe_auto_adjust(store, flight_id, jobs)
+    return out
+
+
+def _finish_file(settings: ApiSettings, s: Any, flight: Flight, f: FlightFile, path: Path) -> None:
+    """Verify the whole file's SHA-256 and move it into place; on mismatch discard it and restart at 0."""
+    part = path.with_name(path.name + ".part")
+    part.touch()
+    h = hashlib.sha256()
+    with open(part, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    if h.hexdigest() != f.sha256:
+        log.warning("%s/%s: final SHA-256 mismatch; discarding %d bytes", flight.id, f.name, f.received)
+        part.unlink()
+        f.received = 0
+        f.status = "pending"
+        return
+    os.replace(part, path)
+    f.status = "complete"
+    if all(x.status == "complete" for x in flight.files):
+        flight.status = "complete"
+
+
+# ------------------------------------------------------------------------------------------------- jobs
+
+ADJUST_ROLES = ("trajectory", "events", "orientations")
+
+
+def _maybe_auto_adjust(store: Store, flight_id: str, jobs: JobRunner) -> None:
+    """Queue the adjustment once every file is in, when the manifest has trajectory, events and orientations."""
+    with store.session() as s:
+        flight = s.get(Flight, flight_id)
+        if flight is None or flight.jobs:
+            return
+        roles = {f.role for f in flight.files}
+        if not all(r in roles for r in ADJUST_ROLES):
+            return
+        job = Job(flight_id=flight_id, kind="adjust", params={})
+        s.add(job)
+        s.commit()
+        job_id = job.id
+    log.info("flight %s complete with trajectory, events and orientations: adjustment job %s queued",
+             flight_id, job_id)
+    jobs.submit(job_id)
+
+
+@router.post("/{flight_id}/jobs", response_model=JobOut, status_code=status.HTTP_202_ACCEPTED)
+def create_job(flight_id: str, body: JobCreate, request: Request, store: Store = Depends(get_store)) -> JobOut:
+    """Queue a processing job (runs in the background; poll its status)."""
+    with store.session() as s:
+        flight = s.get(Flight, flight_id)
+        if flight is None:
+            raise HTTPException(status_code=404, detail=f"no flight {flight_id}")
+        if flight.status != "complete":
+            raise HTTPException(status_code=409, detail="the flight's upload is not complete")
+        job = Job(flight_id=flight_id, kind=body.kind, params=body.params)
+        s.add(job)
+        s.commit()
+        out = job_out(job)
+    request.app.state.jobs.submit(out.id)
+    return out
+
+
+@router.get("/{flight_id}/jobs/{job_id}", response_model=JobOut)
+def get_job(flight_id: str, job_id: str, store: Store = Depends(get_store)) -> JobOut:
+    """A job's status and message."""
+    with store.session() as s:
+        job = s.get(Job, job_id)
+        if job is None or job.flight_id != flight_id:
+            raise HTTPException(status_code=404, detail=f"no job {job_id} on flight {flight_id}")
+        return job_out(job)
+
+
+def _latest_output(settings: ApiSettings, store: Store, flight_id: str, filename: str) -> Path:
+    with store.session() as s:
+        flight = s.get(Flight, flight_id)
+        if flight is None:
+            raise HTTPException(status_code=404, detail=f"no flight {flight_id}")
+        done = [j for j in flight.jobs if j.kind == "adjust" and j.status == "done"]
+    if not done:
+        raise HTTPException(status_code=404, detail="no finished adjustment for this flight")
+    path = settings.data_dir / "outputs" / flight_id / done[-1].id / filename
+    if not path.is_file():
+        raise HTTPException(status_code=404, detail=f"{filename} missing from the last adjustment")
+    return path
+
+
+@router.get("/{flight_id}/results", response_class=JSONResponse)
+def get_results(flight_id: str, settings: ApiSettings = Depends(get_settings),
+                store: Store = Depends(get_store)) -> Response:
+    """`results.json` of the latest finished adjustment."""
+    path = _latest_output(settings, store, flight_id, "results.json")
+    return Response(content=path.read_bytes(), media_type="application/json")
+
+
+@router.get("/{flight_id}/report", response_class=HTMLResponse)
+def get_report(flight_id: str, settings: ApiSettings = Depends(get_settings),
+               store: Store = Depends(get_store)) -> Response:
+    """The self-contained HTML report of the latest finished adjustment."""
+    path = _latest_output(settings, store, flight_id, "report.html")
+    return HTMLResponse(content=path.read_text(encoding="utf-8"))

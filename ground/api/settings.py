@@ -1,0 +1,58 @@
+"""Settings of the ground API, validated once at start: data dir, database URL, token, size limits."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from onboard.errors import ConfigFileError
+
+TOKEN_ENV = "DIRECTGEO_TOKEN"
+MIN_TOKEN_CHARS = 16
+
+
+@dataclass(frozen=True)
+class ApiSettings:
+    """Everything `create_app` needs. `token` is the shared bearer secret (never a default, never in code)."""
+
+    data_dir: Path
+    token: str
+    database_url: str | None = None
+    max_file_bytes: int = 8 * 1024**3
+    max_flight_bytes: int = 64 * 1024**3
+    max_chunk_bytes: int = 16 * 1024**2
+    max_files_per_flight: int = 10_000
+    job_workers: int = 1
+
+    def __post_init__(self) -> None:
+        if len(self.token) < MIN_TOKEN_CHARS:
+            raise ConfigFileError(f"the API token must have at least {MIN_TOKEN_CHARS} characters")
+        for name in ("max_file_bytes", "max_flight_bytes", "max_chunk_bytes", "max_files_per_flight"):
+            if getattr(self, name) <= 0:
+                raise ConfigFileError(f"{name} must be positive")
+
+    @property
+    def db_url(self) -> str:
+        """`database_url`, or a SQLite file in the data directory."""
+        return self.database_url or f"sqlite:///{self.data_dir / 'directgeo.sqlite3'}"
+
+    @property
+    def flights_dir(self) -> Path:
+        """Where raw flight files live."""
+        return self.data_dir / "flights"
+
+
+def load_token(token_file: str | Path | None = None, environ: dict[str, str] | None = None) -> str:
+    """The API token: from `token_file` when given (first line), else from $DIRECTGEO_TOKEN; error when neither."""
+    env = os.environ if environ is None else environ
+    if token_file is not None:
+        try:
+            token = Path(token_file).read_text(encoding="utf-8").strip().splitlines()[0].strip()
+        except (OSError, IndexError, UnicodeDecodeError) as exc:
+            raise ConfigFileError(f"cannot read the token file {token_file}: {exc}") from exc
+        return token
+    token = env.get(TOKEN_ENV, "").strip()
+    if not token:
+        raise ConfigFileError(f"no API token: set ${TOKEN_ENV} or pass --token-file")
+    return token

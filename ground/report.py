@@ -1,0 +1,177 @@
+"""Self-contained HTML report of an adjustment: parameters with σ, correlation heat map, residuals per image,
+check-point table and the trajectory coloured by fix status. Figures are inline base64 PNGs (no external
+assets, opens offline). matplotlib is used through `Figure` objects only (no pyplot global state).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from ground.adjust.model import AdjustmentProblem
+from ground.adjust.types import Trajectory
+from onboard.rtk.geodesy import ecef_to_enu
+
+Q_COLOURS = {1: ("fix", "#2ca02c"), 2: ("float", "#ff7f0e"), 5: ("single", "#d62728")}
+
+
+def _png(fig: Figure) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=96, bbox_inches="tight")
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _img(fig: Figure, alt: str) -> str:
+    return f'<figure><img alt="{html.escape(alt)}" src="{_png(fig)}"><figcaption>{html.escape(alt)}</figcaption></figure>'
+
+
+def correlation_figure(names: list[str], matrix: np.ndarray) -> Figure:
+    """Heat map of the parameter correlation matrix (−1 … 1)."""
+    n = max(len(names), 1)
+    fig = Figure(figsize=(1.0 + 0.45 * n, 0.8 + 0.45 * n))
+    ax = fig.add_subplot()
+    im = ax.imshow(matrix if matrix.size else np.zeros((1, 1)), vmin=-1, vmax=1, cmap="RdBu_r")
+    ax.set_xticks(range(len(names)), names, rotation=90)
+    ax.set_yticks(range(len(names)), names)
+    for i in range(len(names)):
+        for j in range(len(names)):
+            if abs(matrix[i, j]) >= 0.9 and i != j:
+                ax.text(j, i, f"{matrix[i, j]:.2f}", ha="center", va="center", fontsize=6)
+    fig.colorbar(im, ax=ax, shrink=0.8, label="ρ")
+    ax.set_title("parameter correlations (|ρ| ≥ 0.9 annotated)")
+    return fig
+
+
+def residual_figures(residuals: list[dict[str, Any]], centres_enu: np.ndarray | None) -> list[Figure]:
+    """Per-image residuals: E/N/U against image order (outliers marked), and a horizontal vector map."""
+    e = np.array([[r["e_m"], r["n_m"], r["u_m"]] for r in residuals]).reshape(-1, 3) * 100.0
+    out = np.array([r["outlier"] for r in residuals], dtype=bool)
+    fig = Figure(figsize=(9, 5))
+    axes = fig.subplots(3, 1, sharex=True)
+    idx = np.arange(e.shape[0])
+    for k, (ax, label) in enumerate(zip(axes, ("East", "North", "Up"))):
+        ax.bar(idx, e[:, k], color=np.where(out, "#d62728", "#1f77b4"))
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_ylabel(f"{label} (cm)")
+    axes[-1].set_xlabel("image (in time order); red = outlier")
+    axes[0].set_title("residuals e_i = S(C_i) + R·R_i·O − G_i − V_i·t_d per image")
+    figs = [fig]
+    if centres_enu is not None and centres_enu.shape[0] == e.shape[0]:
+        fig2 = Figure(figsize=(6, 6))
+        ax = fig2.add_subplot()
+        scale = max(float(np.ptp(centres_enu[:, :2])) / 20.0, 1e-3) / max(float(np.abs(e[:, :2]).max()), 1e-3)
+        ax.quiver(centres_enu[:, 0], centres_enu[:, 1], e[:, 0] * scale, e[:, 1] * scale, angles="xy",
+                  scale_units="xy", scale=1, color=np.where(out, "#d62728", "#1f77b4"))
+        sc = ax.scatter(centres_enu[:, 0], centres_enu[:, 1], c=e[:, 2], cmap="RdBu_r", s=14,
+                        vmin=-np.abs(e[:, 2]).max(), vmax=np.abs(e[:, 2]).max())
+        fig2.colorbar(sc, ax=ax, label="Up residual (cm)")
+        ax.set_aspect("equal")
+        ax.set_xlabel("East (m)")
+        ax.set_ylabel("North (m)")
+        ax.set_title("horizontal residuals (arrows, exaggerated) at the camera centres")
+        figs.append(fig2)
+    return figs
+
+
+def trajectory_figure(traj: Trajectory, origin_ecef_m: np.ndarray, cams_enu: np.ndarray | None) -> Figure:
+    """Trajectory (E/N about the origin) coloured by RTKLIB quality; camera positions on top."""
+    enu = ecef_to_enu(traj.pos_ecef_m, origin_ecef_m)
+    fig = Figure(figsize=(7, 6))
+    ax = fig.add_subplot()
+    q = np.asarray(traj.q)
+    for code, (label, colour) in Q_COLOURS.items():
+        m = q == code
+        if m.any():
+            ax.scatter(enu[m, 0], enu[m, 1], s=3, c=colour, label=f"{label} ({100 * m.mean():.1f} %)")
+    other = ~np.isin(q, list(Q_COLOURS))
+    if other.any():
+        ax.scatter(enu[other, 0], enu[other, 1], s=3, c="grey", label=f"other ({100 * other.mean():.1f} %)")
+    if cams_enu is not None:
+        ax.scatter(cams_enu[:, 0], cams_enu[:, 1], marker="^", s=18, facecolors="none", edgecolors="k",
+                   label="cameras")
+    ax.set_aspect("equal")
+    ax.set_xlabel("East (m)")
+    ax.set_ylabel("North (m)")
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title("antenna trajectory by fix status")
+    return fig
+
+
+def _parameter_rows(res: dict[str, Any]) -> list[tuple[str, str, str, str]]:
+    rows = []
+    for k, axis in enumerate("xyz"):
+        rows.append((f"lever arm O_{axis}", f"{res['lever_arm_m'][k] * 1000:.1f}", f"{res['lever_arm_sigma_m'][k] * 1000:.1f}", "mm"))
+    rows.append(("shutter delay t_d", f"{res['delay_s'] * 1000:.2f}", f"{res['delay_sigma_s'] * 1000:.2f}", "ms"))
+    rows.append(("scale μ − 1", f"{(res['scale'] - 1) * 1e6:.1f}", f"{res['scale_sigma'] * 1e6:.1f}", "ppm"))
+    for k, axis in enumerate("ENU"):
+        rows.append((f"translation T_{axis}", f"{res['translation_m'][k]:.4f}", f"{res['translation_sigma_m'][k]:.4f}", "m"))
+    for k, axis in enumerate("ENU"):
+        rows.append((f"rotation σ about {axis}", "—", f"{np.degrees(res['rotation_sigma_rad'][k]) * 3600:.1f}", "arcsec"))
+    rows.append(("σ̂₀ (a-posteriori)", f"{res['sigma0']:.3f}", "", ""))
+    return rows
+
+
+def _table(headers: list[str], rows: list[tuple[Any, ...]], table_id: str) -> str:
+    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in headers)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>" for r in rows)
+    return f'<table id="{table_id}"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
+
+
+def render_report(res: dict[str, Any], problem: AdjustmentProblem | None = None, trajectory: Trajectory | None = None,
+                  origin_ecef_m: np.ndarray | None = None) -> str:
+    """The report as one HTML string (figures inline)."""
+    names = list(res["correlations"]["names"])
+    matrix = np.asarray(res["correlations"]["matrix"], dtype=float).reshape(len(names), len(names))
+    cams_enu = None
+    if problem is not None:
+        rot = np.asarray(res["rotation"], dtype=float)
+        cams_enu = np.asarray(res["translation_m"]) + res["scale"] * problem.centre_rel @ rot.T
+    parts = [
+        "<h2>Parameters</h2>",
+        _table(["parameter", "value", "σ", "unit"], _parameter_rows(res), "parameters"),
+        f"<p>condition number {res['condition_number']:.3g}; weakest combination: "
+        f"{html.escape(str(res['weakest_combination']))}</p>",
+    ]
+    if res["warnings"]:
+        parts.append("<h3>Warnings</h3><ul>" + "".join(f"<li>{html.escape(w)}</li>" for w in res["warnings"]) + "</ul>")
+    parts += ["<h2>Correlations</h2>", _img(correlation_figure(names, matrix), "correlation heat map")]
+    parts.append("<h2>Residuals per image</h2>")
+    parts += [_img(f, alt) for f, alt in zip(residual_figures(res["residuals"], cams_enu),
+                                            ("residuals per image (E, N, U)", "horizontal residual map"))]
+    if res["outliers"]:
+        parts.append(_table(["outlier image", "χ²"], [(o["image"], f"{o['chi2']:.1f}") for o in res["outliers"]],
+                            "outliers"))
+    parts.append("<h2>Check points</h2>")
+    if res["checkpoints"]:
+        rows = [(c["name"], f"{c['de_m'] * 100:.1f}", f"{c['dn_m'] * 100:.1f}", f"{c['du_m'] * 100:.1f}",
+                 f"{c['abs_m'] * 100:.1f}", f"{c['sigma_m'] * 100:.1f}") for c in res["checkpoints"]]
+        for stat in ("mean", "std", "rms"):
+            d = res[f"checkpoint_{stat}_m"]
+            rows.append((stat, *(f"{d.get(k, float('nan')) * 100:.1f}" for k in ("e", "n", "u", "3d")), ""))
+        parts.append(_table(["point", "δE (cm)", "δN (cm)", "δU (cm)", "|δ| (cm)", "σ (cm)"], rows, "checkpoints"))
+    else:
+        parts.append("<p>no check points</p>")
+    if trajectory is not None and origin_ecef_m is not None:
+        parts += ["<h2>Trajectory</h2>", _img(trajectory_figure(trajectory, origin_ecef_m, cams_enu),
+                                              "trajectory coloured by fix status")]
+    if res.get("skipped"):
+        parts.append("<h2>Images left out</h2>" + _table(["image", "reason"], [(s["image"], s["reason"])
+                                                                              for s in res["skipped"]], "skipped"))
+    style = ("body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}"
+             "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:2px 8px;"
+             "text-align:right}th{background:#eee}img{max-width:100%}figcaption{font-size:small;color:#555}")
+    title = f"directgeo adjustment report — {res['n_images']} images"
+    return (f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
+            f"<style>{style}</style></head><body><h1>{html.escape(title)}</h1>{''.join(parts)}</body></html>")
+
+
+def write_report(path: str | Path, res: dict[str, Any], problem: AdjustmentProblem | None = None,
+                 trajectory: Trajectory | None = None, origin_ecef_m: np.ndarray | None = None) -> None:
+    """Write the self-contained HTML report."""
+    Path(path).write_text(render_report(res, problem, trajectory, origin_ecef_m), encoding="utf-8")

@@ -1,0 +1,118 @@
+"""Flight store: SQLAlchemy models (flights, files, upload sessions, jobs) and small transactional helpers.
+
+SQLite file by default (`sqlite:///<data_dir>/directgeo.sqlite3`), any SQLAlchemy URL (PostgreSQL) through
+`DATABASE_URL`. Raw files live on disk under `<data_dir>/flights/<flight id>/`; the database holds what was
+promised (manifest: names, sizes, SHA-256) and what was received.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import uuid
+from typing import Any
+
+from sqlalchemy import JSON, BigInteger, DateTime, ForeignKey, Integer, String, Text, UniqueConstraint, create_engine
+from sqlalchemy.engine import Engine
+from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column, relationship, sessionmaker
+
+
+def _now() -> dt.datetime:
+    return dt.datetime.now(dt.timezone.utc)
+
+
+def new_id() -> str:
+    """A random 32-hex-digit identifier (no ordering information leaks, no collisions in practice)."""
+    return uuid.uuid4().hex
+
+
+class Base(DeclarativeBase):
+    """Declarative base of the store's tables."""
+
+
+class Flight(Base):
+    """One flight: its name (from the onboard manifest), state and the manifest as received."""
+
+    __tablename__ = "flights"
+
+    id: Mapped[str] = mapped_column(String(32), primary_key=True, default=new_id)
+    name: Mapped[str] = mapped_column(String(255), unique=True, index=True)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=_now)
+    status: Mapped[str] = mapped_column(String(32), default="uploading")  # uploading | complete
+    manifest: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    files: Mapped[list[FlightFile]] = relationship(back_populates="flight", cascade="all, delete-orphan",
+                                                   order_by="FlightFile.name")
+    jobs: Mapped[list[Job]] = relationship(back_populates="flight", cascade="all, delete-orphan",
+                                           order_by="Job.created_at")
+
+
+class FlightFile(Base):
+    """A file promised by the manifest: expected size and SHA-256, bytes received so far, final state."""
+
+    __tablename__ = "flight_files"
+    __table_args__ = (UniqueConstraint("flight_id", "name"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    flight_id: Mapped[str] = mapped_column(ForeignKey("flights.id", ondelete="CASCADE"), index=True)
+    name: Mapped[str] = mapped_column(String(255))
+    role: Mapped[str | None] = mapped_column(String(32), nullable=True)
+    size: Mapped[int] = mapped_column(BigInteger)
+    sha256: Mapped[str] = mapped_column(String(64))
+    received: Mapped[int] = mapped_column(BigInteger, default=0)
+    status: Mapped[str] = mapped_column(String(16), default="pending")  # pending | partial | complete
+    flight: Mapped[Flight] = relationship(back_populates="files")
+    sessions: Mapped[list[UploadSession]] = relationship(back_populates="file", cascade="all, delete-orphan")
+
+
+class UploadSession(Base):
+    """One client's run of chunk uploads to a file (a resumed upload opens a new session at its offset)."""
+
+    __tablename__ = "upload_sessions"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    file_id: Mapped[int] = mapped_column(ForeignKey("flight_files.id", ondelete="CASCADE"), index=True)
+    client: Mapped[str] = mapped_column(String(64), default="")
+    start_offset: Mapped[int] = mapped_column(BigInteger, default=0)
+    bytes_received: Mapped[int] = mapped_column(BigInteger, default=0)
+    chunks: Mapped[int] = mapped_column(Integer, default=0)
+    rejected_chunks: Mapped[int] = mapped_column(Integer, default=0)
+    started_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=_now)
+    updated_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=_now)
+    file: Mapped[FlightFile] = relationship(back_populates="sessions")
+
+
+class Job(Base):
+    """A processing job on a flight (`adjust`, `rtk`) and its status: queued | running | done | failed."""
+
+    __tablename__ = "jobs"
+
+    id: Mapped[str] = mapped_column(String(32), primary_key=True, default=new_id)
+    flight_id: Mapped[str] = mapped_column(ForeignKey("flights.id", ondelete="CASCADE"), index=True)
+    kind: Mapped[str] = mapped_column(String(16))
+    status: Mapped[str] = mapped_column(String(16), default="queued")
+    params: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    message: Mapped[str] = mapped_column(Text, default="")
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=_now)
+    started_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    finished_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    flight: Mapped[Flight] = relationship(back_populates="jobs")
+
+
+class Store:
+    """Engine + session factory; `create_all` on open (the schema is small and additive)."""
+
+    def __init__(self, database_url: str) -> None:
+        kwargs: dict[str, Any] = {}
+        if database_url.startswith("sqlite"):
+            # uvicorn serves sync endpoints from a thread pool and jobs run in a worker thread
+            kwargs["connect_args"] = {"check_same_thread": False, "timeout": 30}
+        self.engine: Engine = create_engine(database_url, **kwargs)
+        Base.metadata.create_all(self.engine)
+        self.sessions = sessionmaker(self.engine, expire_on_commit=False)
+
+    def session(self) -> Session:
+        """A new ORM session (use as a context manager)."""
+        return self.sessions()
+
+    def close(self) -> None:
+        """Dispose of the connection pool."""
+        self.engine.dispose()
