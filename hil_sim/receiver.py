@@ -706,8 +706,9 @@ class ReceiverCore:
                 self._pending_edges.append((pulse_t.add_s(self._pulse_length_s(pulse_t)), 1, False))
             flash_t: GpsTime | None = getattr(ev, "flash_time", None)
             if flash_t is not None:
+                bounce_t = getattr(ev, "bounce_time", None)  # a bounce the world's camera simulated
                 for te, rising in hot_shoe_edges(flash_t, self.options.contact_closed_s, self.faults,
-                                                 extra_bounces=getattr(ev, "bounce_times", ()) or ()):
+                                                 extra_bounces=() if bounce_t is None else (bounce_t,)):
                     self._pending_edges.append((te, 0, rising))
         self._pending_edges.sort(key=lambda e: (e[0], e[1]))
         keep = []

@@ -37,7 +37,7 @@ class CameraEvent:
 
     pulse_time: GpsTime
     flash_time: GpsTime | None
-    bounce_times: tuple[GpsTime, ...] = ()
+    bounce_time: GpsTime | None = None
 
 
 @dataclass
@@ -75,9 +75,8 @@ class StandInWorld:
                         half_cyc_sub=np.zeros(n, np.uint8), pr_std_m=np.full(n, 0.32),
                         cp_std_cyc=np.full(n, 0.004))
 
-    def add_event(self, pulse_time: GpsTime, flash_time: GpsTime | None,
-                  bounce_times: tuple[GpsTime, ...] = ()) -> None:
-        self.events.append(CameraEvent(pulse_time, flash_time, bounce_times))
+    def add_event(self, pulse_time: GpsTime, flash_time: GpsTime | None, bounce_time: GpsTime | None = None) -> None:
+        self.events.append(CameraEvent(pulse_time, flash_time, bounce_time))
 
     def ephemerides(self) -> list[Ephemeris]:
         return self.ephs

@@ -236,7 +236,7 @@ def test_one_tim_tm2_per_flash_with_count_and_edge_bits(standin_world) -> None: 
 def test_bounce_and_two_flashes_in_one_epoch_lose_marks_with_a_count_jump(standin_world) -> None:  # noqa: ANN001
     t0 = standin_world.start
     standin_world.add_event(t0.add_s(2.1), t0.add_s(2.164))
-    standin_world.add_event(t0.add_s(4.1), t0.add_s(4.164), bounce_times=(t0.add_s(4.1648),))  # bounce
+    standin_world.add_event(t0.add_s(4.1), t0.add_s(4.164), bounce_time=t0.add_s(4.1648))  # bounce
     standin_world.add_event(t0.add_s(6.1), t0.add_s(6.164))  # two photos within one epoch
     standin_world.add_event(t0.add_s(6.6), t0.add_s(6.664))
     core = flash_core(standin_world)

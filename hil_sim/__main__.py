@@ -1,0 +1,120 @@
+"""`python -m hil_sim receiver …`: a u-blox receiver on a pseudo-terminal until SIGTERM/SIGINT.
+
+The first stdout line is the pty slave path (flushed), so a parent process can read it and open the port.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+from collections.abc import Sequence
+from types import FrameType
+
+from hil_sim.faults import FaultOptions
+from hil_sim.receiver import MODELS, ReceiverOptions
+
+log = logging.getLogger("hil_sim")
+
+
+def _window(text: str) -> tuple[float, float]:
+    try:
+        at, dur = (float(x) for x in text.split(":"))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected AT_S:DURATION_S, got {text!r}") from exc
+    return at, dur
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command-line interface (one sub-command for now: receiver)."""
+    p = argparse.ArgumentParser(prog="python -m hil_sim", description=__doc__)
+    sub = p.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("receiver", help="u-blox LEA-6T / NEO-M8T emulator on a pseudo-terminal")
+    r.add_argument("--model", choices=sorted(MODELS), required=True)
+    r.add_argument("--speed", type=float, default=1.0, help="simulated time runs N× real time")
+    r.add_argument("--seed", type=int, default=1, help="seed of the world and the faults")
+    r.add_argument("--baud", type=int, default=9600, help="UART1 rate at power-on (factory 9600)")
+    r.add_argument("--link", help="stable symlink to the current pty slave (re-pointed after port loss)")
+    r.add_argument("--receiver", choices=("rover", "base"), default="rover")
+    r.add_argument("--nav", help="RINEX navigation file of the world (default: the scenario's)")
+    g = r.add_mutually_exclusive_group()
+    g.add_argument("--clear-align-to-tow", dest="align", action="store_const", const="clear", default="clear",
+                   help="clear alignToTow for periods that do not divide 1 s (default)")
+    g.add_argument("--keep-align-to-tow", dest="align", action="store_const", const="keep")
+    r.add_argument("--rawx-on-u6", choices=("nak", "ack-ignore"), default="nak")
+    r.add_argument("--tp5-on-u6", choices=("ack", "nak"), default="ack")
+    r.add_argument("--silent", action="store_true", help="never answer; stream the factory output")
+    r.add_argument("--ack-invalid-rates", action="store_true", help="ACK too-fast CFG-RATE, apply the minimum")
+    r.add_argument("--trigger-extint", action="store_true", help="trigger pulse on EXTINT1 (TIM-TM2 ch 1)")
+    r.add_argument("--time-valid-after", type=float, default=None,
+                   help="simulated s to valid time (default: the scenario camera's valid_after_s)")
+    r.add_argument("--corrupt-rate", type=float, default=0.0, help="probability per byte written")
+    r.add_argument("--drop-epoch-rate", type=float, default=0.0, help="probability per raw epoch")
+    r.add_argument("--bounce-prob", type=float, default=0.0, help="hot-shoe bounce probability per flash")
+    r.add_argument("--unplug", type=_window, action="append", default=[], metavar="AT_S:DURATION_S",
+                   help="port disappears at simulated AT_S for DURATION_S (repeatable)")
+    r.add_argument("-v", "--verbose", action="store_true")
+    return p
+
+
+def run_receiver(args: argparse.Namespace) -> int:
+    """Build the world and the emulator, print the pty path, run until a signal."""
+    from hil_sim.pty_server import ReceiverEmulator
+    from hil_sim.scenario import Scenario
+    from hil_sim.world import World
+
+    overrides: dict[str, object] = {"seed": args.seed}
+    if args.nav:
+        overrides["nav_path"] = args.nav
+    scenario = Scenario.default(model=args.model, **overrides)
+    world = World(scenario)
+    valid_after = args.time_valid_after
+    if valid_after is None:
+        valid_after = scenario.camera.valid_after_s
+    options = ReceiverOptions(
+        align_to_tow=args.align, rawx_on_u6=args.rawx_on_u6, tp5_on_u6=args.tp5_on_u6, silent=args.silent,
+        ack_invalid_rates=args.ack_invalid_rates, trigger_extint=args.trigger_extint,
+        time_valid_after_s=valid_after, receiver=args.receiver,
+        faults=FaultOptions(seed=args.seed, corrupt_byte_rate=args.corrupt_rate,
+                            drop_epoch_rate=args.drop_epoch_rate, bounce_prob=args.bounce_prob,
+                            unplug_windows_s=tuple(args.unplug)))
+    emu = ReceiverEmulator(args.model, options, world, speed=args.speed, link=args.link,
+                           t_start=scenario.start, initial_baud=args.baud)
+    done = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        done.set()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    path = emu.start()
+    print(path, flush=True)
+    if args.link:
+        log.info("link %s -> %s", args.link, path)
+    try:
+        while not done.wait(0.2):
+            if emu.error is not None:
+                log.error("emulator failed: %s", emu.error)
+                return 1
+    finally:
+        emu.stop()
+    s = emu.core.stats
+    log.info("stopped: %d frames in, %d ACK, %d NAK, %d epochs out, %d dropped (budget), %d marks",
+             s.frames_in, s.acked, s.naked, s.epochs_out, s.epochs_dropped_budget, s.marks_out)
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of `python -m hil_sim`."""
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, stream=sys.stderr,
+                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    if args.command == "receiver":
+        return run_receiver(args)
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
