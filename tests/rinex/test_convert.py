@@ -1,0 +1,184 @@
+"""`convert` against RTKLIB's conversion of the same logs, complete conversion of a truncated log, clear errors."""
+
+from __future__ import annotations
+
+import gzip
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from onboard.convert import convert_main, convert_one
+from onboard.formats.rinex_nav import read_rinex_nav
+from onboard.formats.rinex_obs import read_rinex_obs
+from onboard.gnsstime import GpsTime
+from tests.conftest import PROJECT_ROOT, shared_file
+
+M8P = "gnss/ublox-m8p-galway-2018"
+
+
+def _body(path: Path) -> list[str]:
+    text = gzip.open(path, "rt").read() if path.suffix == ".gz" else path.read_text()
+    return text.split("END OF HEADER", 1)[1].splitlines()[1:]
+
+
+@pytest.fixture(scope="module")
+def m8p_converted(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("m8p")
+    convert_one(shared_file(f"{M8P}/raw/rover-20181004-1237.ubx.gz"), out)
+    return out
+
+
+def test_m8p_gps_observations_equal_rtklib(m8p_converted: Path) -> None:
+    """Same epochs, satellites, values (to RINEX rounding) and LLI as RTKLIB convbin on the same log."""
+    ours = read_rinex_obs(m8p_converted / "rover-20181004-1237.obs").epochs
+    ref = read_rinex_obs(shared_file(f"{M8P}/rinex/rover-20181004-1237.obs.gz")).epochs
+    assert len(ours) == len(ref) == 1205
+    for a, b in zip(ours, ref):
+        a, b = a.gps_only(), b.gps_only()
+        assert a.time == b.time
+        assert a.sv_id.tolist() == b.sv_id.tolist()
+        for name in ("pr_m", "cp_cyc", "dop_hz", "cn0_dbhz"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=f"{name} at {a.time}")
+        assert a.lli.tolist() == b.lli.tolist(), f"LLI at {a.time}"
+    # RTKLIB's LLI here has slips and half-cycle flags: the comparison above covers both
+    all_lli = np.concatenate([e.gps_only().lli for e in ref])
+    assert (all_lli & 1).any() and (all_lli & 2).any()
+
+
+def test_m8p_observation_records_are_byte_identical_to_rtklib(m8p_converted: Path) -> None:
+    """Every observation line (GPS and GLONASS) matches RTKLIB's text; only event records sit elsewhere."""
+    ours = [line for line in _body(m8p_converted / "rover-20181004-1237.obs") if " 5  0" not in line[29:]]
+    ref = [line for line in _body(shared_file(f"{M8P}/rinex/rover-20181004-1237.obs.gz")) if " 5  0" not in line[29:]]
+    assert ours == ref
+
+
+def test_m8p_event_records(m8p_converted: Path) -> None:
+    """4 falling-edge marks, as RTKLIB; we place each before the first epoch at or after it (time order),
+    RTKLIB before the epoch after the one the TIM-TM2 message followed (one epoch later)."""
+    ours = [line for line in _body(m8p_converted / "rover-20181004-1237.obs") if line.startswith(">")]
+    ref = [line for line in _body(shared_file(f"{M8P}/rinex/rover-20181004-1237.obs.gz")) if line.startswith(">")]
+    events = [line for line in ours if line[31:35] == "5  0"]
+    assert events == [line for line in ref if line[31:35] == "5  0"]
+    assert events[0] == "> 2018 10 04 12 39 25.1415356  5  0"
+    idx = ours.index(events[0])
+    assert ours[idx - 1].startswith("> 2018 10 04 12 39 24.991") and ours[idx + 1].startswith("> 2018 10 04 12 39 25.991")
+
+
+def test_m8p_header(m8p_converted: Path) -> None:
+    text = (m8p_converted / "rover-20181004-1237.obs").read_text()
+    header = text.split("END OF HEADER", 1)[0].splitlines()[:-1]
+    assert all(len(line) == 80 for line in header)
+    assert header[0] == "     3.04           OBSERVATION DATA    M: Mixed            RINEX VERSION / TYPE"
+    assert "G    4 C1C L1C D1C S1C                                      SYS / # / OBS TYPES " in header
+    assert "  2018    10    04    12    38   08.9910000     GPS         TIME OF FIRST OBS   " in header
+    assert "     1.000                                                  INTERVAL            " in header
+    ref = gzip.open(shared_file(f"{M8P}/rinex/rover-20181004-1237.obs.gz"), "rt").read()
+    glo = next(line for line in ref.splitlines() if "GLONASS SLOT" in line)
+    assert glo in header  # FCNs from RXM-RAWX freqId, as RTKLIB
+    pos = read_rinex_obs(m8p_converted / "rover-20181004-1237.obs").header.approx_pos_ecef_m
+    assert np.linalg.norm(pos - np.array([3774088.9931, -601661.8217, 5089321.3853])) < 10.0
+
+
+def test_m8p_navigation_equals_rtklib(m8p_converted: Path) -> None:
+    ours = read_rinex_nav(m8p_converted / "rover-20181004-1237.nav")
+    ref = read_rinex_nav(shared_file(f"{M8P}/rinex/rover-20181004-1237.nav.gz"))
+    key = lambda e: (e.prn, e.toe, e.iode)  # noqa: E731
+    assert sorted(map(key, ours.ephemerides)) == sorted(map(key, ref.ephemerides))
+    assert len(ours.ephemerides) == 14 and ours.leap_s == 18
+    refs = {key(e): e for e in ref.ephemerides}
+    for e in ours.ephemerides:
+        r = refs[key(e)]
+        for name in ("sqrt_a", "e", "m0_rad", "omega0_rad", "af0_s", "af1_s_s", "tgd_s", "idot_rad_s", "crs_m"):
+            assert getattr(e, name) == pytest.approx(getattr(r, name), rel=1e-11, abs=1e-22), name
+        assert (e.toc, e.iodc, e.health, e.ura_index) == (r.toc, r.iodc, r.health, r.ura_index)
+
+
+def test_rxm_raw_log_with_truncated_last_frame_converts_completely(tmp_path: Path) -> None:
+    src = shared_file("ubx/rtklib_ubx_20080526.ubx")
+    result = convert_one(src, tmp_path)
+    assert result.obs.epochs == 242 and result.stats.by_message["RXM-RAW"] == 242
+    obs = read_rinex_obs(result.obs_path)
+    assert len(obs.epochs) == 242
+    assert obs.epochs[0].time == GpsTime(1481, 107_964_999_000_000)
+    assert obs.epochs[-1].time == GpsTime(1481, 108_205_999_000_000)
+    assert set(result.obs.satellites) == {"G", "S"}  # SBAS PRN 129/137 as S29/S37
+    assert result.ephemerides > 0 and result.nav_path.stat().st_size > 0
+
+
+def test_journal_directory_converts_like_the_log(tmp_path: Path) -> None:
+    """A flight journal split into segments mid-frame converts to the same observations as the whole log."""
+    data = shared_file("ubx/gpsd_ublox-neo-m8t.log").read_bytes()
+    flight = tmp_path / "flight-20180101T000000Z"
+    flight.mkdir()
+    cut = len(data) // 2 + 7
+    (flight / "000001.ubx").write_bytes(data[:cut])
+    (flight / "000002.ubx").write_bytes(data[cut:])
+    whole = convert_one(shared_file("ubx/gpsd_ublox-neo-m8t.log"), tmp_path / "a")
+    split = convert_one(flight, tmp_path / "b")
+    assert split.obs_path.name == "flight-20180101T000000Z.obs"
+    assert split.obs.epochs == whole.obs.epochs == 39
+    assert _body(split.obs_path) == _body(whole.obs_path)
+
+
+def test_cli_prints_what_it_wrote(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = convert_main([str(shared_file("ubx/gpsd_ublox-neo-m8t.log")), "-o", str(tmp_path), "--no-progress"])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert f"{tmp_path / 'gpsd_ublox-neo-m8t.obs'}: 39 epochs, 13 satellites (G 10, S 3), 0 time marks" in out
+    assert f"{tmp_path / 'gpsd_ublox-neo-m8t.nav'}: 0 GPS ephemerides" in out
+    assert (tmp_path / "gpsd_ublox-neo-m8t.obs").exists() and (tmp_path / "gpsd_ublox-neo-m8t.nav").exists()
+
+
+# ----------------------------------------------------------------------------------------------- failure paths
+
+def test_truncated_gzip_is_a_clear_error_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    blob = shared_file(f"{M8P}/raw/rover-20181004-1237.ubx.gz").read_bytes()
+    cut = tmp_path / "cut.ubx.gz"
+    cut.write_bytes(blob[: len(blob) // 2])
+    code = convert_main([str(cut), "-o", str(tmp_path / "out"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and "cut.ubx.gz: gzip data is truncated" in err
+    assert not (tmp_path / "out" / "cut.obs").exists()
+
+
+def test_corrupt_gzip_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    blob = bytearray(shared_file(f"{M8P}/raw/rover-20181004-1237.ubx.gz").read_bytes())
+    for k in range(1000, 1200):
+        blob[k] ^= 0x5A
+    bad = tmp_path / "bad.ubx.gz"
+    bad.write_bytes(bytes(blob))
+    code = convert_main([str(bad), "-o", str(tmp_path), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and "bad.ubx.gz: gzip data is corrupt" in err
+
+
+def test_missing_empty_and_foreign_inputs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "empty.ubx").write_bytes(b"")
+    (tmp_path / "text.ubx").write_text("hello\n" * 100)
+    (tmp_path / "nodata").mkdir()
+    args = [str(tmp_path / n) for n in ("missing.ubx", "empty.ubx", "text.ubx", "nodata")]
+    code = convert_main(args + ["-o", str(tmp_path / "out"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "missing.ubx: no such file" in err
+    assert "empty.ubx: no raw observations or ephemerides found" in err
+    assert "text.ubx: no raw observations" in err
+    assert "nodata: no journal segments" in err
+
+
+def test_one_bad_input_does_not_stop_the_others(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = convert_main([str(tmp_path / "missing.ubx"), str(shared_file("ubx/gpsd_ublox-neo-m8t.log")),
+                         "-o", str(tmp_path), "--no-progress"])
+    assert code == 2 and (tmp_path / "gpsd_ublox-neo-m8t.obs").exists()
+
+
+def test_command_line_exit_code_without_traceback(tmp_path: Path) -> None:
+    env = dict(os.environ, PYTHONPATH=str(PROJECT_ROOT))
+    proc = subprocess.run([sys.executable, "-m", "onboard.convert", str(tmp_path / "nope.ubx.gz"), "-o",
+                           str(tmp_path)], capture_output=True, text=True, env=env, timeout=60)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr and "nope.ubx.gz: no such file" in proc.stderr
