@@ -1,0 +1,204 @@
+"""Scenario description of the simulated world: options as frozen dataclasses, units in every name.
+
+A `Scenario` is data only (no I/O): start time, site, base placement, navigation file path, the error model,
+the flight and camera plans and the two receivers' models. `Scenario.default(model, **overrides)` gives the
+standard survey flight on 2010-07-01 (GPS week 1590, the day of the real broadcast orbits in
+`shared/data/gnss/broadcast-nav-20100701/brdc1820.10n`) at 13:00 GPST over Zurich, when 9 GPS satellites are
+above 15° (10 above the 5° receiver mask).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from onboard.gnsstime import GpsTime
+
+DEFAULT_NAV_PATH = Path(__file__).resolve().parents[2] / "shared" / "data" / "gnss" / "broadcast-nav-20100701" / (
+    "brdc1820.10n"
+)
+"""Where the real broadcast orbits of 2010-07-01 live (../shared/data; never copied into the project)."""
+DEFAULT_START = GpsTime(1590, 392_400 * 1_000_000_000)
+"""2010-07-01 13:00:00 GPST (Thursday of GPS week 1590)."""
+
+
+@dataclass(frozen=True)
+class ErrorModel:
+    """Error budget of the simulated observables (all 1σ; `*_zenith_*` values are scaled by 1/sin(el)).
+
+    Receiver errors (independent per receiver and satellite): white code/phase/Doppler noise, first-order
+    Gauss–Markov multipath on code and phase. Common errors (same for base and rover): broadcast orbit error
+    (3-D, per axis), satellite clock error, ionosphere model error (fraction of the Klobuchar delay),
+    zenith troposphere residual after Saastamoinen. Differential: ionospheric gradient (slant delay change
+    per km of horizontal base–rover separation, random direction per satellite). Tracking events: cycle slips
+    with LLI (new ambiguity, lock time reset) and without (integer jump only), half-cycle ambiguity after
+    acquisition. `noise_free()` switches all of these off (ambiguities stay random integers).
+    """
+
+    code_sigma_zenith_m: float = 0.5
+    phase_sigma_zenith_m: float = 0.003
+    doppler_sigma_zenith_hz: float = 0.05
+    mp_code_sigma_zenith_m: float = 0.5
+    mp_phase_sigma_zenith_m: float = 0.001
+    mp_tau_s: float = 30.0
+    cn0_zenith_dbhz: float = 50.0
+    cn0_horizon_dbhz: float = 35.0
+    cn0_sigma_dbhz: float = 1.0
+    orbit_sigma_m: float = 0.3
+    orbit_tau_s: float = 3600.0
+    sat_clock_sigma_m: float = 0.3
+    sat_clock_tau_s: float = 3600.0
+    iono_model_error_fraction: float = 0.2
+    iono_model_error_tau_s: float = 1800.0
+    iono_gradient_mm_per_km: float = 1.0
+    tropo_residual_zenith_sigma_m: float = 0.02
+    tropo_residual_tau_s: float = 1800.0
+    slip_lli_rate_per_h: float = 0.1
+    slip_undetected_rate_per_h: float = 0.02
+    slip_undetected_max_cyc: int = 3
+    half_cycle_probability: float = 0.5
+    half_cycle_resolve_s: float = 2.0
+    clock_drift_rw_s_s_per_sqrt_s: float = 2e-12
+
+    @classmethod
+    def noise_free(cls) -> ErrorModel:
+        """Every random error, event and residual at zero (deterministic modelled delays remain)."""
+        return cls(
+            code_sigma_zenith_m=0.0, phase_sigma_zenith_m=0.0, doppler_sigma_zenith_hz=0.0,
+            mp_code_sigma_zenith_m=0.0, mp_phase_sigma_zenith_m=0.0, cn0_sigma_dbhz=0.0, orbit_sigma_m=0.0,
+            sat_clock_sigma_m=0.0, iono_model_error_fraction=0.0, iono_gradient_mm_per_km=0.0,
+            tropo_residual_zenith_sigma_m=0.0, slip_lli_rate_per_h=0.0, slip_undetected_rate_per_h=0.0,
+            half_cycle_probability=0.0, clock_drift_rw_s_s_per_sqrt_s=0.0,
+        )
+
+
+@dataclass(frozen=True)
+class ReceiverModel:
+    """A u-blox receiver's clock and tracking behaviour.
+
+    The local oscillator runs with offset `clock_bias0_s` + `clock_drift_s_s`·(t − start) (+ a random walk of
+    the drift); the receiver measures on its own nominal grid shifted by `tag_offset_ms` (LEA-6T −1 → tags at
+    …999 ms, M8T −8 → …992 ms) and steps its time by 1 ms whenever |bias| exceeds `clock_jump_threshold_s`
+    (tags then move to …998 / …993 ms …). `elevation_mask_deg` is the receiver's tracking mask.
+    """
+
+    kind: str = "m8t"
+    tag_offset_ms: int = -8
+    clock_bias0_s: float = -0.35e-3
+    clock_drift_s_s: float = -0.25e-6
+    clock_jump_threshold_s: float = 0.5e-3
+    elevation_mask_deg: float = 5.0
+    max_sats: int = 16
+
+    @classmethod
+    def lea6t(cls, **overrides: object) -> ReceiverModel:
+        """LEA-6T (RXM-RAW): tags …999 ms; bias kept within ±1 ms by 1-ms steps (one step after ~10 min)."""
+        base = cls(kind="lea6t", tag_offset_ms=-1, clock_bias0_s=0.62e-3, clock_drift_s_s=0.65e-6,
+                   clock_jump_threshold_s=1.0e-3, max_sats=16)
+        return dataclasses.replace(base, **overrides)  # type: ignore[arg-type]
+
+    @classmethod
+    def m8t(cls, **overrides: object) -> ReceiverModel:
+        """NEO/LEA-M8T (RXM-RAWX): free-running clock, tags …992 ms, an occasional 1-ms step."""
+        return dataclasses.replace(cls(), **overrides)  # type: ignore[arg-type]
+
+    @classmethod
+    def for_kind(cls, kind: str, **overrides: object) -> ReceiverModel:
+        """The model named "lea6t" or "m8t"."""
+        if kind == "lea6t":
+            return cls.lea6t(**overrides)
+        if kind == "m8t":
+            return cls.m8t(**overrides)
+        raise ValueError(f"unknown receiver model {kind!r} (expected 'lea6t' or 'm8t')")
+
+
+@dataclass(frozen=True)
+class FlightPlan:
+    """The rover's flight: static on the ground, vertical climb, parallel survey lines joined by half-circle
+    turns, optional descent and landing. Distances in metres (ENU about the takeoff point), speeds m/s.
+
+    `line_speeds_m_s` cycles over the lines (a different speed per line). `fly=False` keeps the rover static
+    for the whole scenario (zero-baseline and static tests).
+    """
+
+    fly: bool = True
+    static_s: float = 60.0
+    climb_rate_m_s: float = 2.5
+    survey_height_m: float = 60.0
+    line_length_m: float = 240.0
+    line_spacing_m: float = 30.0
+    n_lines: int = 4
+    line_azimuth_deg: float = 30.0
+    line_speeds_m_s: tuple[float, ...] = (4.0, 4.6, 5.0, 4.3)
+    accel_m_s2: float = 1.5
+    land: bool = True
+    descent_rate_m_s: float = 1.5
+    wobble_amplitude_deg: float = 2.8
+    lever_arm_cam_m: tuple[float, float, float] = (0.01, -0.05, -0.18)
+
+
+@dataclass(frozen=True)
+class CameraPlan:
+    """TimePulse → camera → flash chain (see hil_sim.camera).
+
+    Pulses every `period_s` on the GPS-time grid at `phase_offset_s` past the grid (not on the second);
+    pulses before `valid_after_s` (scenario-relative: the receiver has no valid time yet) are suppressed.
+    The shutter fires `shutter_delay_mean_s` ± `shutter_jitter_sigma_s` after the pulse; the flash mark is
+    the hot-shoe falling edge at exposure. `missed_flash_probability` drops a flash; `bounce_probability`
+    adds a second edge `bounce_delay_max_s` or less after it.
+    """
+
+    period_s: float = 2.0
+    phase_offset_s: float = 0.3217
+    shutter_delay_mean_s: float = 0.064
+    shutter_jitter_sigma_s: float = 0.0002
+    valid_after_s: float = 30.0
+    missed_flash_probability: float = 0.0
+    bounce_probability: float = 0.0
+    bounce_delay_max_s: float = 0.003
+    trigger_routed: bool = True
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Everything that defines one simulated flight; the World is a pure function of it (and `seed`).
+
+    `site_*` is the rover antenna at takeoff (WGS 84), the ENU origin of the flight. `base_offset_enu_m` is
+    the base antenna relative to it (e.g. (800, −600, 2) for a 1 km baseline). `nav_path` is the RINEX
+    navigation file whose orbits/clocks/Klobuchar coefficients are the truth.
+    """
+
+    start: GpsTime = DEFAULT_START
+    duration_s: float = 1200.0
+    seed: int = 1
+    site_lat_deg: float = 47.40
+    site_lon_deg: float = 8.50
+    site_h_m: float = 500.0
+    base_offset_enu_m: tuple[float, float, float] = (800.0, -600.0, 2.0)
+    nav_path: Path = DEFAULT_NAV_PATH
+    errors: ErrorModel = field(default_factory=ErrorModel)
+    flight: FlightPlan = field(default_factory=FlightPlan)
+    camera: CameraPlan = field(default_factory=CameraPlan)
+    rover_receiver: ReceiverModel = field(default_factory=ReceiverModel.m8t)
+    base_receiver: ReceiverModel = field(default_factory=lambda: ReceiverModel.m8t(
+        clock_bias0_s=0.21e-3, clock_drift_s_s=0.12e-6))
+
+    @classmethod
+    def default(cls, model: str = "m8t", **overrides: object) -> Scenario:
+        """The standard survey flight with both receivers of `model` ("m8t" or "lea6t"); fields overridable."""
+        rover = ReceiverModel.for_kind(model)
+        base = ReceiverModel.for_kind(model, clock_bias0_s=0.21e-3, clock_drift_s_s=0.12e-6)
+        if model == "lea6t":
+            base = ReceiverModel.for_kind(model, clock_bias0_s=-0.4e-3, clock_drift_s_s=-0.3e-6)
+        values: dict[str, object] = {"rover_receiver": rover, "base_receiver": base}
+        values.update(overrides)
+        if "nav_path" in values:
+            values["nav_path"] = Path(str(values["nav_path"]))
+        return cls(**values)  # type: ignore[arg-type]
+
+    @property
+    def baseline_m(self) -> float:
+        """Length of the base offset from the takeoff point (m)."""
+        e, n, u = self.base_offset_enu_m
+        return float((e * e + n * n + u * u) ** 0.5)

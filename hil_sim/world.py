@@ -1,0 +1,540 @@
+"""The simulated GNSS world: real broadcast orbits, faithful L1 signal physics, u-blox-like receivers.
+
+API used by the receiver emulator (names are a contract):
+
+- ``Scenario`` (hil_sim.scenario) with ``Scenario.default(model="m8t"|"lea6t", **overrides)``;
+- ``World(scenario)``: raises ``onboard.errors.InputError`` with the path when the navigation file is missing
+  or holds no usable GPS ephemeris for the scenario time;
+- ``world.observe(receiver, t_rx_nominal) -> ObsEpoch``: `receiver` "rover" | "base"; `t_rx_nominal` the epoch
+  on the receiver's nominal grid (e.g. every 200 ms on the whole second); the returned epoch's `time` is the
+  receiver's tag (its clock model, see below). Observations come in time order per receiver (LLI and
+  clock-reset flags refer to the previous call for that receiver);
+- ``world.ephemerides() -> list[Ephemeris]``: the set being broadcast (one per healthy PRN, toe nearest the
+  scenario middle; the same set is the truth orbit, plus the orbit error below);
+- ``world.iono_params() -> (alpha, beta)`` Klobuchar coefficients from the navigation file header;
+- ``world.trajectory`` (hil_sim.flight.Trajectory), ``world.camera_events(t0, t1) -> list[CameraEvent]``;
+- ``world.truth(t) -> dict`` antenna/camera positions, attitude, armed flag, receiver clock biases;
+- ``world.epoch_timing(receiver, t_rx_nominal)`` and ``world.components(receiver, t_rx_nominal)`` expose the
+  exact measurement instant and every term of the observation equations for tests.
+
+Observation equations (GPS L1 C/A, λ = c/1575.42 MHz, RINEX sign convention: phase has the sign of range,
+Doppler = −range rate/λ, positive when approaching) for receiver r and satellite s at the true reception
+time t (GPS time):
+
+    pr  = ρ + c·(b_r − dt_s) + T + I + MP_code + ε_code
+    cp  = (ρ + c·(b_r − dt_s) + T − I + MP_phase + ε_phase)/λ + N (+ ½ during an unresolved half cycle)
+    dop = −(ρ̇ + c·(ḃ_r − ḋt_s))/λ + ε_dop
+
+- ρ: geometric range from the antenna to the satellite at transmission time t − ρ/c (light-time iteration),
+  satellite position rotated by the Earth's rotation during the travel time (exact Sagnac rotation).
+  Satellite truth = broadcast ephemeris + orbit error (3-D Gauss–Markov, σ `orbit_sigma_m` per axis,
+  τ `orbit_tau_s` = 1 h): common to both receivers.
+- dt_s: broadcast clock (af0, af1, af2 at transmission time, relativistic eccentricity term) − TGD, plus a
+  satellite clock error (Gauss–Markov, σ `sat_clock_sigma_m` = 0.3 m, τ 1 h), common to both receivers.
+- T: Saastamoinen with a standard atmosphere at each antenna's height (onboard.rtk.models.saastamoinen_m),
+  plus a zenith residual (Gauss–Markov σ 2 cm, τ 30 min, common) mapped with 1/sin(el).
+- I: Klobuchar with the file's α/β at each antenna (onboard.rtk.models.klobuchar_m) × (1 + model error,
+  Gauss–Markov per satellite σ 20 %, τ 30 min, common) + a differential gradient: per satellite a random
+  horizontal direction, magnitude `iono_gradient_mm_per_km` (1 mm/km) of slant delay per km of horizontal
+  rover–base separation × the Klobuchar obliquity factor. Code delayed, phase advanced.
+- Receiver errors, per receiver and satellite: white code σ 0.5 m, phase σ 3 mm, Doppler σ 0.05 Hz, each
+  ÷ sin(el); first-order Gauss–Markov multipath, code σ 0.5 m, phase σ 1 mm (÷ sin(el)), τ 30 s
+  (process sampled every 1 s, linearly interpolated); C/N0 = 35 + 15·sin(el) dB-Hz + 1 dB white noise.
+- Carrier phase ambiguity N: a random integer (±500 cycles, i.e. phase starts near code/λ as u-blox's
+  does) per arc; a new arc when the satellite rises above the receiver mask (5°) or after a cycle slip with
+  loss of lock (Poisson, `slip_lli_rate_per_h` per satellite; LLI bit 0 on the next epoch, lock time reset).
+  Undetected slips (Poisson, `slip_undetected_rate_per_h`) add ±1…3 cycles with no flag and no lock reset.
+  For `half_cycle_resolve_s` after each acquisition the phase may be off by ½ cycle (probability
+  `half_cycle_probability`): LLI bit 1 is set then; afterwards the receiver corrects it and reports
+  `half_cyc_sub` = 1 (RXM-RAWX trkStat bit 3) for arcs where it subtracted the half cycle.
+- Receiver clock: local oscillator offset β(t) = bias0 + drift·(t − start) + a random walk of the drift
+  (σ `clock_drift_rw_s_s_per_sqrt_s`). The receiver measures when its oscillator reads the nominal epoch +
+  `tag_offset_ms` and steps its own time by 1 ms whenever |β − J·1 ms| exceeds `clock_jump_threshold_s`
+  (J the step count). Tag = nominal + offset − J ms; b_r = tag − t (the quantity in the equations). At a step
+  the tag moves by 1 ms (…999 → …998 ms on a LEA-6T) while the measurement instant does not, so b_r, the
+  pseudorange (by c·1 ms = 299 792.458 m) and the phase (by exactly 1 575 420 cycles, an integer, no slip)
+  all jump together, as on real u-blox RXM-RAW/RAWX; the RAWX `clock_reset` flag marks the epoch after it.
+
+Everything random is drawn from `np.random.default_rng` seeded by (scenario seed, purpose, receiver,
+satellite, epoch): a scenario reproduces exactly, in any order of calls (except the LLI/clock-reset flags,
+which compare with the previous call). `ErrorModel.noise_free()` removes every random error.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from scipy.signal import lfilter
+
+from hil_sim.camera import CameraEvent, camera_events
+from hil_sim.flight import Trajectory
+from hil_sim.scenario import ReceiverModel, Scenario
+from onboard.errors import InputError
+from onboard.formats.rinex_nav import read_rinex_nav
+from onboard.gnsstime import NS_PER_S, GpsTime
+from onboard.rtk.consts import CLIGHT_M_S, FREQ_L1_HZ, LAMBDA_L1_M, OMEGA_E_RAD_S
+from onboard.rtk.ephemeris import MAX_EPH_AGE_S, eph_position, eph_position_velocity
+from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
+from onboard.rtk.models import klobuchar_m, saastamoinen_m
+from onboard.rtk.types import GNSS_GPS, LLI_HALF_CYCLE, LLI_SLIP, Ephemeris, ObsEpoch
+
+log = logging.getLogger(__name__)
+
+Vec = npt.NDArray[np.float64]
+RECEIVERS = ("rover", "base")
+N_PRN = 32
+MARGIN_S = 300.0
+"""Span simulated before the start and after the end of the scenario (s); observations outside raise."""
+SLOW_DT_S = 10.0
+FAST_DT_S = 1.0
+AMBIGUITY_RANGE_CYC = 500
+LEAP_S_2010 = 15
+
+# Purposes of the random streams (part of every seed so streams never overlap).
+_P_ORBIT, _P_SATCLK, _P_IONO, _P_TROPO, _P_GRAD, _P_MP, _P_CLOCK, _P_TRACK, _P_EPOCH = range(1, 10)
+
+
+def _rng(*key: int) -> np.random.Generator:
+    return np.random.default_rng([k & 0xFFFFFFFF for k in key])
+
+
+def _gauss_markov(rng: np.random.Generator, n: int, cols: int, dt_s: float, tau_s: float) -> Vec:
+    """(n, cols) samples of a stationary unit-variance first-order Gauss–Markov process every `dt_s`."""
+    phi = math.exp(-dt_s / tau_s)
+    x0 = rng.standard_normal(cols)
+    w = rng.standard_normal((n, cols)) * math.sqrt(1.0 - phi * phi)
+    w[0] = x0
+    return np.asarray(lfilter([1.0], [1.0, -phi], w, axis=0))
+
+
+class _Grid:
+    """Uniform time grid from `t0_ns` with step `dt_s`; linear interpolation of sampled processes."""
+
+    def __init__(self, t0_ns: int, dt_s: float, n: int) -> None:
+        self.t0_ns = t0_ns
+        self.dt_ns = round(dt_s * NS_PER_S)
+        self.dt_s = dt_s
+        self.n = n
+
+    def locate(self, t: GpsTime) -> tuple[int, float]:
+        x = (t.total_ns - self.t0_ns) / self.dt_ns
+        if x < 0 or x > self.n - 1:
+            raise ValueError(f"time {t} is outside the simulated span; extend Scenario.duration_s")
+        i = min(int(x), self.n - 2)
+        return i, x - i
+
+    def interp(self, values: Vec, t: GpsTime) -> Vec:
+        i, f = self.locate(t)
+        return np.asarray(values[i] * (1.0 - f) + values[i + 1] * f)
+
+    def time(self, i: int) -> GpsTime:
+        return GpsTime.from_total_ns(self.t0_ns + i * self.dt_ns)
+
+
+@dataclass(frozen=True)
+class EpochTiming:
+    """When an epoch is measured: `t_rx_nominal` requested, `tag` the receiver's time tag, `t_true` the GPS
+    time of the measurement, `clock_bias_s` = tag − t_true exactly, `clock_drift_s_s`, `jumps` the 1-ms
+    steps taken so far (signed)."""
+
+    t_rx_nominal: GpsTime
+    tag: GpsTime
+    t_true: GpsTime
+    clock_bias_s: float
+    clock_drift_s_s: float
+    jumps: int
+
+
+@dataclass
+class _Track:
+    """Tracking history of one satellite at one receiver: acquisitions, slips, ambiguities (all ns times).
+
+    `resets_ns` sorted acquisition instants (arc starts and LLI slips) with `reset_lli` (True for slips),
+    `reset_n_cyc` the ambiguity drawn at each, `reset_half` whether a half cycle is pending after it;
+    `arc_ends_ns` instants where tracking stops (setting); `jumps_ns`/`jumps_cyc` undetected slips.
+    """
+
+    resets_ns: list[int]
+    reset_lli: list[bool]
+    reset_n_cyc: list[int]
+    reset_half: list[bool]
+    jumps_ns: list[int]
+    jumps_cyc: list[int]
+
+
+class _Clock:
+    """A receiver clock on the fast grid: oscillator offset β, its drift, the 1-ms step count J."""
+
+    def __init__(self, model: ReceiverModel, grid: _Grid, start_ns: int, rw: float, rng: np.random.Generator) -> None:
+        self.model = model
+        self.grid = grid
+        n = grid.n
+        drift = model.clock_drift_s_s + np.cumsum(rng.standard_normal(n) * rw * math.sqrt(grid.dt_s))
+        beta = np.concatenate(([0.0], np.cumsum(drift[:-1] * grid.dt_s)))
+        k0 = (start_ns - grid.t0_ns) / grid.dt_ns
+        beta += model.clock_bias0_s - np.interp(k0, np.arange(n), beta)
+        self.beta = beta
+        self.drift = drift
+        thr = model.clock_jump_threshold_s
+        jumps = np.zeros(n, dtype=np.int64)
+        j = 0
+        for k in range(n):
+            while beta[k] - j * 1e-3 > thr:
+                j += 1
+            while beta[k] - j * 1e-3 < -thr:
+                j -= 1
+            jumps[k] = j
+        self.jumps = jumps
+
+    def beta_at(self, t: GpsTime) -> float:
+        return float(self.grid.interp(self.beta, t))
+
+    def timing(self, t_nom: GpsTime) -> EpochTiming:
+        local = t_nom.add_ns(self.model.tag_offset_ms * 1_000_000)
+        t = local
+        for _ in range(3):
+            t = local.add_s(-self.beta_at(t))
+        i, _ = self.grid.locate(t)
+        j = int(self.jumps[i])
+        tag = local.add_ns(-j * 1_000_000)
+        return EpochTiming(t_nom, tag, t, tag.diff_ns(t) / NS_PER_S, float(self.drift[i]), j)
+
+
+class World:
+    """GNSS physics of one scenario (see module docstring). Pure computation after construction."""
+
+    def __init__(self, scenario: Scenario) -> None:
+        self.scenario = scenario
+        sc = scenario
+        em = sc.errors
+        nav_path = Path(sc.nav_path)
+        if not nav_path.is_file():
+            raise InputError(
+                f"navigation file {nav_path} not found: the simulator needs real broadcast orbits "
+                "(Scenario.nav_path; default ../shared/data/gnss/broadcast-nav-20100701/brdc1820.10n)"
+            )
+        nav = read_rinex_nav(nav_path)
+        self._alpha = nav.iono_alpha
+        self._beta = nav.iono_beta
+        self.start = sc.start
+        self.end = sc.start.add_s(sc.duration_s)
+        mid = sc.start.add_s(sc.duration_s / 2)
+        best: dict[int, Ephemeris] = {}
+        for eph in nav.ephemerides:
+            if eph.health != 0 or not 1 <= eph.prn <= N_PRN:
+                continue
+            if abs(mid.diff_s(eph.toe)) > MAX_EPH_AGE_S - sc.duration_s / 2 - MARGIN_S:
+                continue
+            old = best.get(eph.prn)
+            if old is None or abs(mid.diff_s(eph.toe)) < abs(mid.diff_s(old.toe)):
+                best[eph.prn] = eph
+        if not best:
+            raise InputError(f"{nav_path}: no healthy GPS ephemeris valid over the scenario ({sc.start}, "
+                             f"{sc.duration_s} s)")
+        self._eph = best
+        self.prns = sorted(best)
+        self.trajectory = Trajectory(sc.flight, sc.start, sc.site_lat_deg, sc.site_lon_deg, sc.site_h_m)
+        self.base_ecef_m = self.trajectory.enu_to_ecef(np.asarray(sc.base_offset_enu_m, dtype=float))
+        self._base_enu_m = np.asarray(sc.base_offset_enu_m, dtype=float)
+        self._r_ecef_to_enu = enu_rotation(self.trajectory.lat_rad, self.trajectory.lon_rad)
+
+        t0_ns = sc.start.total_ns - round(MARGIN_S * NS_PER_S)
+        span_s = sc.duration_s + 2 * MARGIN_S
+        self._slow = _Grid(t0_ns, SLOW_DT_S, math.ceil(span_s / SLOW_DT_S) + 2)
+        self._fast = _Grid(t0_ns, FAST_DT_S, math.ceil(span_s / FAST_DT_S) + 2)
+        seed = sc.seed
+        ns, nf = self._slow.n, self._fast.n
+        self._orbit_err = em.orbit_sigma_m * _gauss_markov(
+            _rng(seed, _P_ORBIT), ns, 3 * N_PRN, SLOW_DT_S, em.orbit_tau_s).reshape(ns, N_PRN, 3)
+        self._satclk_err_m = em.sat_clock_sigma_m * _gauss_markov(
+            _rng(seed, _P_SATCLK), ns, N_PRN, SLOW_DT_S, em.sat_clock_tau_s)
+        self._iono_err = em.iono_model_error_fraction * _gauss_markov(
+            _rng(seed, _P_IONO), ns, N_PRN, SLOW_DT_S, em.iono_model_error_tau_s)
+        self._tropo_res_m = em.tropo_residual_zenith_sigma_m * _gauss_markov(
+            _rng(seed, _P_TROPO), ns, 1, SLOW_DT_S, em.tropo_residual_tau_s)[:, 0]
+        ang = _rng(seed, _P_GRAD).uniform(0.0, 2 * math.pi, N_PRN)
+        self._iono_grad_enu = em.iono_gradient_mm_per_km * 1e-6 * np.stack([np.sin(ang), np.cos(ang)], axis=1)
+        models = {"rover": sc.rover_receiver, "base": sc.base_receiver}
+        self._mp_code: dict[str, Vec] = {}
+        self._mp_phase: dict[str, Vec] = {}
+        self._clock: dict[str, _Clock] = {}
+        self._tracks: dict[str, list[_Track | None]] = {}
+        self._model = models
+        for r_idx, rcv in enumerate(RECEIVERS):
+            self._mp_code[rcv] = _gauss_markov(_rng(seed, _P_MP, r_idx, 0), nf, N_PRN, FAST_DT_S, em.mp_tau_s)
+            self._mp_phase[rcv] = _gauss_markov(_rng(seed, _P_MP, r_idx, 1), nf, N_PRN, FAST_DT_S, em.mp_tau_s)
+            same_clock = rcv == "base" and sc.base_receiver == sc.rover_receiver
+            self._clock[rcv] = _Clock(models[rcv], self._fast, sc.start.total_ns, em.clock_drift_rw_s_s_per_sqrt_s,
+                                      _rng(seed, _P_CLOCK, 0 if same_clock else r_idx))
+            self._tracks[rcv] = self._build_tracks(r_idx, rcv)
+        self._last_obs: dict[str, tuple[int, int] | None] = {"rover": None, "base": None}
+
+    # ------------------------------------------------------------------------------- public queries
+    def ephemerides(self) -> list[Ephemeris]:
+        """The broadcast ephemerides (one per healthy PRN) valid over the whole scenario."""
+        return [self._eph[p] for p in self.prns]
+
+    def iono_params(self) -> tuple[tuple[float, ...] | None, tuple[float, ...] | None]:
+        """Klobuchar (α, β) of the navigation file header (None when absent)."""
+        return self._alpha, self._beta
+
+    def camera_events(self, t0: GpsTime, t1: GpsTime) -> list[CameraEvent]:
+        """Camera trigger pulses in [t0, t1) with their flashes (pulses before valid time suppressed)."""
+        valid_from = self.start.add_s(self.scenario.camera.valid_after_s)
+        return camera_events(self.scenario.camera, t0, t1, valid_from, self.scenario.seed)
+
+    def receiver_position_ecef_m(self, receiver: str, t: GpsTime) -> Vec:
+        """Antenna phase centre of `receiver` at GPS time `t` (ECEF m)."""
+        if receiver == "base":
+            return self.base_ecef_m.copy()
+        if receiver == "rover":
+            return self.trajectory.position_ecef_m(t)
+        raise ValueError(f"unknown receiver {receiver!r} (expected 'rover' or 'base')")
+
+    def epoch_timing(self, receiver: str, t_rx_nominal: GpsTime) -> EpochTiming:
+        """Measurement instant, tag and clock state of `receiver` for the nominal epoch `t_rx_nominal`."""
+        if receiver not in RECEIVERS:
+            raise ValueError(f"unknown receiver {receiver!r} (expected 'rover' or 'base')")
+        return self._clock[receiver].timing(t_rx_nominal)
+
+    def truth(self, t: GpsTime) -> dict[str, Any]:
+        """Ground truth at GPS time `t`: rover antenna/camera (ECEF m), velocity, attitude, armed flag, base
+        antenna, receiver clock biases (β − J·1 ms, s) and 1-ms step counts."""
+        st = self.trajectory.state(t)
+        out: dict[str, Any] = {
+            "time": t, "antenna_ecef_m": st.pos_ecef_m, "antenna_vel_ecef_m_s": st.vel_ecef_m_s,
+            "antenna_enu_m": st.pos_enu_m, "camera_ecef_m": st.camera_ecef_m, "camera_enu_m": st.camera_enu_m,
+            "r_cam_to_enu": st.r_cam_to_enu, "roll_deg": math.degrees(st.roll_rad),
+            "pitch_deg": math.degrees(st.pitch_rad), "yaw_deg": math.degrees(st.yaw_rad), "armed": st.armed,
+            "phase": st.phase, "line_index": st.line_index, "base_ecef_m": self.base_ecef_m.copy(),
+            "enu_origin_ecef_m": self.trajectory.origin_ecef_m.copy(),
+            "lever_arm_cam_m": np.asarray(self.scenario.flight.lever_arm_cam_m, dtype=float),
+        }
+        for rcv in RECEIVERS:
+            clk = self._clock[rcv]
+            i, _ = self._fast.locate(t)
+            out[f"{rcv}_clock_bias_s"] = clk.beta_at(t) - int(clk.jumps[i]) * 1e-3
+            out[f"{rcv}_clock_drift_s_s"] = float(clk.drift[i])
+            out[f"{rcv}_clock_jumps"] = int(clk.jumps[i])
+        return out
+
+    def observe(self, receiver: str, t_rx_nominal: GpsTime) -> ObsEpoch:
+        """The L1 observables `receiver` reports for its nominal epoch `t_rx_nominal` (time = its tag)."""
+        return self._simulate(receiver, t_rx_nominal)[0]
+
+    def components(self, receiver: str, t_rx_nominal: GpsTime) -> dict[str, Any]:
+        """Every term of the observation equations for one epoch (arrays aligned with the epoch's sv_id)."""
+        return self._simulate(receiver, t_rx_nominal, update_state=False)[1]
+
+    # ------------------------------------------------------------------------------------ internals
+    def _sat_state(self, prn: int, t_tx: GpsTime, t_rx: GpsTime) -> tuple[Vec, Vec, float, float]:
+        """True satellite position (m) and velocity (m/s) at `t_tx` (ECEF of t_tx), clock (s) and drift (s/s)."""
+        eph = self._eph[prn]
+        pos, vel, clk, drift = eph_position_velocity(eph, t_tx)
+        pos = pos + self._slow.interp(self._orbit_err[:, prn - 1, :], t_rx)
+        clk = clk - eph.tgd_s + float(self._slow.interp(self._satclk_err_m[:, prn - 1], t_rx)) / CLIGHT_M_S
+        return pos, vel, clk, drift
+
+    def _geometry(self, prn: int, t: GpsTime, rcv_ecef: Vec, rcv_vel: Vec) -> dict[str, Any]:
+        """Light-time solution: range, range rate, satellite clock for a receiver at `rcv_ecef` at time t."""
+        tau = 0.075
+        pos = vel = np.zeros(3)
+        clk = drift = 0.0
+        rho = 0.0
+        t_tx = t
+        for _ in range(4):
+            t_tx = t.add_s(-tau)
+            pos, vel, clk, drift = self._sat_state(prn, t_tx, t)
+            th = OMEGA_E_RAD_S * tau
+            c, s = math.cos(th), math.sin(th)
+            rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+            pos_r = rot @ pos
+            rho = float(np.linalg.norm(pos_r - rcv_ecef))
+            tau = rho / CLIGHT_M_S
+        los = (pos_r - rcv_ecef) / rho
+        vel_r = rot @ vel
+        e_vs = float(los @ vel_r)
+        rho_dot = (e_vs - float(los @ rcv_vel)) / (1.0 + e_vs / CLIGHT_M_S)
+        return {"rho_m": rho, "rho_dot_m_s": rho_dot, "sat_pos_m": pos_r, "sat_clock_s": clk,
+                "sat_drift_s_s": drift, "los": los, "t_tx": t_tx}
+
+    def _elevation_grid(self, receiver: str) -> Vec:
+        """Elevation (rad) of every PRN (NaN without ephemeris) at the slow grid's instants, for `receiver`."""
+        g = self._slow
+        el = np.full((g.n, N_PRN), np.nan)
+        for k in range(g.n):
+            t = g.time(k)
+            rcv = self._position_clamped(receiver, t)
+            lat, lon, _ = ecef_to_llh(rcv)
+            r = enu_rotation(lat, lon)
+            for prn in self.prns:
+                pos, _ = eph_position(self._eph[prn], t.add_s(-0.075))
+                enu = r @ (pos - rcv)
+                el[k, prn - 1] = math.atan2(enu[2], math.hypot(enu[0], enu[1]))
+        return el
+
+    def _position_clamped(self, receiver: str, t: GpsTime) -> Vec:
+        return self.receiver_position_ecef_m(receiver, t)
+
+    def _build_tracks(self, r_idx: int, receiver: str) -> list[_Track | None]:
+        """Acquisitions, slips and ambiguities of every satellite at `receiver` over the simulated span."""
+        em = self.scenario.errors
+        mask = math.radians(self._model[receiver].elevation_mask_deg)
+        el = self._elevation_grid(receiver)
+        if receiver == "rover":
+            self._el_grid_rover = el
+        else:
+            self._el_grid_base = el
+        g = self._slow
+        span_ns = (g.n - 1) * g.dt_ns
+        tracks: list[_Track | None] = [None] * N_PRN
+        for prn in self.prns:
+            rng = _rng(self.scenario.seed, _P_TRACK, r_idx, prn)
+            e = el[:, prn - 1] - mask
+            resets: list[tuple[int, bool]] = []
+            if e[0] >= 0:
+                resets.append((g.t0_ns, False))
+            for k in range(1, g.n):
+                if e[k - 1] < 0 <= e[k]:
+                    frac = -e[k - 1] / (e[k] - e[k - 1])
+                    resets.append((g.t0_ns + round((k - 1 + frac) * g.dt_ns), False))
+            span_h = span_ns / 3.6e12
+            n_lli = rng.poisson(em.slip_lli_rate_per_h * span_h)
+            n_und = rng.poisson(em.slip_undetected_rate_per_h * span_h)
+            lli_t = sorted(int(x) for x in g.t0_ns + rng.uniform(0, span_ns, n_lli))
+            und_t = sorted(int(x) for x in g.t0_ns + rng.uniform(0, span_ns, n_und))
+            resets += [(t, True) for t in lli_t]
+            resets.sort()
+            mag = rng.integers(1, max(1, em.slip_undetected_max_cyc) + 1, n_und)
+            sign = rng.choice(np.array([-1, 1]), n_und)
+            tracks[prn - 1] = _Track(
+                resets_ns=[t for t, _ in resets], reset_lli=[lli for _, lli in resets],
+                reset_n_cyc=[int(x) for x in rng.integers(-AMBIGUITY_RANGE_CYC, AMBIGUITY_RANGE_CYC + 1, len(resets))],
+                reset_half=[bool(x) for x in rng.random(len(resets)) < em.half_cycle_probability],
+                jumps_ns=und_t, jumps_cyc=[int(a * b) for a, b in zip(mag, sign)],
+            )
+        return tracks
+
+    def _tracked(self, receiver: str, prn: int, t: GpsTime) -> bool:
+        el = self._el_grid_rover if receiver == "rover" else self._el_grid_base
+        mask = math.radians(self._model[receiver].elevation_mask_deg)
+        return bool(self._slow.interp(el[:, prn - 1], t) >= mask)
+
+    def _simulate(self, receiver: str, t_nom: GpsTime, update_state: bool = True) -> tuple[ObsEpoch, dict[str, Any]]:
+        if receiver not in RECEIVERS:
+            raise ValueError(f"unknown receiver {receiver!r} (expected 'rover' or 'base')")
+        sc = self.scenario
+        em = sc.errors
+        model = self._model[receiver]
+        r_idx = RECEIVERS.index(receiver)
+        timing = self._clock[receiver].timing(t_nom)
+        t = timing.t_true
+        self._slow.locate(t)  # raises outside the simulated span
+        if receiver == "rover":
+            st = self.trajectory.state(t)
+            rcv, rcv_vel, rcv_enu = st.pos_ecef_m, st.vel_ecef_m_s, st.pos_enu_m
+        else:
+            rcv, rcv_vel, rcv_enu = self.base_ecef_m, np.zeros(3), self._base_enu_m
+        lat, lon, h = ecef_to_llh(rcv)
+        r_enu = enu_rotation(lat, lon)
+        d_enu = rcv_enu - self._base_enu_m  # horizontal separation from the base drives the iono gradient
+
+        # Per-epoch white noise, fixed layout over all 32 PRNs so it does not depend on the visible set.
+        noise = _rng(sc.seed, _P_EPOCH, r_idx, t_nom.total_ns, t_nom.total_ns >> 32).standard_normal((4, N_PRN))
+        prev = self._last_obs[receiver]
+        prev_ns = prev[0] if prev is not None and prev[0] < t.total_ns else t.total_ns - NS_PER_S
+        prev_jumps = prev[1] if prev is not None else timing.jumps
+
+        rows: list[dict[str, Any]] = []
+        for prn in self.prns:
+            if not self._tracked(receiver, prn, t):
+                continue
+            geo = self._geometry(prn, t, rcv, rcv_vel)
+            enu = r_enu @ (geo["sat_pos_m"] - rcv)
+            el_s = math.atan2(enu[2], math.hypot(enu[0], enu[1]))
+            az_s = math.atan2(enu[0], enu[1]) % (2 * math.pi)
+            rows.append({"prn": prn, "el": el_s, "az": az_s, **geo})
+        if len(rows) > model.max_sats:
+            rows = sorted(sorted(rows, key=lambda r: -r["el"])[: model.max_sats], key=lambda r: r["prn"])
+        n = len(rows)
+        prn_arr = np.array([r["prn"] for r in rows], dtype=np.int16)
+        col = prn_arr.astype(int) - 1
+        el = np.array([r["el"] for r in rows])
+        az = np.array([r["az"] for r in rows])
+        rho = np.array([r["rho_m"] for r in rows])
+        rho_dot = np.array([r["rho_dot_m_s"] for r in rows])
+        dts = np.array([r["sat_clock_s"] for r in rows])
+        dts_dot = np.array([r["sat_drift_s_s"] for r in rows])
+        sin_el = np.sin(np.maximum(el, math.radians(1.0)))
+
+        tropo_model = saastamoinen_m(lat, h, el)
+        tropo = tropo_model + float(self._slow.interp(self._tropo_res_m, t)) / sin_el
+        iono_model = klobuchar_m(t.tow_s, lat, lon, az, el, self._alpha, self._beta)
+        obliquity = 1.0 + 16.0 * (0.53 - el / math.pi) ** 3
+        grad = self._iono_grad_enu[col] @ d_enu[:2] if n else np.zeros(0)
+        iono = iono_model * (1.0 + self._slow.interp(self._iono_err, t)[col]) + grad * obliquity
+
+        mp_code = em.mp_code_sigma_zenith_m / sin_el * self._fast.interp(self._mp_code[receiver], t)[col]
+        mp_phase = em.mp_phase_sigma_zenith_m / sin_el * self._fast.interp(self._mp_phase[receiver], t)[col]
+        eps_code = em.code_sigma_zenith_m / sin_el * noise[0, col]
+        eps_phase = em.phase_sigma_zenith_m / sin_el * noise[1, col]
+        eps_dop = em.doppler_sigma_zenith_hz / sin_el * noise[2, col]
+        cn0 = em.cn0_horizon_dbhz + (em.cn0_zenith_dbhz - em.cn0_horizon_dbhz) * np.sin(np.maximum(el, 0.0))
+        cn0 = cn0 + em.cn0_sigma_dbhz * noise[3, col]
+
+        b = timing.clock_bias_s
+        clocks_m = CLIGHT_M_S * (b - dts)
+        amb = np.zeros(n)
+        half = np.zeros(n)
+        lock_ms = np.zeros(n)
+        lli = np.zeros(n, dtype=np.uint8)
+        half_sub = np.zeros(n, dtype=np.uint8)
+        half_ns = round(em.half_cycle_resolve_s * NS_PER_S)
+        tracks = self._tracks[receiver]
+        for i, prn in enumerate(prn_arr):
+            tr = tracks[int(prn) - 1]
+            assert tr is not None
+            k = int(np.searchsorted(tr.resets_ns, t.total_ns, side="right")) - 1
+            k = max(k, 0)
+            t_reset = tr.resets_ns[k]
+            jumps = sum(c for tj, c in zip(tr.jumps_ns, tr.jumps_cyc) if t_reset < tj <= t.total_ns)
+            amb[i] = tr.reset_n_cyc[k] + jumps
+            age_ns = t.total_ns - t_reset
+            lock_ms[i] = age_ns / 1e6
+            if age_ns < half_ns:
+                lli[i] |= LLI_HALF_CYCLE
+                half[i] = 0.5 if tr.reset_half[k] else 0.0
+            elif tr.reset_half[k]:
+                half_sub[i] = 1
+            if tr.reset_lli[k] and prev_ns < t_reset <= t.total_ns:
+                lli[i] |= LLI_SLIP
+
+        pr = rho + clocks_m + tropo + iono + mp_code + eps_code
+        cp = (rho + clocks_m + tropo - iono + mp_phase + eps_phase) / LAMBDA_L1_M + amb + half
+        dop = -(rho_dot + CLIGHT_M_S * (timing.clock_drift_s_s - dts_dot)) / LAMBDA_L1_M + eps_dop
+        pr_std = np.hypot(em.code_sigma_zenith_m, em.mp_code_sigma_zenith_m) / sin_el
+        cp_std = np.hypot(em.phase_sigma_zenith_m, em.mp_phase_sigma_zenith_m) / sin_el / LAMBDA_L1_M
+        clock_reset = timing.jumps != prev_jumps
+        if update_state:
+            self._last_obs[receiver] = (t.total_ns, timing.jumps)
+        epoch = ObsEpoch(
+            time=timing.tag, gnss_id=np.full(n, GNSS_GPS, dtype=np.int8), sv_id=prn_arr, pr_m=pr, cp_cyc=cp,
+            dop_hz=dop, cn0_dbhz=cn0, lock_ms=lock_ms, lli=lli, half_cyc_sub=half_sub, pr_std_m=pr_std,
+            cp_std_cyc=cp_std, clock_reset=bool(clock_reset), leap_s=LEAP_S_2010,
+        )
+        details = {
+            "timing": timing, "receiver_ecef_m": rcv, "receiver_vel_ecef_m_s": rcv_vel, "sv_id": prn_arr,
+            "el_rad": el, "az_rad": az, "rho_m": rho, "rho_dot_m_s": rho_dot, "sat_clock_s": dts,
+            "sat_drift_s_s": dts_dot, "sat_pos_m": np.array([r["sat_pos_m"] for r in rows]).reshape(n, 3),
+            "t_tx": [r["t_tx"] for r in rows], "tropo_m": tropo, "tropo_model_m": tropo_model,
+            "iono_m": iono, "iono_model_m": iono_model, "mp_code_m": mp_code, "mp_phase_m": mp_phase,
+            "eps_code_m": eps_code, "eps_phase_m": eps_phase, "eps_dop_hz": eps_dop, "ambiguity_cyc": amb,
+            "half_cycle_cyc": half, "clock_bias_s": b, "freq_l1_hz": FREQ_L1_HZ,
+        }
+        return epoch, details
