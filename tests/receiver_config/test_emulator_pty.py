@@ -1,0 +1,207 @@
+"""Configuration against the hil_sim receiver emulator over a real pseudo-terminal (lea6t and m8t).
+
+The emulator models the line rate through the pty's termios (wrong rate = garbage both ways), so the CFG-PRT
+baud change is exercised for real: the ACK only arrives once our side has reopened at the new rate.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import termios
+from collections.abc import AsyncIterator, Callable, Iterator
+from contextlib import asynccontextmanager, contextmanager
+from typing import Any
+
+import pytest
+
+from onboard.errors import ConfigRejected
+from onboard.receiver.configure import FrameQueueLink, apply_profile, detect_receiver
+from onboard.receiver.framing import Frame, StreamFramer, ubx_frame
+from onboard.receiver.profiles import ReceiverOptions, build_profile
+from tests.conftest import shared_file
+
+emu_mod = pytest.importorskip("hil_sim.pty_server", reason="hil_sim receiver emulator not available")
+rx_mod = pytest.importorskip("hil_sim.receiver")
+try:  # A2's stand-in World (real broadcast orbits, geometric ranges) unless A1's World has landed
+    from tests.hil_sim_receiver.conftest import NAV, StandInWorld
+except ImportError:  # pragma: no cover - depends on the other area's fixtures
+    pytest.skip("hil_sim stand-in world not available", allow_module_level=True)
+
+pytestmark = pytest.mark.timeout(60)
+_BAUD = {9600: termios.B9600, 38400: termios.B38400, 57600: termios.B57600, 115200: termios.B115200,
+         230400: termios.B230400}
+
+
+class PtyLink:
+    """A minimal asyncio ConfigLink over a pty slave: add_reader → framer → FrameQueueLink; reopen = termios."""
+
+    def __init__(self, path: str, baud: int) -> None:
+        self.fd = os.open(path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        self.framer = StreamFramer()
+        self.raw = bytearray()  # every byte received, as the recorder would journal it
+        self.frames: list[Frame] = []
+        self.link = FrameQueueLink(self._write, self._reopen)
+        self._set_baud(baud)
+        termios.tcflush(self.fd, termios.TCIFLUSH)
+        asyncio.get_running_loop().add_reader(self.fd, self._readable)
+
+    def _set_baud(self, baud: int) -> None:
+        attrs = termios.tcgetattr(self.fd)
+        attrs[0] = attrs[1] = attrs[3] = 0
+        attrs[2] = termios.CS8 | termios.CREAD | termios.CLOCAL
+        attrs[4] = attrs[5] = _BAUD[baud]
+        termios.tcsetattr(self.fd, termios.TCSADRAIN, attrs)
+
+    def _readable(self) -> None:
+        try:
+            data = os.read(self.fd, 65536)
+        except BlockingIOError:
+            return
+        self.raw += data
+        for frame in self.framer.feed(data):
+            self.frames.append(frame)
+            self.link.feed(frame)
+
+    async def _write(self, raw: bytes) -> None:
+        os.write(self.fd, raw)
+        termios.tcdrain(self.fd)
+
+    async def _reopen(self, baud: int) -> None:
+        # A pty has no transmitter: tcdrain returns at once, and the emulator judges the line rate when it
+        # *reads*. Give it time to read what we sent at the old rate (what a UART's tcdrain guarantees).
+        await asyncio.sleep(0.1)
+        self._set_baud(baud)
+        self.framer = StreamFramer()
+
+    def close(self) -> None:
+        asyncio.get_running_loop().remove_reader(self.fd)
+        os.close(self.fd)
+
+
+@contextmanager
+def emulator(model: str, **options: Any) -> Iterator[Any]:
+    from onboard.formats.rinex_nav import read_rinex_nav
+
+    world = StandInWorld(read_rinex_nav(shared_file(NAV)).ephemerides)
+    emu = emu_mod.ReceiverEmulator(model, rx_mod.ReceiverOptions(**options), world, speed=1.0)
+    emu.start()
+    try:
+        yield emu
+    finally:
+        emu.stop()
+    assert emu.error is None, emu.error
+
+
+@asynccontextmanager
+async def pty_link(path: str, baud: int = 9600) -> AsyncIterator[PtyLink]:
+    link = PtyLink(path, baud)
+    try:
+        yield link
+    finally:
+        link.close()
+
+
+def run(coro: Any) -> Any:
+    return asyncio.run(coro)
+
+
+@pytest.mark.parametrize("model", ["lea6t", "m8t"])
+def test_profile_applied_and_verified_by_poll_back(model: str) -> None:
+    opts = ReceiverOptions()
+
+    async def scenario(path: str) -> Any:
+        async with pty_link(path) as pl:
+            info = await detect_receiver(pl.link)
+            report = await apply_profile(pl.link, build_profile(info.model, opts), opts, receiver=info,
+                                         current_baud=9600)
+            return info, report
+
+    with emulator(model) as emu:
+        info, report = run(scenario(emu.path))
+        assert emu.core.baud_rate == 115200
+        tp5 = emu.core.config.tp5
+    assert info.model == model
+    assert report.ok, [str(e) for e in report.errors]
+    assert report.baud == 115200
+    assert all(m.polled_back for m in report.messages)
+    cam = report.result("CFG-TP5 TIMEPULSE2 camera")
+    # The emulator (like a real receiver may) cleared alignToTow for the 3 s period: recorded, not an error.
+    assert cam.status == "altered" and cam.applied["alignToTow"] == 0
+    assert tp5[1]["freqPeriodLock"] == 3_000_000 and tp5[1]["pulseLenRatioLock"] == 100_000
+    assert tp5[0]["freqPeriodLock"] == 1_000_000  # TIMEPULSE kept at 1 PPS
+
+
+def test_lea6t_tp5_nak_falls_back_to_cfg_tp_on_the_emulator() -> None:
+    opts = ReceiverOptions()
+
+    async def scenario(path: str) -> Any:
+        async with pty_link(path) as pl:
+            return await apply_profile(pl.link, build_profile("lea6t", opts), opts, current_baud=9600)
+
+    with emulator("lea6t", tp5_on_u6="nak") as emu:
+        report = run(scenario(emu.path))
+        tp = dict(emu.core.config.tp)
+    assert report.ok, [str(e) for e in report.errors]
+    assert report.camera_timepulse == "TIMEPULSE"
+    assert report.result("CFG-TP TIMEPULSE camera").status == "ok"
+    assert (tp["interval"], tp["length"], tp["status"], tp["timeRef"]) == (3_000_000, 100_000, 1, 1)
+
+
+def test_m8t_table_on_a_lea6t_falls_back_to_rxm_raw() -> None:
+    opts = ReceiverOptions()
+
+    async def scenario(path: str) -> Any:
+        async with pty_link(path) as pl:
+            return await apply_profile(pl.link, build_profile("unknown", opts), opts, current_baud=9600)
+
+    with emulator("lea6t") as emu:
+        report = run(scenario(emu.path))
+        raw_rate = emu.core.rate_of((0x02, 0x10))
+    assert report.result("CFG-MSG RXM-RAWX every 1").status == "naked"
+    assert report.result("CFG-MSG RXM-RAW every 1").status == "ok" and raw_rate == 1
+
+
+def test_emulator_factory_timepulse_is_the_real_neo_m8t_dump() -> None:
+    dump = {}
+    for line in shared_file("ubx/rtkbase_U-Blox_NEO-M8T_rtkbase.txt").read_text().splitlines():
+        if line.startswith("CFG-TP5 - "):
+            body = bytes.fromhex(line.split(" - ", 1)[1])
+            dump[body[4]] = ubx_frame(body[0], body[1], body[4:])
+
+    async def scenario(path: str) -> dict[int, bytes]:
+        async with pty_link(path) as pl:
+            got = {}
+            for idx in (0, 1):
+                await pl.link.send(ubx_frame(0x06, 0x31, bytes((idx,))))
+                frame = await pl.link.wait_frame(
+                    lambda f, i=idx: (f.msg_class, f.msg_id) == (0x06, 0x31) and f.payload[:1] == bytes((i,))
+                    and len(f.payload) == 32, 1.0)
+                assert frame is not None
+                got[idx] = frame.raw
+            return got
+
+    with emulator("m8t") as emu:
+        got = run(scenario(emu.path))
+    assert got == dump
+    assert got[0][6 + 28] == 0xF7
+
+
+def test_silent_receiver_named_in_the_report_and_its_bytes_still_arrive() -> None:
+    """Nothing raised beyond MON-VER's ConfigRejected; every message named; NMEA kept flowing meanwhile."""
+    opts = ReceiverOptions(ack_timeout_s=0.2, retries=0)
+
+    async def scenario(path: str) -> Any:
+        async with pty_link(path) as pl:
+            with pytest.raises(ConfigRejected, match="MON-VER"):
+                await detect_receiver(pl.link, timeout_s=0.2, retries=0)
+            report = await apply_profile(pl.link, build_profile("m8t", opts), opts, current_baud=9600)
+            return report, len(pl.raw), len(pl.frames)
+
+    with emulator("m8t", silent=True) as emu:
+        report, n_bytes, n_frames = run(scenario(emu.path))
+    assert not report.ok
+    assert [e.message for e in report.errors] == [e.label for e in build_profile("m8t", opts).entries]
+    assert report.errors[0].field == "baudRate"
+    assert report.baud == 9600  # back at the rate the receiver still talks
+    assert n_frames > 5 and n_bytes > 300  # factory NMEA received throughout
