@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
@@ -142,6 +144,14 @@ class LambdaResult:
 
     fixed: Arr
     sq_dist: Arr
+    cond_var: Arr
+    """Conditional variances D of the decorrelated ambiguities (cycles²)."""
+
+    @property
+    def success_rate(self) -> float:
+        """Bootstrapped success rate Π(2Φ(1/(2√Dᵢ))−1), a sharp lower bound of the ILS success rate
+        (Teunissen 1998); computed in the decorrelated space."""
+        return float(np.prod([math.erf(1.0 / (2.0 * math.sqrt(2.0 * d))) for d in self.cond_var]))
 
     @property
     def ratio(self) -> float:
@@ -164,4 +174,4 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2) -> LambdaResult:
     zs = z.T @ a
     e, s = search(lmat, d, zs, m)
     f = np.linalg.solve(z.T, e)
-    return LambdaResult(np.round(f), s)
+    return LambdaResult(np.round(f), s, d)

@@ -23,6 +23,9 @@ class RtkOptions:
     hold_elmask_deg: float = 15.0
     ar_mode: str = "fix-and-hold"
     ratio_threshold: float = 3.0
+    min_success_rate: float = 0.99
+    """Bootstrapped ILS success rate a fix needs besides the ratio test (rejects fixes of ambiguities the
+    float solution has not yet determined, e.g. single-epoch code-only geometry)."""
     min_lock_epochs: int = 0
     min_fix_sats: int = 4
     min_hold_epochs: int = 5

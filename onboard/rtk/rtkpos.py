@@ -414,7 +414,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             return None
         ratio = res.ratio
         best_ratio = max(best_ratio, ratio)
-        if ratio >= o.ratio_threshold:
+        if ratio >= o.ratio_threshold and res.success_rate >= o.min_success_rate:
             ints = res.fixed[:, 0]
             try:
                 gain = np.linalg.solve(qa, qba.T).T
