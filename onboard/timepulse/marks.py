@@ -6,9 +6,11 @@ GPS time). The 2–3 s camera period cannot be aligned to the top of a second, s
 never assumed: with no trigger measurement every image says so (`pulse_reason`).
 
 Each pairing carries flags:
-- ``missed_flash``: the TIM-TM2 rising-edge `count` jumped by more than one since the previous flash
-  (edges lost: a missed flash, or a bounce inside one navigation epoch; `lost_edges` says how many);
-- ``bounce``: a second flash edge followed within `bounce_window_ns` (dropped, the first edge kept);
+- ``missed_flash``: the TIM-TM2 rising-edge `count` jumped by more than one (edges lost: a missed flash, or
+  a bounce inside one navigation epoch; `lost_edges` says how many, charged to the next flash);
+- ``bounce``: a second flash edge followed within `bounce_window_ns` (dropped, the first edge kept), or
+  edges were lost (count jump) while every measured pulse has its flash: the extra edge was a bounce, and
+  this flash time may be the bounce's (TIM-TM2 reports only the last falling edge of an epoch);
 - ``pulse_without_flash``: a measured pulse with no flash within `max_delay_ns` (and before the next pulse);
 - ``flash_without_pulse``: a flash with no measured pulse before it (only when the trigger is measured).
 
@@ -115,6 +117,37 @@ def _debounce(marks: list[CameraMark], window_ns: int) -> tuple[list[CameraMark]
     return kept, bounced
 
 
+def _lost_edges(all_marks: list[CameraMark], flashes: list[CameraMark], options: PairingOptions) -> list[int]:
+    """Edges lost before each flash, from the TIM-TM2 rising-edge counter.
+
+    With the flash channel's rising edges (contact opening) available, each reported rising edge carries the
+    count including itself, so consecutive rising marks differ by exactly 1 unless edges were lost; the loss
+    is charged to the first flash after the earlier rising edge. Without them, consecutive flash (falling)
+    reports are compared (less exact: a contact opening in the epoch after its flash shifts one count).
+    """
+    lost = [0] * len(flashes)
+    rising = sorted((m for m in all_marks if m.source == "tim-tm2" and m.channel == options.flash_channel
+                     and m.edge != options.flash_edge and m.valid and m.time is not None),
+                    key=lambda m: m.time)  # type: ignore[arg-type, return-value]
+    if rising:
+        for a, b in zip(rising, rising[1:]):
+            jump = (b.count - a.count) % COUNT_MODULO - 1
+            if jump > 0:
+                assert a.time is not None
+                after = next((i for i, f in enumerate(flashes) if f.time > a.time), None)  # type: ignore[operator]
+                if after is not None:
+                    lost[after] += jump
+        return lost
+    prev_count: int | None = None
+    for i, mark in enumerate(flashes):
+        if mark.source != "tim-tm2":
+            continue
+        if prev_count is not None:
+            lost[i] = max(0, (mark.count - prev_count) % COUNT_MODULO - 1)
+        prev_count = mark.count
+    return lost
+
+
 def pair_marks(marks: Iterable[CameraMark], options: PairingOptions = PairingOptions()) -> list[ImagePairing]:
     """Pair trigger pulses with flashes, in time order; see the module docstring for the flags.
 
@@ -125,15 +158,7 @@ def pair_marks(marks: Iterable[CameraMark], options: PairingOptions = PairingOpt
     flashes = sorted((m for m in all_marks if _usable(m, options.flash_channel, options.flash_edge)),
                      key=lambda m: m.time)  # type: ignore[arg-type, return-value]
     flashes, flash_bounced = _debounce(flashes, options.bounce_window_ns)
-    lost: list[int] = []
-    prev_count: int | None = None
-    for mark in flashes:
-        jump = 0
-        if mark.source == "tim-tm2" and prev_count is not None:
-            jump = max(0, (mark.count - prev_count) % COUNT_MODULO - 1)
-        lost.append(jump)
-        if mark.source == "tim-tm2":
-            prev_count = mark.count
+    lost = _lost_edges(all_marks, flashes, options)
 
     def flash_flags(i: int) -> list[str]:
         flags = []
@@ -196,7 +221,26 @@ def pair_marks(marks: Iterable[CameraMark], options: PairingOptions = PairingOpt
         return t.total_ns
 
     out.sort(key=when)
+    if options.trigger_measured:
+        out = _lost_edges_to_bounces(out)
     return [dataclasses.replace(p, index=i) for i, p in enumerate(out)]
+
+
+def _lost_edges_to_bounces(pairs: list[ImagePairing]) -> list[ImagePairing]:
+    """With measured pulses a missed flash shows as a pulse without flash; lost edges without one are bounces.
+
+    Such a flash time may be the bounce's edge (TIM-TM2 reports the last falling edge of the epoch), which the
+    BOUNCE flag tells the adjustment.
+    """
+    fixed: list[ImagePairing] = []
+    for i, p in enumerate(pairs):
+        if MISSED_FLASH in p.flags and p.pulse_time is not None:
+            prev = pairs[i - 1] if i > 0 else None
+            if prev is None or PULSE_WITHOUT_FLASH not in prev.flags:
+                flags = tuple(f for f in p.flags if f != MISSED_FLASH)
+                p = dataclasses.replace(p, flags=flags if BOUNCE in flags else (*flags, BOUNCE))
+        fixed.append(p)
+    return fixed
 
 
 # --- GPIO edge times --------------------------------------------------------------------------------------

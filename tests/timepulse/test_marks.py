@@ -77,8 +77,9 @@ def test_bounce_within_the_window_is_flagged_and_dropped() -> None:
     pairs = pair_marks(marks)
     assert len(pairs) == 3
     assert pairs[1].flags == (BOUNCE,) and pairs[1].delay_ns == 60_000_000  # first edge kept
-    # The bounce's rising edge also advanced the counter: flash 2 shows one lost edge.
-    assert pairs[2].flags == (MISSED_FLASH,) and pairs[2].lost_edges == 1
+    # The bounce's rising edge also advanced the counter: flash 2 shows one lost edge, and since every pulse
+    # has its flash, the lost edge is recognised as a bounce, not a missed flash.
+    assert pairs[2].flags == (BOUNCE,) and pairs[2].lost_edges == 1
     wider = pair_marks(marks, PairingOptions(bounce_window_ns=1_000_000))
     assert FLASH_WITHOUT_PULSE in wider[2].flags  # with a 1 ms window the bounce is a flash of its own
 
@@ -170,3 +171,30 @@ def test_timepulse_record_says_when_there_is_no_trigger_measurement() -> None:
 def test_malformed_records_are_clear_errors(record: dict[str, object], message: str) -> None:
     with pytest.raises(InputError, match=message):
         parse_records([record])
+
+
+def _contact_open(k: int, delay_ns: int, count: int) -> CameraMark:
+    """The hot-shoe contact opening 4 ms after flash k: the rising edge TIM-TM2 counts."""
+    return CameraMark(0, "rising", count, T0.add_ns(PHASE_NS + k * PERIOD_NS + delay_ns + 4_000_000), 15, 1, True)
+
+
+def test_rising_edge_counts_avoid_a_false_missed_flash() -> None:
+    """Flash 1's contact opened in the next epoch, so its falling report still shows count 11: not a loss."""
+    marks = [pulse(k) for k in range(3)]
+    marks += [flash(0, 6e7, 11), flash(1, 6e7, 11), flash(2, 6e7, 13)]
+    marks += [_contact_open(k, 6e7, 11 + k) for k in range(3)]
+    assert [p.flags for p in pair_marks(marks)] == [(), (), ()]
+    # Falling reports alone would have charged one lost edge to flash 2 (the less exact fallback rule).
+    falling_only = [m for m in marks if m.edge == "falling" or m.channel == 1]
+    assert [p.lost_edges for p in pair_marks(falling_only)] == [0, 0, 1]
+
+
+def test_rising_edge_count_jump_is_charged_to_the_next_flash() -> None:
+    marks = [pulse(k) for k in range(3)] + [flash(k, 6e7, 11 + 2 * (k > 0) + k) for k in range(3)]
+    marks += [_contact_open(0, 6e7, 11), _contact_open(1, 6e7, 13), _contact_open(2, 6e7, 14)]
+    pairs = pair_marks(marks)
+    # Every pulse got its flash, so the lost edge was a bounce (its time may be the bounce's) ...
+    assert [p.lost_edges for p in pairs] == [0, 1, 0] and pairs[1].flags == (BOUNCE,)
+    # ... and without trigger measurement it can only be called a possibly missed flash.
+    unmeasured = pair_marks(marks, PairingOptions(trigger_measured=False))
+    assert unmeasured[1].flags == (MISSED_FLASH,)
