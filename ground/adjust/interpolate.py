@@ -23,12 +23,13 @@ NS_PER_S = 1_000_000_000
 class AntennaSamples:
     """Antenna states at event times, in local ENU (m, m/s) about `origin_ecef_m`.
 
-    `pos_enu_m`, `vel_enu_m_s`, `sigma_enu_m` (n,3) (NaN where not valid), `quality` (n,) worst RTKLIB q of
+    `pos_enu_m`, `vel_enu_m_s`, `acc_enu_m_s2`, `sigma_enu_m` (n,3) (NaN where not valid), `quality` (n,) worst RTKLIB q of
     the two bracketing epochs (0 when not valid), `valid` (n,) bool, `reason` (n,) '' or why the event was refused.
     """
 
     pos_enu_m: npt.NDArray[np.float64]
     vel_enu_m_s: npt.NDArray[np.float64]
+    acc_enu_m_s2: npt.NDArray[np.float64]  # second derivative of the Hermite cubic (piecewise linear)
     sigma_enu_m: npt.NDArray[np.float64]
     quality: npt.NDArray[np.int8]
     valid: npt.NDArray[np.bool_]
@@ -127,11 +128,14 @@ def interpolate_antenna(
     hh = h_s[:, None]
     pos = h00[:, None] * p0 + (h10[:, None] * hh) * v0 + h01[:, None] * p1 + (h11[:, None] * hh) * v1
     vel = (d00[:, None] * p0 + (d10[:, None] * hh) * v0 + d01[:, None] * p1 + (d11[:, None] * hh) * v1) / hh
+    a00, a10, a01, a11 = 12 * s - 6, 6 * s - 4, -12 * s + 6, 6 * s - 2
+    acc = (a00[:, None] * p0 + (a10[:, None] * hh) * v0 + a01[:, None] * p1 + (a11[:, None] * hh) * v1) / hh**2
     var = (1 - s)[:, None] * var_enu[kc] + s[:, None] * var_enu[kc + 1]
     quality = np.maximum(q[kc], q[kc + 1]).astype(np.int8)
     pos[~valid] = np.nan
     vel[~valid] = np.nan
+    acc[~valid] = np.nan
     sig = np.sqrt(var)
     sig[~valid] = np.nan
     quality[~valid] = 0
-    return AntennaSamples(pos, vel, sig, quality, valid, tuple(reasons), origin)
+    return AntennaSamples(pos, vel, acc, sig, quality, valid, tuple(reasons), origin)

@@ -2,12 +2,13 @@
 
 Model (shared/docs/adjustment.md), per image i, in a local ENU frame (metres)::
 
-    e_i = T + μ·R·C_i + (R·R_i)·O − G_i − V_i·t_d            (3 residuals)
+    e_i = T + μ·R·C_i + (R·R_i)·O − G_i − V_i·t_d − ½·A_i·t_d²     (3 residuals)
 
 S(x) = T + μ·R·x maps the bundle adjustment's relative frame into ENU; `C_i`, `R_i` are the camera centre and
 camera→relative rotation (camera axes x right, y down, z forward); O is antenna phase centre minus optical
 centre in the camera frame (antenna = C + R_cam→world·O, Daakir 2016 eq. 9); G_i, V_i are the antenna position
-and velocity interpolated at the event time; t_d is the event→exposure delay (s).
+velocity (and acceleration, a second-order term that matters for 60–90 ms trigger delays while the drone
+speeds up) interpolated at the event time; t_d is the event→exposure delay (s).
 GCP j: S(P_rel) − P_ground = 0 (weighted). Check points never enter the adjustment.
 
 This module holds the data types only; `ground.adjust.solve.adjust` does the work.
@@ -135,6 +136,8 @@ class AdjustmentProblem:
     quality: npt.NDArray[np.int8]
     control: tuple[ControlPoint, ...] = ()
     origin_ecef_m: npt.NDArray[np.float64] | None = None
+    #: antenna acceleration (n,3) m/s² at the event (second-order delay term ½·A·t_d²); None = zero
+    acceleration_enu_m_s2: npt.NDArray[np.float64] | None = None
     #: images left out while building the problem, with the reason (no event, outside the trajectory, gap …)
     skipped: tuple[tuple[str, str], ...] = ()
 
@@ -151,6 +154,7 @@ class AdjustmentProblem:
         quality: npt.ArrayLike | None = None,
         control: list[ControlPoint] | tuple[ControlPoint, ...] = (),
         origin_ecef_m: npt.ArrayLike | None = None,
+        acceleration_enu_m_s2: npt.ArrayLike | None = None,
     ) -> AdjustmentProblem:
         """Validate shapes and build a problem; σ may be a scalar or (n,3). Raises ValueError on bad shapes."""
         n = len(images)
@@ -172,7 +176,12 @@ class AdjustmentProblem:
         if np.any(s <= 0) or not np.all(np.isfinite(s)):
             raise ValueError("antenna σ must be positive and finite")
         origin = None if origin_ecef_m is None else np.asarray(origin_ecef_m, dtype=float)
-        return cls(tuple(images), c, r, g, v, s, t, q, tuple(control), origin)
+        acc = None
+        if acceleration_enu_m_s2 is not None:
+            acc = np.asarray(acceleration_enu_m_s2, dtype=float).reshape(-1, 3)
+            if acc.shape[0] != n or not np.all(np.isfinite(acc)):
+                raise ValueError("acceleration_enu_m_s2 must be finite with one row per image")
+        return cls(tuple(images), c, r, g, v, s, t, q, tuple(control), origin, acc)
 
     @property
     def gcps(self) -> tuple[ControlPoint, ...]:

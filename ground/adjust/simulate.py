@@ -29,10 +29,10 @@ _DT_S = 0.01  # integration step of the flight dynamics
 
 @dataclass(frozen=True)
 class BlockOptions:
-    """What to simulate (units in names). Defaults: a 6-line block at 50 m, 4–5 m/s, u-blox RTK-like noise."""
+    """What to simulate (units in names). Defaults: an 8-line block at 50 m, 4–5 m/s, u-blox RTK-like noise."""
 
-    n_lines: int = 6
-    line_length_m: float = 120.0
+    n_lines: int = 8
+    line_length_m: float = 150.0
     line_spacing_m: float = 20.0
     altitude_m: float = 50.0
     speed_range_m_s: tuple[float, float] = (4.0, 5.0)
@@ -40,7 +40,7 @@ class BlockOptions:
     turn_speed_m_s: float = 3.0
     climb_rate_m_s: float = 2.0
     lag_time_constant_s: float = 0.6
-    photo_interval_s: float = 1.0
+    photo_interval_s: float = 0.8
     photos_in_climb_descent: bool = True
     heading_mode: Literal["track", "fixed"] = "track"
     wobble_deg: float = 3.0
@@ -48,18 +48,18 @@ class BlockOptions:
     delay_s: float = 0.064
     event_kind: Literal["trigger", "flash"] = "trigger"
     trajectory_rate_hz: float = 5.0
-    gnss_white_sigma_m: tuple[float, float, float] = (0.007, 0.007, 0.012)
-    gnss_correlated_sigma_m: tuple[float, float, float] = (0.004, 0.004, 0.007)
+    gnss_white_sigma_m: tuple[float, float, float] = (0.005, 0.005, 0.009)
+    gnss_correlated_sigma_m: tuple[float, float, float] = (0.003, 0.003, 0.005)
     gnss_correlation_time_s: float = 30.0
     gnss_bias_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  # constant offset (float ambiguities, datum)
     velocity_sigma_m_s: float = 0.02
     with_velocities: bool = True  # False: the trajectory has no velocities (central differences are used)
-    camera_centre_noise_m: float = 0.01
+    camera_centre_noise_m: float = 0.0058  # per axis: ~1 cm in 3D
     camera_angle_noise_deg: float = 0.01
     n_ground_points: int = 12
     gcp_names: tuple[str, ...] = ()  # which ground points are GCPs (the others are check points)
-    ground_sigma_m: float = 0.005  # survey σ of the ground coordinates
-    rel_point_noise_m: float = 0.005  # bundle adjustment noise of ground points, ENU m
+    ground_sigma_m: float = 0.003  # survey σ of the ground coordinates
+    rel_point_noise_m: float = 0.003  # bundle adjustment noise of ground points, ENU m
     origin_llh_deg_m: tuple[float, float, float] = (48.5, -3.5, 80.0)
     gps_week: int = 2400
     start_tow_s: float = 302400.0

@@ -91,12 +91,9 @@ def build_problem(
         ant.quality[keep],
         tuple(control),
         ant.origin_ecef_m,
+        ant.acc_enu_m_s2[keep],
     )
-    return AdjustmentProblem(
-        base.images, base.centre_rel, base.r_cam_to_rel, base.antenna_enu_m, base.velocity_enu_m_s,
-        base.antenna_sigma_enu_m, base.event_time_s, base.quality, base.control, base.origin_ecef_m,
-        tuple(skipped),
-    )  # fmt: skip
+    return replace(base, skipped=tuple(skipped))
 
 
 @dataclass
@@ -107,6 +104,7 @@ class _Data:
     r: Arr
     g: Arr
     v: Arr
+    a: Arr
     sig: Arr  # combined σ (antenna ⊕ camera centre), ENU m
     pairs: RelativePairs | None
 
@@ -203,11 +201,12 @@ class _Model:
             jac[:, :, 7:10] = np.einsum("ij,njk->nik", rr, r_i)
         return p[_T] + rz, jac
 
-    def image_residuals(self, p: Arr, c: Arr, r: Arr, g: Arr, v: Arr) -> tuple[Arr, Arr]:
+    def image_residuals(self, p: Arr, c: Arr, r: Arr, g: Arr, v: Arr, a: Arr) -> tuple[Arr, Arr]:
         """Unwhitened e_i (n,3) and ∂e_i/∂p (n,3,11)."""
         pred, jac = self._points(p, self.r0, c, r)
-        jac[:, :, 10] = -v
-        return pred - g - v * p[_TD], jac
+        td = p[_TD]
+        jac[:, :, 10] = -v - a * td
+        return pred - g - v * td - 0.5 * a * td * td, jac
 
     def residuals_and_jacobian(self, x: Arr) -> tuple[Arr, Arr]:
         p = self.full(x)
@@ -215,7 +214,7 @@ class _Model:
         assert d is not None
         blocks: list[Arr] = []
         jblocks: list[Arr] = []
-        e, je = self.image_residuals(p, d.c, d.r, d.g, d.v)
+        e, je = self.image_residuals(p, d.c, d.r, d.g, d.v, d.a)
         if d.pairs is None:
             blocks.append((e / d.sig).ravel())
             jblocks.append((je / d.sig[:, :, None]).reshape(-1, 11))
@@ -305,17 +304,25 @@ def _covariance(jac: Arr, res: Arr, names: tuple[str, ...]) -> tuple[float, Arr,
     dof = m - n
     sigma0 = float(np.sqrt(res @ res / dof)) if dof > 0 else float("nan")
     norms = np.linalg.norm(jac, axis=0)
-    norms[norms == 0] = 1.0
+    norms[norms < 1e-12 * max(float(norms.max()), 1e-300)] = 1.0  # an all-zero column stays ~0: singular
     _, sv, vt = np.linalg.svd(jac / norms, full_matrices=False)
     smin = sv[-1] if sv[-1] > 0 else np.finfo(float).tiny
     cond = float(sv[0] / smin)
-    inv_sv2 = np.where(sv > sv[0] * 1e-13, 1.0 / np.maximum(sv, np.finfo(float).tiny) ** 2, 0.0)
+    singular = sv < sv[0] * 1e-10
+    inv_sv2 = np.where(singular, 0.0, 1.0 / np.maximum(sv, np.finfo(float).tiny) ** 2)
     cov_n = (vt.T * inv_sv2) @ vt
     cov = cov_n / np.outer(norms, norms) * ((sigma0**2) if np.isfinite(sigma0) else 1.0)
-    sd = np.sqrt(np.maximum(np.diag(cov), 0))
+    if np.any(singular):
+        # a null direction of J: the parameters in it are not determinable, their σ is infinite (not 0)
+        involved = np.any(np.abs(vt[singular]) > 0.05, axis=0)
+        cov[involved, :] = np.nan
+        cov[:, involved] = np.nan
+        cov[involved, involved] = np.inf
+    sd = np.sqrt(np.maximum(np.nan_to_num(np.diag(cov), nan=np.inf), 0))
     with np.errstate(divide="ignore", invalid="ignore"):
         corr = cov / np.outer(sd, sd)
-    corr = np.nan_to_num(corr)
+    corr = np.nan_to_num(corr, nan=0.0, posinf=0.0, neginf=0.0)
+    np.fill_diagonal(corr, 1.0)
     vec = vt[-1]
     order = np.argsort(-np.abs(vec))
     terms = [f"{vec[k]:+.2f}·{names[k]}" for k in order if abs(vec[k]) >= 0.2]
@@ -356,6 +363,7 @@ def adjust(problem: AdjustmentProblem, options: AdjustmentOptions | None = None)
         base[_TD] = opt.delay.value_s
     model = _Model(opt, rot0, base, problem.gcps, c_bar, g_bar)
     sig_all = np.sqrt(problem.antenna_sigma_enu_m**2 + opt.camera_centre_sigma_m**2)
+    acc = np.zeros((n_img, 3)) if problem.acceleration_enu_m_s2 is None else problem.acceleration_enu_m_s2
     names = tuple(n for n, a in zip(PARAMETER_NAMES, model.active, strict=True) if a)
 
     def set_data(mask: npt.NDArray[np.bool_]) -> None:
@@ -366,7 +374,7 @@ def adjust(problem: AdjustmentProblem, options: AdjustmentOptions | None = None)
                 raise AdjustmentRefused(f"relative control: no consecutive image pair closer than {opt.max_pair_dt_s} s")
         model.data = _Data(
             problem.centre_rel[mask], problem.r_cam_to_rel[mask], problem.antenna_enu_m[mask],
-            problem.velocity_enu_m_s[mask], sig_all[mask], pairs,
+            problem.velocity_enu_m_s[mask], acc[mask], sig_all[mask], pairs,
         )  # fmt: skip
 
     def solve(x0: Arr, loss: str) -> Arr:
@@ -394,7 +402,7 @@ def adjust(problem: AdjustmentProblem, options: AdjustmentOptions | None = None)
 
     # outliers: per-image χ² at the robust solution, normalised by a robust σ̂₀²
     e_all, _ = model.image_residuals(p, problem.centre_rel, problem.r_cam_to_rel, problem.antenna_enu_m,
-                                     problem.velocity_enu_m_s)  # fmt: skip
+                                     problem.velocity_enu_m_s, acc)  # fmt: skip
     if opt.relative_control:
         chi2 = _relative_image_chi2(e_all, problem.event_time_s, sig_all, opt.max_pair_dt_s)
     else:
@@ -419,13 +427,14 @@ def adjust(problem: AdjustmentProblem, options: AdjustmentOptions | None = None)
     inflation = 1.0
     if opt.inflate_for_time_correlation and not opt.relative_control and cov.size:
         e_in, _ = model.image_residuals(p, problem.centre_rel[inlier], problem.r_cam_to_rel[inlier],
-                                        problem.antenna_enu_m[inlier], problem.velocity_enu_m_s[inlier])  # fmt: skip
+                                        problem.antenna_enu_m[inlier], problem.velocity_enu_m_s[inlier],
+                                        acc[inlier])  # fmt: skip
         inflation = variance_inflation(e_in / sig_all[inlier], problem.event_time_s[inlier], len(names),
                                        opt.segment_gap_s)  # fmt: skip
         cov = cov * inflation
     rot = model.rotation(p)
     sd_full = np.zeros(11)
-    sd_full[model.active] = np.sqrt(np.maximum(np.diag(cov), 0)) if cov.size else 0.0
+    sd_full[model.active] = np.sqrt(np.maximum(np.nan_to_num(np.diag(cov), nan=np.inf), 0)) if cov.size else 0.0
     cov_full = np.zeros((11, 11))
     if cov.size:
         cov_full[np.ix_(model.active, model.active)] = cov
@@ -433,7 +442,7 @@ def adjust(problem: AdjustmentProblem, options: AdjustmentOptions | None = None)
     translation_sigma = np.sqrt(np.maximum(np.diag(jt @ cov_full @ jt.T), 0))
 
     e_all, _ = model.image_residuals(p, problem.centre_rel, problem.r_cam_to_rel, problem.antenna_enu_m,
-                                     problem.velocity_enu_m_s)  # fmt: skip
+                                     problem.velocity_enu_m_s, acc)  # fmt: skip
     checkpoints, rms, mean, std = _check_points(model, p, cov_full, problem.checks)
     gcp_res: dict[str, tuple[float, float, float]] = {}
     if problem.gcps:
@@ -597,7 +606,9 @@ def _warnings(
         for b in range(a + 1, len(names)):
             if abs(corr[a, b]) > thr:
                 out.append(f"|ρ({names[a]}, {names[b]})| = {abs(corr[a, b]):.3f} > {thr}")
-    if cond > 1e6:
+    if cond > 1e10:
+        out.append(f"not determinable from these data: {weakest} (condition {cond:.2e}); σ reported as infinite")
+    elif cond > 1e6:
         out.append(f"normal equations nearly singular (condition {cond:.2e}); weakest combination: {weakest}")
     not_fixed = int(np.sum(problem.quality[inlier] != 1))
     if not_fixed:
