@@ -6,6 +6,7 @@ The first stdout line is the pty slave path (flushed), so a parent process can r
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import signal
 import sys
@@ -15,6 +16,7 @@ from types import FrameType
 
 from hil_sim.faults import FaultOptions
 from hil_sim.receiver import MODELS, ReceiverOptions
+from onboard.errors import InputError
 
 log = logging.getLogger("hil_sim")
 
@@ -39,6 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--link", help="stable symlink to the current pty slave (re-pointed after port loss)")
     r.add_argument("--receiver", choices=("rover", "base"), default="rover")
     r.add_argument("--nav", help="RINEX navigation file of the world (default: the scenario's)")
+    r.add_argument("--duration", type=float, default=None,
+                   help="simulated span in s (default: the scenario's); afterwards no more measurements")
     g = r.add_mutually_exclusive_group()
     g.add_argument("--clear-align-to-tow", dest="align", action="store_const", const="clear", default="clear",
                    help="clear alignToTow for periods that do not divide 1 s (default)")
@@ -68,11 +72,20 @@ def run_receiver(args: argparse.Namespace) -> int:
     overrides: dict[str, object] = {"seed": args.seed}
     if args.nav:
         overrides["nav_path"] = args.nav
+    if args.duration is not None:
+        overrides["duration_s"] = args.duration
     scenario = Scenario.default(model=args.model, **overrides)
-    world = World(scenario)
     valid_after = args.time_valid_after
     if valid_after is None:
         valid_after = scenario.camera.valid_after_s
+    else:  # the world's camera suppresses pulses before the same instant
+        scenario = dataclasses.replace(scenario, camera=dataclasses.replace(scenario.camera,
+                                                                           valid_after_s=valid_after))
+    try:
+        world = World(scenario)
+    except InputError as exc:
+        print(f"hil_sim: {exc}", file=sys.stderr)
+        return 2
     options = ReceiverOptions(
         align_to_tow=args.align, rawx_on_u6=args.rawx_on_u6, tp5_on_u6=args.tp5_on_u6, silent=args.silent,
         ack_invalid_rates=args.ack_invalid_rates, trigger_extint=args.trigger_extint,

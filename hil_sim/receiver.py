@@ -311,6 +311,9 @@ class ReceiverCore:
         self._tracked: list[int] = []
         self._ephs: list[Ephemeris] | None = None
         self._rng = np.random.default_rng(options.faults.seed + 17)
+        end = getattr(world, "end", None)
+        self.t_end: GpsTime | None = end if isinstance(end, GpsTime) else None
+        self._ended_logged = False
         self._handlers: dict[tuple[int, int], Callable[[bytes], list[bytes]]] = {
             (0x06, 0x00): self._cfg_prt, (0x06, 0x01): self._cfg_msg, (0x06, 0x08): self._cfg_rate,
             (0x06, 0x31): self._cfg_tp5, (0x06, 0x07): self._cfg_tp, (0x06, 0x09): self._cfg_cfg,
@@ -561,6 +564,12 @@ class ReceiverCore:
 
     def _epoch(self, t: GpsTime) -> list[bytes]:
         out: list[bytes] = []
+        if self.t_end is not None and t > self.t_end:
+            # the world is simulated only over its scenario: afterwards the receiver lost all signals
+            if not self._ended_logged:
+                log.warning("scenario ended at %s: no more measurements", self.t_end)
+                self._ended_logged = True
+            return out
         self._epoch_index += 1
         idx = self._epoch_index
         valid = self.time_valid(t)
@@ -631,6 +640,8 @@ class ReceiverCore:
     def _subframes_until(self, t: GpsTime) -> list[bytes]:
         """Subframes 1–3 of every tracked satellite that ended in (last epoch, t]."""
         out: list[bytes] = []
+        if self.t_end is not None and t > self.t_end:
+            return out
         six = 6 * NS_PER_S
         since = self._sf_last if self._sf_last is not None else t
         self._sf_last = t
