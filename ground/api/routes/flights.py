@@ -244,7 +244,8 @@ def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str
         sess = s.scalar(select(UploadSession).where(UploadSession.file_id == f.id, UploadSession.client == client)
                         .order_by(UploadSession.id.desc()))
         if sess is None or sess.start_offset + sess.bytes_received != offset:
-            sess = UploadSession(file_id=f.id, client=client, start_offset=offset)
+            sess = UploadSession(file_id=f.id, client=client, start_offset=offset, bytes_received=0, chunks=0,
+                                 rejected_chunks=0)
             s.add(sess)
         try:
             check_sha256(claimed)

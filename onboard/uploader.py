@@ -1,0 +1,254 @@
+"""Resumable, checksummed upload of a recorded flight to the ground API (httpx).
+
+Reads the flight's `manifest.json` (onboard.logger.journal), checks every segment against the SHA-256 the
+recorder wrote (a segment that no longer matches is reported, never uploaded as if good), hashes the other
+files of the flight folder, creates the flight on the server (idempotent: same name and files re-open it),
+then for each file asks the server how many bytes it holds (HEAD → Upload-Offset) and sends the rest in
+chunks, each with its own SHA-256. Network errors and rejected chunks are retried with back-off; a 409 means
+the server's offset moved: ask again and continue from there. The server verifies the whole file at the end.
+
+Usage: `python -m onboard.uploader --url http://ground:8600 [--token-file F] FLIGHT_DIR` (token also from
+$DIRECTGEO_TOKEN).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import logging
+import os
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+from urllib.parse import quote
+
+import httpx
+
+from onboard.errors import InputError, OnboardError
+
+log = logging.getLogger(__name__)
+
+CHUNK_SHA_HEADER = "X-Chunk-SHA256"
+OFFSET_HEADER = "Upload-Offset"
+#: files of a flight folder that are never uploaded (temporary files of the recorder)
+SKIP_SUFFIXES = (".tmp", ".part")
+#: manifest roles by file name (the ground API queues the adjustment when trajectory+events+orientations exist)
+ROLE_BY_NAME = {"events.jsonl": "events", "manifest.json": "manifest"}
+ROLE_BY_SUFFIX = {".ubx": "raw", ".idx": "index", ".pos": "trajectory"}
+
+
+class UploadError(OnboardError):
+    """The upload cannot complete (server refusal, corrupted local file, retries exhausted)."""
+
+
+@dataclass(frozen=True)
+class UploaderOptions:
+    """Chunking and retry policy."""
+
+    chunk_bytes: int = 4 * 1024 * 1024
+    max_retries: int = 8
+    backoff_initial_s: float = 0.5
+    backoff_max_s: float = 30.0
+    timeout_s: float = 60.0
+
+
+@dataclass
+class FileEntry:
+    """A file to upload: name in the flight folder, size, SHA-256, role."""
+
+    name: str
+    size: int
+    sha256: str
+    role: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """Manifest entry as the API expects it."""
+        return {"name": self.name, "size": self.size, "sha256": self.sha256, "role": self.role}
+
+
+@dataclass
+class UploadReport:
+    """What an upload did: flight id, bytes sent (this run), per-file final state, retries used."""
+
+    flight_id: str
+    bytes_sent: int = 0
+    chunks_sent: int = 0
+    retries: int = 0
+    files: dict[str, str] = field(default_factory=dict)
+
+
+def sha256_file(path: Path) -> str:
+    """SHA-256 (hex) of a file, read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def build_upload_manifest(flight_dir: str | Path, roles: dict[str, str] | None = None) -> tuple[str, list[FileEntry]]:
+    """(flight name, files) for a flight folder.
+
+    Segments listed in the onboard manifest must still have the size and SHA-256 recorded there (else
+    `UploadError`: the local copy is damaged); other regular files are hashed now. `roles` adds or overrides
+    roles by file name (e.g. {"poses.csv": "orientations"}).
+    """
+    from onboard.logger.journal import MANIFEST_NAME, read_manifest
+
+    d = Path(flight_dir)
+    if not d.is_dir():
+        raise InputError(f"{d} is not a flight folder")
+    manifest = read_manifest(d)
+    if manifest is None and (d / MANIFEST_NAME).exists():
+        raise UploadError(f"{d / MANIFEST_NAME} is unreadable; let the recorder rebuild it before uploading")
+    recorded = {s.name: s for s in manifest.segments} if manifest is not None else {}
+    name = manifest.flight if manifest is not None else d.name
+    entries: list[FileEntry] = []
+    for p in sorted(d.iterdir()):
+        if not p.is_file() or p.name.startswith(".") or p.name.endswith(SKIP_SUFFIXES):
+            continue
+        size, digest = p.stat().st_size, sha256_file(p)
+        seg = recorded.get(p.name)
+        if seg is not None and (seg.bytes != size or seg.sha256 != digest):
+            raise UploadError(f"{p}: {size} bytes sha256 {digest[:12]}… but the manifest recorded {seg.bytes} bytes "
+                              f"sha256 {seg.sha256[:12]}…: local copy damaged, not uploaded")
+        role = (roles or {}).get(p.name) or ROLE_BY_NAME.get(p.name) or ROLE_BY_SUFFIX.get(p.suffix)
+        entries.append(FileEntry(p.name, size, digest, role))
+    missing = set(recorded) - {e.name for e in entries}
+    if missing:
+        raise UploadError(f"segments listed in the manifest are missing: {', '.join(sorted(missing))}")
+    if not entries:
+        raise InputError(f"{d} holds no file to upload")
+    return name, entries
+
+
+class Uploader:
+    """Uploads flight folders to one ground API with a bearer token."""
+
+    def __init__(self, base_url: str, token: str, options: UploaderOptions | None = None,
+                 client: httpx.Client | None = None, sleep: Callable[[float], None] = time.sleep) -> None:
+        self.options = options or UploaderOptions()
+        self.client = client or httpx.Client(base_url=base_url, timeout=self.options.timeout_s)
+        self.headers = {"Authorization": f"Bearer {token}"}
+        self.sleep = sleep
+
+    def close(self) -> None:
+        """Close the HTTP client."""
+        self.client.close()
+
+    def _request(self, report: UploadReport, method: str, url: str, **kw: Any) -> httpx.Response:
+        """One request with retries on transport errors and 5xx; other statuses are returned to the caller."""
+        delay = self.options.backoff_initial_s
+        headers = {**self.headers, **kw.pop("headers", {})}
+        for attempt in range(self.options.max_retries + 1):
+            try:
+                r = self.client.request(method, url, headers=headers, **kw)
+                if r.status_code < 500:
+                    return r
+                err = f"HTTP {r.status_code}: {r.text[:200]}"
+            except httpx.TransportError as exc:
+                err = f"{type(exc).__name__}: {exc}"
+            if attempt == self.options.max_retries:
+                raise UploadError(f"{method} {url} failed after {attempt + 1} attempts: {err}")
+            report.retries += 1
+            log.warning("%s %s: %s; retry in %.1f s", method, url, err, delay)
+            self.sleep(delay)
+            delay = min(delay * 2, self.options.backoff_max_s)
+        raise AssertionError("unreachable")
+
+    def upload_flight(self, flight_dir: str | Path, roles: dict[str, str] | None = None) -> UploadReport:
+        """Upload (or resume uploading) a flight folder; returns when the server holds every file verified."""
+        d = Path(flight_dir)
+        name, entries = build_upload_manifest(d, roles)
+        report = UploadReport(flight_id="")
+        r = self._request(report, "POST", "/flights", json={"name": name, "files": [e.to_json() for e in entries]})
+        if r.status_code not in (200, 201):
+            raise UploadError(f"server refused flight {name}: HTTP {r.status_code} {r.text[:300]}")
+        flight = r.json()
+        report.flight_id = flight["id"]
+        state = {f["name"]: f for f in flight["files"]}
+        for e in entries:
+            if state.get(e.name, {}).get("status") == "complete":
+                report.files[e.name] = "complete"
+                continue
+            self._upload_file(report, d / e.name, e)
+        return report
+
+    def _offset(self, report: UploadReport, url: str) -> int:
+        r = self._request(report, "HEAD", url)
+        if r.status_code != 200:
+            raise UploadError(f"HEAD {url}: HTTP {r.status_code}")
+        return int(r.headers[OFFSET_HEADER])
+
+    def _upload_file(self, report: UploadReport, path: Path, entry: FileEntry) -> None:
+        url = f"/flights/{report.flight_id}/files/{quote(entry.name, safe='')}"
+        offset = self._offset(report, url)
+        rejected = 0
+        with open(path, "rb") as fh:
+            while True:
+                if offset >= entry.size and entry.size > 0:
+                    break
+                fh.seek(offset)
+                chunk = fh.read(self.options.chunk_bytes)
+                r = self._request(report, "PUT", url, params={"offset": offset}, content=chunk,
+                                  headers={CHUNK_SHA_HEADER: hashlib.sha256(chunk).hexdigest(),
+                                           "Content-Type": "application/octet-stream"})
+                if r.status_code == 200:
+                    body = r.json()
+                    report.bytes_sent += len(chunk)
+                    report.chunks_sent += 1
+                    offset = int(body["received"])
+                    if body["status"] == "complete":
+                        break
+                    continue
+                if r.status_code == 409 and "already complete" in r.text:
+                    break
+                if r.status_code in (409, 422) and rejected < self.options.max_retries:
+                    # offset moved (another run) or the chunk arrived damaged / whole file restarted: ask again
+                    rejected += 1
+                    report.retries += 1
+                    log.warning("%s at offset %d: HTTP %d %s; re-reading the server offset", entry.name, offset,
+                                r.status_code, r.text[:200])
+                    offset = self._offset(report, url)
+                    continue
+                raise UploadError(f"{entry.name}: HTTP {r.status_code} {r.text[:300]}")
+        report.files[entry.name] = "complete"
+        log.info("%s uploaded (%d bytes)", entry.name, entry.size)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m onboard.uploader`: upload one or more flight folders; exit 0 when all are complete."""
+    p = argparse.ArgumentParser(prog="python -m onboard.uploader", description=__doc__.splitlines()[0])
+    p.add_argument("--url", required=True, help="ground API base URL")
+    p.add_argument("--token-file", type=Path, help="file holding the API token (else $DIRECTGEO_TOKEN)")
+    p.add_argument("--chunk-mib", type=float, default=4.0)
+    p.add_argument("--role", action="append", default=[], metavar="NAME=ROLE",
+                   help="role of a file, e.g. poses.csv=orientations (repeatable)")
+    p.add_argument("flights", nargs="+", type=Path)
+    args = p.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    token = (args.token_file.read_text().strip() if args.token_file else os.environ.get("DIRECTGEO_TOKEN", ""))
+    if not token:
+        print("error: no token (--token-file or $DIRECTGEO_TOKEN)", file=sys.stderr)
+        return 2
+    roles = dict(r.split("=", 1) for r in args.role)
+    up = Uploader(args.url, token, UploaderOptions(chunk_bytes=int(args.chunk_mib * 1024 * 1024)))
+    rc = 0
+    try:
+        for d in args.flights:
+            try:
+                rep = up.upload_flight(d, roles)
+                print(f"{d}: flight {rep.flight_id} complete, {rep.bytes_sent} bytes sent, {rep.retries} retries")
+            except (UploadError, InputError) as exc:
+                print(f"{d}: error: {exc}", file=sys.stderr)
+                rc = 1
+    finally:
+        up.close()
+    return rc
+
+
+if __name__ == "__main__":
+    sys.exit(main())

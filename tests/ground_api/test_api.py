@@ -1,0 +1,265 @@
+"""The ground API against a live uvicorn server and a real SQLite file: auth, names, limits, corruption, resume,
+jobs. Each test says what the server must do with the bad input and that nothing is lost or written."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sqlite3
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+
+from ground.api.settings import ApiSettings
+from onboard.logger.journal import Manifest, SegmentInfo
+from onboard.uploader import UploaderOptions, UploadError, Uploader, build_upload_manifest
+from tests.ground_api.conftest import TOKEN, LiveServer, start_server
+
+pytestmark = pytest.mark.timeout(120)
+
+
+def _sha(b: bytes) -> str:
+    return hashlib.sha256(b).hexdigest()
+
+
+def _create(c: httpx.Client, files: dict[str, bytes], name: str = "flight-20240501T101500Z",
+            roles: dict[str, str] | None = None) -> dict[str, Any]:
+    body = {"name": name, "files": [{"name": n, "size": len(b), "sha256": _sha(b), "role": (roles or {}).get(n)}
+                                    for n, b in files.items()]}
+    r = c.post("/flights", json=body)
+    assert r.status_code == 201, r.text
+    return r.json()
+
+
+def _put(c: httpx.Client, fid: str, name: str, offset: int, chunk: bytes, sha: str | None = None) -> httpx.Response:
+    return c.put(f"/flights/{fid}/files/{name}", params={"offset": offset}, content=chunk,
+                 headers={"X-Chunk-SHA256": sha or _sha(chunk)})
+
+
+def test_unauthenticated_requests_are_refused(live: LiveServer) -> None:
+    """No token or a wrong token: 401 on every flight route, nothing created; health and OpenAPI stay public."""
+    with live.client(token=None) as anon, live.client(token="wrong-token-0123456789") as wrong, live.client() as ok:
+        fid = _create(ok, {"a.ubx": b"x" * 10})["id"]
+        for c in (anon, wrong):
+            assert c.get("/flights").status_code == 401
+            assert c.post("/flights", json={"name": "f2", "files": []}).status_code == 401
+            assert c.get(f"/flights/{fid}").status_code == 401
+            assert c.head(f"/flights/{fid}/files/a.ubx").status_code == 401
+            assert _put(c, fid, "a.ubx", 0, b"x" * 10).status_code == 401
+            assert c.get(f"/flights/{fid}/report").status_code == 401
+            assert c.post(f"/flights/{fid}/jobs", json={"kind": "adjust"}).status_code == 401
+        assert ok.head(f"/flights/{fid}/files/a.ubx").headers["Upload-Offset"] == "0"  # the 401 PUTs wrote nothing
+        assert len(ok.get("/flights").json()) == 1
+        assert anon.get("/health").json() == {"status": "ok"}
+        spec = anon.get("/openapi.json").json()
+        assert "/flights/{flight_id}/files/{name}" in spec["paths"]
+        assert "put" in spec["paths"]["/flights/{flight_id}/files/{name}"]
+
+
+@pytest.mark.parametrize("bad", ["../evil.ubx", "..", ".", ".hidden", "a/b.ubx", "a\\b.ubx", "nul\x00.ubx",
+                                 "/etc/passwd", "C:evil", ""])
+def test_manifest_with_bad_names_is_refused(live: LiveServer, bad: str) -> None:
+    """A manifest naming a file outside the flight directory (or hidden/odd) is refused with 400; no flight made."""
+    with live.client() as c:
+        r = c.post("/flights", json={"name": "f", "files": [{"name": bad, "size": 1, "sha256": "0" * 64}]})
+        assert r.status_code in (400, 422), r.text
+        assert c.get("/flights").json() == []
+
+
+def test_path_traversing_upload_names_are_refused(live: LiveServer, tmp_path: Path) -> None:
+    """Percent-encoded ../ and names not in the manifest: 400/404, and no file appears outside the flight dir."""
+    with live.client() as c:
+        fid = _create(c, {"a.ubx": b"abc"})["id"]
+        for raw in ("..%2F..%2F..%2Fevil", "..%2Fevil", "%2E%2E", "a.ubx%00", "sub%2Fa.ubx", "..%5Cevil"):
+            r = c.put(f"/flights/{fid}/files/{raw}", params={"offset": 0}, content=b"abc",
+                      headers={"X-Chunk-SHA256": _sha(b"abc")})
+            assert r.status_code in (400, 404), (raw, r.status_code, r.text)
+        assert _put(c, fid, "b.ubx", 0, b"abc").status_code == 404  # not in the manifest
+    data = live.settings.data_dir
+    written = sorted(p.relative_to(data).as_posix() for p in data.rglob("*") if p.is_file())
+    assert all(p == "directgeo.sqlite3" or p.startswith(f"flights/{fid}/") for p in written), written
+    assert not (data / "evil").exists() and not (data.parent / "evil").exists()
+
+
+def test_oversized_files_and_chunks_are_refused(live: LiveServer) -> None:
+    """File over the limit at manifest time, chunk over the chunk limit, chunk past the promised size: 413."""
+    s = live.settings
+    with live.client() as c:
+        r = c.post("/flights", json={"name": "big", "files": [{"name": "a.ubx", "size": s.max_file_bytes + 1,
+                                                                "sha256": "0" * 64}]})
+        assert r.status_code == 413
+        data = os.urandom(s.max_chunk_bytes + 10)
+        fid = _create(c, {"a.ubx": data})["id"]
+        assert _put(c, fid, "a.ubx", 0, data).status_code == 413
+        small = _create(c, {"s.ubx": b"12345"}, name="small")["id"]
+        assert _put(c, small, "s.ubx", 0, b"123456").status_code == 413
+        assert c.get(f"/flights/{small}/files/s.ubx").json()["received"] == 0
+
+
+def test_corrupted_chunk_rejected_and_bad_offset_conflicts(live: LiveServer) -> None:
+    """A chunk whose bytes do not match its SHA-256 is rejected (422) and not stored; a wrong offset gets 409."""
+    data = os.urandom(100_000)
+    with live.client() as c:
+        fid = _create(c, {"a.ubx": data})["id"]
+        assert _put(c, fid, "a.ubx", 0, data[:40_000]).status_code == 200
+        damaged = bytearray(data[40_000:80_000])
+        damaged[123] ^= 0x40
+        r = _put(c, fid, "a.ubx", 40_000, bytes(damaged), sha=_sha(data[40_000:80_000]))
+        assert r.status_code == 422 and "corrupted" in r.text
+        assert c.head(f"/flights/{fid}/files/a.ubx").headers["Upload-Offset"] == "40000"
+        r = _put(c, fid, "a.ubx", 30_000, data[30_000:70_000])
+        assert r.status_code == 409
+        assert _put(c, fid, "a.ubx", 40_000, data[40_000:40_010], sha="not-hex").status_code == 400
+        assert _put(c, fid, "a.ubx", 40_000, data[40_000:]).json()["status"] == "complete"
+        got = c.get(f"/flights/{fid}/files/a.ubx/content")
+        assert got.content == data
+
+
+def test_whole_file_hash_mismatch_restarts_the_file(live: LiveServer) -> None:
+    """Chunks all well-formed but the file is not the one promised: 422 at the end, data discarded, offset 0."""
+    promised, sent = b"A" * 1000, b"B" * 1000
+    with live.client() as c:
+        fid = _create(c, {"a.ubx": promised})["id"]
+        r = _put(c, fid, "a.ubx", 0, sent)
+        assert r.status_code == 422 and "differs from the manifest" in r.text
+        st = c.get(f"/flights/{fid}/files/a.ubx").json()
+        assert st["received"] == 0 and st["status"] == "pending"
+        assert _put(c, fid, "a.ubx", 0, promised).json()["status"] == "complete"
+        assert c.get(f"/flights/{fid}").json()["status"] == "complete"
+
+
+def _flight_folder(root: Path, sizes: tuple[int, ...] = (300_000, 200_000)) -> Path:
+    """A recorder-style flight folder: segments + index files + events.jsonl + manifest.json (journal format)."""
+    d = root / "flight-20240501T101500Z"
+    d.mkdir(parents=True)
+    rng = np.random.default_rng(3)
+    segs = []
+    for i, n in enumerate(sizes):
+        b = rng.integers(0, 256, n, dtype=np.uint8).tobytes()
+        (d / f"{i:06d}.ubx").write_bytes(b)
+        (d / f"{i:06d}.idx").write_bytes(b"\x00" * 64)
+        segs.append(SegmentInfo(name=f"{i:06d}.ubx", bytes=n, sha256=_sha(b)))
+    (d / "events.jsonl").write_text('{"type":"mark","week":2300,"tow_ns":1}\n')
+    m = Manifest(flight=d.name, created_wall_ns=1, segments=segs, closed=True)
+    (d / "manifest.json").write_text(json.dumps(m.to_json()))
+    return d
+
+
+class _Unplug(httpx.HTTPTransport):
+    """Network edge fault: after `n` chunk PUTs every request fails as if the link were gone."""
+
+    def __init__(self, n: int) -> None:
+        super().__init__()
+        self.n, self.puts = n, 0
+
+    def handle_request(self, request: httpx.Request) -> httpx.Response:
+        if request.method == "PUT":
+            self.puts += 1
+        if self.puts > self.n:
+            raise httpx.ConnectError("link down (test)", request=request)
+        return super().handle_request(request)
+
+
+def test_interrupted_upload_resumes_to_byte_identical_files(api_settings: ApiSettings, tmp_path: Path) -> None:
+    """Link lost after 3 chunks, server restarted on the same SQLite file: the next run sends only the rest."""
+    folder = _flight_folder(tmp_path / "onboard")
+    opts = UploaderOptions(chunk_bytes=50_000, max_retries=2, backoff_initial_s=0.0)
+    srv = start_server(api_settings)
+    try:
+        client = httpx.Client(base_url=srv.url, transport=_Unplug(3), timeout=30)
+        up = Uploader(srv.url, TOKEN, opts, client=client, sleep=lambda s: None)
+        with pytest.raises(UploadError, match="failed after 3 attempts"):
+            up.upload_flight(folder)
+        up.close()
+    finally:
+        srv.stop()
+    srv = start_server(api_settings)  # a new process would see the same: state is in SQLite and on disk
+    try:
+        with srv.client() as c:
+            flights = c.get("/flights").json()
+            # files go in name order: 000000.idx (64 B, one PUT), then two 50 kB chunks of 000000.ubx
+            assert len(flights) == 1 and flights[0]["bytes_received"] == 64 + 100_000
+        up = Uploader(srv.url, TOKEN, opts, sleep=lambda s: None)
+        rep = up.upload_flight(folder)
+        up.close()
+        total = sum(p.stat().st_size for p in folder.iterdir())
+        assert rep.bytes_sent == total - 100_064
+        fdir = api_settings.flights_dir / rep.flight_id
+        for p in folder.iterdir():
+            assert (fdir / p.name).read_bytes() == p.read_bytes(), p.name
+        assert not list(fdir.glob("*.part"))
+        # a third run finds everything complete and sends nothing
+        again = Uploader(srv.url, TOKEN, opts, sleep=lambda s: None).upload_flight(folder)
+        assert again.bytes_sent == 0 and again.flight_id == rep.flight_id
+    finally:
+        srv.stop()
+    db = sqlite3.connect(api_settings.data_dir / "directgeo.sqlite3")
+    try:
+        rows = db.execute("select name, received, size, status from flight_files").fetchall()
+        assert all(r[1] == r[2] and r[3] == "complete" for r in rows) and len(rows) == 6
+        sessions = db.execute("select count(*), sum(bytes_received) from upload_sessions").fetchone()
+        assert sessions[0] >= 2 and sessions[1] == total
+    finally:
+        db.close()
+
+
+def test_uploader_refuses_a_damaged_local_segment(tmp_path: Path) -> None:
+    """A segment whose bytes no longer match the recorder's manifest is never uploaded as good."""
+    folder = _flight_folder(tmp_path)
+    seg = folder / "000001.ubx"
+    b = bytearray(seg.read_bytes())
+    b[10] ^= 1
+    seg.write_bytes(bytes(b))
+    with pytest.raises(UploadError, match="damaged"):
+        build_upload_manifest(folder)
+    seg.unlink()
+    with pytest.raises(UploadError, match="missing"):
+        build_upload_manifest(folder)
+
+
+def _wait_job(c: httpx.Client, fid: str, timeout_s: float = 90.0) -> dict[str, Any]:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        jobs = c.get(f"/flights/{fid}").json()["jobs"]
+        if jobs and jobs[-1]["status"] in ("done", "failed"):
+            return jobs[-1]
+        time.sleep(0.2)
+    raise AssertionError("job did not finish")
+
+
+def test_uploaded_orientations_trigger_the_adjustment(live: LiveServer, tmp_path: Path) -> None:
+    """Trajectory + events + orientations (+ GCP) uploaded with roles: the adjustment job runs by itself and its
+    results and report are served; the recovered lever arm and delay match the synthetic truth."""
+    pytest.importorskip("ground.adjust.solve")
+    from tests.ground_io.flightgen import write_synthetic_flight
+
+    folder = tmp_path / "flight-synthetic"
+    truth = write_synthetic_flight(folder)
+    roles = {"SOL.pos": "trajectory", "events.csv": "events", "poses.csv": "orientations", "gcp.csv": "gcp"}
+    up = Uploader(live.url, TOKEN, UploaderOptions(chunk_bytes=60_000), sleep=lambda s: None)
+    rep = up.upload_flight(folder, roles)
+    up.close()
+    with live.client() as c:
+        job = _wait_job(c, rep.flight_id)
+        assert job["status"] == "done", job["message"]
+        assert job["kind"] == "adjust"
+        res = c.get(f"/flights/{rep.flight_id}/results").json()
+        np.testing.assert_allclose(res["lever_arm_m"], truth.lever_arm_m, atol=0.01)
+        assert res["delay_s"] == pytest.approx(truth.delay_s, abs=0.005)
+        html = c.get(f"/flights/{rep.flight_id}/report")
+        assert html.headers["content-type"].startswith("text/html")
+        assert 'id="parameters"' in html.text and "data:image/png;base64," in html.text
+        # an explicit job with a bad parameter fails with a message, the server keeps serving
+        r = c.post(f"/flights/{rep.flight_id}/jobs", json={"kind": "adjust", "params": {"estimate": ["scale"]}})
+        assert r.status_code == 202
+        failed = _wait_job(c, rep.flight_id)
+        assert failed["status"] == "failed" and "--estimate" in failed["message"]
+        # no base data uploaded: the RTK job fails saying so
+        c.post(f"/flights/{rep.flight_id}/jobs", json={"kind": "rtk"})
+        rtk = _wait_job(c, rep.flight_id)
+        assert rtk["status"] == "failed" and "base_obs" in rtk["message"]
