@@ -243,6 +243,58 @@ def _lost_edges_to_bounces(pairs: list[ImagePairing]) -> list[ImagePairing]:
     return fixed
 
 
+class PairingRecorder:
+    """Incremental pairing for the daemon: feed the marks of each TIM-TM2 report (or GPIO edge) as they come.
+
+    `add(marks)` returns the event records to append now: one `mark` record per mark at once, and a
+    `pairing` record for each image once it can no longer change (its pulse/flash is older than the newest
+    mark by `settle_ns`: later marks can still bring its flash, a bounce, or the count that reveals a lost
+    edge). `flush()` returns the remaining pairings at the end of a flight. Pure: no clock, no I/O.
+
+    Keeps every mark of the flight (four small records per image; a 2-hour flight at 3 s is ~10 k marks)
+    and re-pairs the tail; fine at one report per second.
+    """
+
+    def __init__(self, options: PairingOptions = PairingOptions(), settle_ns: int | None = None) -> None:
+        self.options = options
+        self.settle_ns = settle_ns if settle_ns is not None else options.max_delay_ns + options.bounce_window_ns + 1_000_000_000
+        self._marks: list[CameraMark] = []
+        self._emitted = 0
+        self._latest_ns: int | None = None
+
+    @property
+    def emitted(self) -> int:
+        """Pairings already returned."""
+        return self._emitted
+
+    def add(self, marks: Iterable[CameraMark], tick_ns: int | None = None) -> list[dict[str, Any]]:
+        """Records for these marks and for every image that became final."""
+        out: list[dict[str, Any]] = []
+        for mark in marks:
+            out.append(mark_record(mark, tick_ns))
+            self._marks.append(mark)
+            if mark.time is not None and mark.valid:
+                t = mark.time.total_ns
+                self._latest_ns = t if self._latest_ns is None else max(self._latest_ns, t)
+        return out + self._pairings(final=False)
+
+    def flush(self) -> list[dict[str, Any]]:
+        """The pairing records not yet returned (end of flight)."""
+        return self._pairings(final=True)
+
+    def _pairings(self, final: bool) -> list[dict[str, Any]]:
+        pairs = pair_marks(self._marks, self.options)
+        out = []
+        for p in pairs[self._emitted :]:
+            t = p.pulse_time if p.pulse_time is not None else p.flash_time
+            assert t is not None
+            if not final and (self._latest_ns is None or self._latest_ns - t.total_ns < self.settle_ns):
+                break
+            out.append(pairing_record(p))
+            self._emitted += 1
+        return out
+
+
 # --- GPIO edge times --------------------------------------------------------------------------------------
 
 

@@ -198,3 +198,31 @@ def test_rising_edge_count_jump_is_charged_to_the_next_flash() -> None:
     # ... and without trigger measurement it can only be called a possibly missed flash.
     unmeasured = pair_marks(marks, PairingOptions(trigger_measured=False))
     assert unmeasured[1].flags == (MISSED_FLASH,)
+
+
+def test_pairing_recorder_emits_marks_at_once_and_each_image_once_final() -> None:
+    """Fed report by report, the recorder yields the same pairings as pairing the whole flight at once."""
+    from onboard.timepulse.marks import PairingRecorder
+
+    reports: list[list[CameraMark]] = []
+    for k in range(5):
+        reports.append([pulse(k, k)])
+        if k != 2:
+            reports.append([flash(k, DELAYS_NS[k], 10 + k), _contact_open(k, DELAYS_NS[k], 10 + k)])
+    rec = PairingRecorder()
+    out: list[dict[str, object]] = []
+    first_pairing_at = None
+    for i, marks in enumerate(reports):
+        got = rec.add(marks)
+        assert [r["kind"] for r in got[: len(marks)]] == ["mark"] * len(marks)
+        if first_pairing_at is None and any(r["kind"] == "pairing" for r in got):
+            first_pairing_at = i
+        out += got
+    out += rec.flush()
+    assert rec.flush() == []  # nothing emitted twice
+    pairings = [r for r in out if r["kind"] == "pairing"]
+    all_marks = [m for marks in reports for m in marks]
+    assert pairings == [pairing_record(p) for p in pair_marks(all_marks)]
+    assert [r["index"] for r in pairings] == [0, 1, 2, 3, 4]
+    assert pairings[2]["flags"] == [PULSE_WITHOUT_FLASH]
+    assert first_pairing_at == 2  # image 0 final once a later pulse is > settle time away, not before
