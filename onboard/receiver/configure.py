@@ -22,6 +22,7 @@ from onboard.receiver.framing import Frame, ubx_frame
 from onboard.receiver.framing import Protocol as FrameProtocol
 from onboard.receiver.profiles import BAUD_RATES, Profile, ProfileEntry, ReceiverOptions, decode_cfg
 from onboard.receiver.ubx_tables import UBX_IDS, poll_frame
+from onboard.timepulse.marks import timepulse_record
 
 log = logging.getLogger(__name__)
 
@@ -487,3 +488,29 @@ async def apply_profile(
     for err in report.errors:
         log.error("configuration: %s", err)
     return report
+
+
+def camera_timepulse_record(report: ConfigReport, profile: Profile) -> dict[str, Any]:
+    """The `timepulse` event record (onboard.timepulse.marks) of what the receiver applied to the camera pulse.
+
+    Values as polled back where the poll answered, else as sent (`align_to_tow` None: not known).
+    """
+    cam_entries = [e for e in profile.entries if e.label.endswith("camera")]
+    cam_entries += [e for group in profile.fallbacks.values() for e in group if e.label.endswith("camera")]
+    for entry in reversed(cam_entries):  # a fallback, when taken, supersedes the CFG-TP5 it replaced
+        try:
+            result = report.result(entry.label)
+        except KeyError:
+            continue
+        if result.status in ("naked", "replaced", "silent"):
+            continue
+        got = {k: v for k, v in result.applied.items() if v is not None} if result.polled_back else {}
+        values = {**entry.fields, **got}
+        if entry.name == "CFG-TP":
+            return timepulse_record(report.camera_timepulse, values["interval"], values["length"],
+                                    values["status"] > 0, None, report.trigger)
+        return timepulse_record(report.camera_timepulse, values["freqPeriodLock"], values["pulseLenRatioLock"],
+                                bool(values["polarity"]), got.get("alignToTow"), report.trigger)
+    rec = timepulse_record(report.camera_timepulse, 0, 0, True, None, report.trigger)
+    rec["note"] = "camera pulse not configured: " + "; ".join(str(e) for e in report.errors)
+    return rec

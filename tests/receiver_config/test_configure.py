@@ -241,3 +241,27 @@ def test_baud_change_with_no_answer_at_either_rate_names_baudrate() -> None:
     assert (err.message, err.field) == ("CFG-PRT port 1", "baudRate")
     assert err.detail == "no valid frames at 115200 baud after 2 attempt(s)"
     assert link.reopens == [115200, 9600, 115200, 9600] and report.baud == 9600
+
+
+def test_camera_timepulse_record_reports_what_was_applied() -> None:
+    from onboard.receiver.configure import camera_timepulse_record
+
+    report, _ = _configure(FakeUblox())
+    rec = camera_timepulse_record(report, build_profile("m8t", ReceiverOptions()))
+    assert (rec["kind"], rec["camera_timepulse"], rec["period_us"], rec["length_us"]) == (
+        "timepulse", "TIMEPULSE2", 3_000_000, 100_000)
+    assert rec["align_to_tow"] == 0 and rec["trigger_measured"] is True  # as polled back: cleared
+
+    rx = FakeUblox(LEA6T_MON_VER)
+    rx.nak = lambda c, i, p: (c, i) == (0x06, 0x31)
+    report, _ = _configure(rx, model="lea6t", trigger="none")
+    rec = camera_timepulse_record(report, build_profile("lea6t", ReceiverOptions(trigger="none")))
+    assert (rec["camera_timepulse"], rec["period_us"], rec["rising"], rec["align_to_tow"]) == (
+        "TIMEPULSE", 3_000_000, True, None)
+    assert rec["note"].startswith("no trigger measurement")
+
+    rx = FakeUblox()
+    rx.silent = True
+    report, _ = _configure(rx, retries=0)
+    rec = camera_timepulse_record(report, build_profile("m8t", ReceiverOptions()))
+    assert rec["period_us"] == 0 and "not configured" in rec["note"] and "CFG-TP5 TIMEPULSE2 camera" in rec["note"]
