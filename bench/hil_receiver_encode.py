@@ -36,7 +36,7 @@ def _pyubx2_rawx(ep: ObsEpoch) -> bytes:
     return UBXMessage("RXM", "RXM-RAWX", GET, **kw).serialize()
 
 
-def _rate(fn, n: int) -> float:  # noqa: ANN001
+def _rate(fn, n: int) -> float:
     t0 = time.perf_counter()
     for _ in range(n):
         fn()

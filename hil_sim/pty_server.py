@@ -22,7 +22,7 @@ import termios
 import threading
 import tty
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 from hil_sim.receiver import ModelName, ReceiverCore, ReceiverOptions, WorldLike
 from onboard.gnsstime import GpsTime
@@ -178,7 +178,7 @@ class ReceiverEmulator:
             self._thread.join(timeout=5.0)
         self.port.close()
 
-    def __enter__(self) -> ReceiverEmulator:
+    def __enter__(self) -> Self:
         self.start()
         return self
 

@@ -42,7 +42,8 @@ import numpy as np
 from hil_sim import ubx_encode as enc
 from hil_sim.faults import FaultOptions, FaultState, hot_shoe_edges
 from onboard.gnsstime import NS_PER_S, GpsTime
-from onboard.receiver.framing import Frame, Protocol as FrameProtocol
+from onboard.receiver.framing import Frame
+from onboard.receiver.framing import Protocol as FrameProtocol
 from onboard.rtk import lnav
 from onboard.rtk.geodesy import ecef_to_llh
 from onboard.rtk.types import GNSS_GPS, Ephemeris, ObsEpoch
@@ -381,10 +382,10 @@ class ReceiverCore:
         port = new["portID"]
         if port not in self.config.ports:
             return [self._nak(key)]
-        if port in (1, 2):
-            if new["mode"] & UART_MODE_8N1_MASK != UART_MODE_8N1 or new["baudRate"] not in VALID_BAUDS:
-                log.info("CFG-PRT incomplete or unsupported (mode 0x%X, baud %d): NAK", new["mode"], new["baudRate"])
-                return [self._nak(key)]
+        uart_bad = new["mode"] & UART_MODE_8N1_MASK != UART_MODE_8N1 or new["baudRate"] not in VALID_BAUDS
+        if port in (1, 2) and uart_bad:
+            log.info("CFG-PRT incomplete or unsupported (mode 0x%X, baud %d): NAK", new["mode"], new["baudRate"])
+            return [self._nak(key)]
         self.config.ports[port] = new
         if port == UART1:
             self.budget.baud = new["baudRate"]
@@ -585,8 +586,8 @@ class ReceiverCore:
         fix = self._nav_fix(t, len(obs)) if valid else None
         if self._out_ubx():
             if due(NAV_SOL):
-                self._send(out, enc.nav_sol(t, *(fix or (None, None)), num_sv=len(obs) if valid else 0,
-                                            p_acc_m=2.5, pdop=1.6))
+                pos, vel = fix if fix is not None else (None, None)
+                self._send(out, enc.nav_sol(t, pos, vel, num_sv=len(obs) if valid else 0, p_acc_m=2.5, pdop=1.6))
             if due(self.model.raw_msg):
                 if self.faults.drop_epoch():
                     self.stats.epochs_dropped_fault += 1
@@ -598,9 +599,8 @@ class ReceiverCore:
                         self.stats.epochs_dropped_budget += 1
             for ch in (0, 1):
                 rep = self.marks[ch].report(valid, self.options.acc_est_ns)
-                if rep is not None and due(TIM_TM2):
-                    if self._send(out, enc.tim_tm2(rep)):
-                        self.stats.marks_out += 1
+                if rep is not None and due(TIM_TM2) and self._send(out, enc.tim_tm2(rep)):
+                    self.stats.marks_out += 1
             if due(TIM_TP):
                 step = self.config.rate["measRate"] * 1_000_000
                 next_pulse = GpsTime.from_total_ns((t.total_ns // NS_PER_S + 1) * NS_PER_S)
@@ -767,7 +767,7 @@ def _nmea(name: str, t: GpsTime, fix: tuple[np.ndarray, np.ndarray] | None, obs:
         body = "GPGSA,A,{},{},1.6,1.0,1.3".format(3 if fix is not None else 1,
                                                    ",".join([f"{s:02d}" for s in svs] + [""] * (12 - len(svs))))
     elif name == "GSV":
-        rows = [(int(s), int(round(float(c)))) for s, c in zip(obs.sv_id, obs.cn0_dbhz, strict=True)][:4]
+        rows = [(int(s), round(float(c))) for s, c in zip(obs.sv_id, obs.cn0_dbhz, strict=True)][:4]
         sats = ",".join(f"{s:02d},,,{c:02d}" for s, c in rows)
         body = f"GPGSV,1,1,{len(obs):02d}" + ("," + sats if sats else "")
     elif name == "RMC":

@@ -186,7 +186,7 @@ def rxm_raw(epoch: ObsEpoch) -> bytes:
         qi = (6 if lli & LLI_SLIP else 7) if phase_ok else 4
         rows.append({"cpMes": cp if phase_ok else 0.0, "prMes": float(epoch.pr_m[i]),
                      "doMes": float(epoch.dop_hz[i]), "sv": int(epoch.sv_id[i]), "mesQI": qi,
-                     "cno": int(round(float(epoch.cn0_dbhz[i]))), "lli": lli})
+                     "cno": round(float(epoch.cn0_dbhz[i])), "lli": lli})
     itow_ms = round(epoch.time.tow_ns / 1_000_000)
     return frame("RXM-RAW", {"iTOW": itow_ms, "week": epoch.time.week}, rows)
 
@@ -218,7 +218,7 @@ def rxm_rawx(epoch: ObsEpoch) -> bytes:
             "prMes": float(epoch.pr_m[i]), "cpMes": cp if phase_ok else 0.0, "doMes": float(epoch.dop_hz[i]),
             "gnssId": int(epoch.gnss_id[i]), "svId": int(epoch.sv_id[i]), "sigId": 0, "freqId": 0,
             "locktime": int(min(64500, max(0.0, lock))) if math.isfinite(lock) else 0,
-            "cno": int(round(float(epoch.cn0_dbhz[i]))),
+            "cno": round(float(epoch.cn0_dbhz[i])),
             "prStdev": _code(float(std_pr[i]), lambda s: round(math.log2(s / 0.01)), 4),
             "cpStdev": _code(float(std_cp[i]), lambda s: round(s / 0.004), 4),
             "doStdev": 4, "trkStat": trk,
@@ -305,7 +305,8 @@ def tim_tp(pulse: GpsTime, q_err_ps: int = 0) -> bytes:
                             "qErr": q_err_ps, "week": pulse.week, "flags": 0x03, "refInfo": 0})
 
 
-def nav_sol(t: GpsTime, pos_ecef_m: Sequence[float] | None, vel_ecef_m_s: Sequence[float] | None,
+def nav_sol(t: GpsTime, pos_ecef_m: Sequence[float] | np.ndarray | None,
+            vel_ecef_m_s: Sequence[float] | np.ndarray | None,
             num_sv: int, p_acc_m: float, pdop: float) -> bytes:
     """NAV-SOL: 3D fix (gpsFix 3, flags fixOK|wknSet|towSet) or no fix when `pos_ecef_m` is None."""
     itow_ms, rem_ns = divmod(t.tow_ns, 1_000_000)

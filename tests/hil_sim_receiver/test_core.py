@@ -16,7 +16,7 @@ from onboard.rtk import lnav
 CONFIGURED_PRT = {"portID": 1, "mode": 0x8C0, "baudRate": 115200, "inProtoMask": 0x1, "outProtoMask": 0x1}
 
 
-def core_for(model: str, world, **opts) -> ReceiverCore:  # noqa: ANN001
+def core_for(model: str, world, **opts) -> ReceiverCore:
     core = ReceiverCore(model, ReceiverOptions(**opts), world, world.start)
     core.advance(world.start)
     return core
@@ -65,7 +65,7 @@ def ubx_of(frames: list[Frame], key: tuple[int, int]) -> list[Frame]:
 
 
 @pytest.mark.parametrize("model", ["lea6t", "m8t"])
-def test_factory_state_nmea_only_9600_and_mon_ver(model: str, standin_world) -> None:  # noqa: ANN001
+def test_factory_state_nmea_only_9600_and_mon_ver(model: str, standin_world) -> None:
     core = core_for(model, standin_world)
     prt = poll(core, "CFG-PRT")
     assert prt["baudRate"] == 9600 and prt["outProtoMask"] == 0x3
@@ -78,7 +78,7 @@ def test_factory_state_nmea_only_9600_and_mon_ver(model: str, standin_world) -> 
 
 
 @pytest.mark.parametrize("model", ["lea6t", "m8t"])
-def test_full_configuration_is_acked_and_polls_return_applied_values(model: str, standin_world) -> None:  # noqa: ANN001
+def test_full_configuration_is_acked_and_polls_return_applied_values(model: str, standin_world) -> None:
     core = core_for(model, standin_world)
     configure(core)
     tp5 = {**M8T_TP5_DEFAULTS[1], "freqPeriod": 2_000_000, "freqPeriodLock": 2_000_000, "pulseLenRatio": 0,
@@ -99,7 +99,7 @@ def test_full_configuration_is_acked_and_polls_return_applied_values(model: str,
         assert acked(send(core, "CFG-TP", {"interval": 1_000_000})) is False  # no legacy CFG-TP on M8
 
 
-def test_rawx_on_lea6t_nak_or_ack_ignore(standin_world) -> None:  # noqa: ANN001
+def test_rawx_on_lea6t_nak_or_ack_ignore(standin_world) -> None:
     nak = core_for("lea6t", standin_world)
     assert acked(send(nak, "CFG-MSG", {"msgClass": 2, "msgID": 0x15, "rateUART1": 1})) is False
     ign = core_for("lea6t", standin_world, rawx_on_u6="ack-ignore")
@@ -111,7 +111,7 @@ def test_rawx_on_lea6t_nak_or_ack_ignore(standin_world) -> None:  # noqa: ANN001
     assert acked(send(tp5nak, "CFG-TP5", M8T_TP5_DEFAULTS[0])) is False
 
 
-def test_bad_inputs_are_naked_and_change_nothing(standin_world) -> None:  # noqa: ANN001
+def test_bad_inputs_are_naked_and_change_nothing(standin_world) -> None:
     core = core_for("m8t", standin_world)
     assert acked(send(core, "CFG-PRT", {**CONFIGURED_PRT, "mode": 0})) is False  # UART mode bits missing
     assert acked(send(core, "CFG-PRT", raw_payload=enc.pack(enc.LAYOUTS["CFG-PRT"], CONFIGURED_PRT)[:12])) is False
@@ -128,7 +128,7 @@ def test_bad_inputs_are_naked_and_change_nothing(standin_world) -> None:  # noqa
     assert core.stats.naked == 9 and core.stats.acked == 1  # the one ACK: the poll
 
 
-def test_ack_invalid_rates_applies_something_else_and_lea6t_navrate_is_fixed(standin_world) -> None:  # noqa: ANN001
+def test_ack_invalid_rates_applies_something_else_and_lea6t_navrate_is_fixed(standin_world) -> None:
     core = core_for("m8t", standin_world, ack_invalid_rates=True)
     assert acked(send(core, "CFG-RATE", {"measRate": 50, "navRate": 1, "timeRef": 1}))
     assert poll(core, "CFG-RATE")["measRate"] == 100  # the poll-back reveals the difference
@@ -139,7 +139,7 @@ def test_ack_invalid_rates_applies_something_else_and_lea6t_navrate_is_fixed(sta
 
 @pytest.mark.parametrize(("policy", "period_us", "kept"), [
     ("clear", 2_000_000, False), ("clear", 3_000_000, False), ("clear", 500_000, True), ("keep", 2_000_000, True)])
-def test_align_to_tow_for_non_divisor_periods(policy: str, period_us: int, kept: bool, standin_world) -> None:  # noqa: ANN001
+def test_align_to_tow_for_non_divisor_periods(policy: str, period_us: int, kept: bool, standin_world) -> None:
     core = core_for("m8t", standin_world, align_to_tow=policy)
     tp5 = {**M8T_TP5_DEFAULTS[1], "freqPeriod": period_us, "freqPeriodLock": period_us, "pulseLenRatio": 0,
            "pulseLenRatioLock": 10_000, "flags": 0xF7}
@@ -149,7 +149,7 @@ def test_align_to_tow_for_non_divisor_periods(policy: str, period_us: int, kept:
 
 
 @pytest.mark.parametrize("model", ["lea6t", "m8t"])
-def test_raw_epochs_at_the_configured_rate_decode_with_pyubx2(model: str, standin_world) -> None:  # noqa: ANN001
+def test_raw_epochs_at_the_configured_rate_decode_with_pyubx2(model: str, standin_world) -> None:
     core = core_for(model, standin_world)
     configure(core, meas_ms=200)
     raws = ubx_of(run(core, 2.0), core.model.raw_msg)
@@ -165,7 +165,7 @@ def test_raw_epochs_at_the_configured_rate_decode_with_pyubx2(model: str, standi
     assert np.allclose(np.diff(tows), 0.2)
 
 
-def test_byte_budget_at_9600_drops_whole_epochs(standin_world) -> None:  # noqa: ANN001
+def test_byte_budget_at_9600_drops_whole_epochs(standin_world) -> None:
     core = core_for("m8t", standin_world)
     # raw at 10 Hz on the factory 9600 baud (960 B/s) with NMEA still on: over-subscribed
     assert acked(send(core, "CFG-MSG3", {"msgClass": 2, "msgID": 0x15, "rate": 1}))
@@ -178,7 +178,7 @@ def test_byte_budget_at_9600_drops_whole_epochs(standin_world) -> None:  # noqa:
     assert all(UBXReader.parse(f.raw).numMeas > 0 for f in raws)  # what arrives is whole
 
 
-def test_subframes_every_6_s_and_aid_eph_after_three_subframes(standin_world) -> None:  # noqa: ANN001
+def test_subframes_every_6_s_and_aid_eph_after_three_subframes(standin_world) -> None:
     core = core_for("lea6t", standin_world)
     configure(core, meas_ms=1000)
     n_sv = len(standin_world.observe("rover", standin_world.start))
@@ -198,7 +198,7 @@ def test_subframes_every_6_s_and_aid_eph_after_three_subframes(standin_world) ->
     assert eph.prn == prn and eph.toe.week == 1590 and len(reply.payload) == 104
 
 
-def flash_core(world, **opts) -> ReceiverCore:  # noqa: ANN001
+def flash_core(world, **opts) -> ReceiverCore:
     core = core_for("m8t", world, time_valid_after_s=1.0, **opts)
     configure(core, meas_ms=1000)
     tp5 = {**M8T_TP5_DEFAULTS[1], "freqPeriod": 2_000_000, "freqPeriodLock": 2_000_000, "pulseLenRatio": 0,
@@ -212,7 +212,7 @@ def tm2(frames: list[Frame], ch: int | None = None) -> list:
     return [m for m in msgs if ch is None or m.ch == ch]
 
 
-def test_one_tim_tm2_per_flash_with_count_and_edge_bits(standin_world) -> None:  # noqa: ANN001
+def test_one_tim_tm2_per_flash_with_count_and_edge_bits(standin_world) -> None:
     t0 = standin_world.start
     flashes = [t0.add_s(2.3 + 2 * k).add_s(0.064) for k in range(4)]
     for k, f in enumerate(flashes):
@@ -233,7 +233,7 @@ def test_one_tim_tm2_per_flash_with_count_and_edge_bits(standin_world) -> None: 
     assert abs(GpsTime.from_ms_subms(trig[0].wnR, trig[0].towMsR, trig[0].towSubMsR).diff_s(t0.add_s(2.3))) < 1e-7
 
 
-def test_bounce_and_two_flashes_in_one_epoch_lose_marks_with_a_count_jump(standin_world) -> None:  # noqa: ANN001
+def test_bounce_and_two_flashes_in_one_epoch_lose_marks_with_a_count_jump(standin_world) -> None:
     t0 = standin_world.start
     standin_world.add_event(t0.add_s(2.1), t0.add_s(2.164))
     standin_world.add_event(t0.add_s(4.1), t0.add_s(4.164), bounce_time=t0.add_s(4.1648))  # bounce
@@ -248,7 +248,7 @@ def test_bounce_and_two_flashes_in_one_epoch_lose_marks_with_a_count_jump(standi
     assert abs(last.diff_s(t0.add_s(6.664))) < 1e-7
 
 
-def test_bounce_fault_from_fault_options(standin_world) -> None:  # noqa: ANN001
+def test_bounce_fault_from_fault_options(standin_world) -> None:
     t0 = standin_world.start
     for k in range(3):
         standin_world.add_event(t0.add_s(2.1 + 2 * k), t0.add_s(2.164 + 2 * k))
@@ -256,7 +256,7 @@ def test_bounce_fault_from_fault_options(standin_world) -> None:  # noqa: ANN001
     assert [m.count for m in tm2(run(core, 8.0), 0)] == [2, 4, 6]
 
 
-def test_camera_timepulse_inactive_means_no_photos(standin_world) -> None:  # noqa: ANN001
+def test_camera_timepulse_inactive_means_no_photos(standin_world) -> None:
     t0 = standin_world.start
     standin_world.add_event(t0.add_s(3.1), t0.add_s(3.164))
     core = core_for("m8t", standin_world, time_valid_after_s=1.0)
@@ -264,7 +264,7 @@ def test_camera_timepulse_inactive_means_no_photos(standin_world) -> None:  # no
     assert not tm2(run(core, 5.0)) and core.stats.pulses_suppressed == 1
 
 
-def test_silent_receiver_answers_nothing_and_streams_factory_nmea(standin_world) -> None:  # noqa: ANN001
+def test_silent_receiver_answers_nothing_and_streams_factory_nmea(standin_world) -> None:
     core = core_for("m8t", standin_world, silent=True)
     assert send(core, "CFG-PRT", CONFIGURED_PRT) == []
     assert send(core, "MON-VER", raw_payload=b"") == []
@@ -273,7 +273,7 @@ def test_silent_receiver_answers_nothing_and_streams_factory_nmea(standin_world)
     assert out and all(f.protocol is Protocol.NMEA for f in out)
 
 
-def test_dropped_epoch_fault_leaves_gaps(standin_world) -> None:  # noqa: ANN001
+def test_dropped_epoch_fault_leaves_gaps(standin_world) -> None:
     core = core_for("m8t", standin_world, faults=FaultOptions(seed=3, drop_epoch_rate=0.3))
     configure(core, meas_ms=200)
     raws = ubx_of(run(core, 10.0), RXM_RAWX)
@@ -293,7 +293,7 @@ def test_corrupt_fault_flips_bytes_at_the_rate_and_is_reproducible() -> None:
         FaultOptions(corrupt_byte_rate=1.5)
 
 
-def test_cfg_cfg_save_load_and_clear(standin_world) -> None:  # noqa: ANN001
+def test_cfg_cfg_save_load_and_clear(standin_world) -> None:
     core = core_for("m8t", standin_world)
     configure(core)
     assert acked(send(core, "CFG-CFG", raw_payload=enc.pack(enc.LAYOUTS["CFG-CFG"], {"saveMask": 0xFFFF}) + b"\x01"))

@@ -19,7 +19,7 @@ from tests.conftest import shared_file
 T = GpsTime(1590, 352_799_999_000_000)
 
 
-def parse(raw: bytes, msgmode: int = GET):  # noqa: ANN201 - pyubx2 message
+def parse(raw: bytes, msgmode: int = GET):
     return UBXReader.parse(raw, msgmode=msgmode)
 
 
@@ -53,7 +53,7 @@ def test_rxm_rawx_decodes_with_pyubx2_trkstat_std_codes_and_locktime_cap() -> No
     assert len(enc.rxm_rawx(epoch())) == 16 + 32 * 3 + 8
 
 
-def test_subframe_messages_carry_lnav_words_that_decode_back_to_the_ephemeris(broadcast_ephemerides) -> None:  # noqa: ANN001
+def test_subframe_messages_carry_lnav_words_that_decode_back_to_the_ephemeris(broadcast_ephemerides) -> None:
     eph = broadcast_ephemerides[0]
     tow0 = (eph.toe.tow_s - 7200) // 30 * 30
     sfs = lnav.encode_subframes_transmitted(eph, tow0)
@@ -74,7 +74,7 @@ def test_subframe_messages_carry_lnav_words_that_decode_back_to_the_ephemeris(br
     assert got is not None and got.iode == eph.iode and got.sqrt_a == pytest.approx(eph.sqrt_a, rel=1e-9)
 
 
-def test_aid_eph_long_and_no_ephemeris_forms(broadcast_ephemerides) -> None:  # noqa: ANN001
+def test_aid_eph_long_and_no_ephemeris_forms(broadcast_ephemerides) -> None:
     eph = broadcast_ephemerides[0]
     how, words = lnav.aid_eph_words(eph)
     raw = enc.aid_eph(eph.prn, how, words)

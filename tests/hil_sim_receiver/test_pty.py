@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import itertools
 import os
 import select
 import time
@@ -24,10 +25,10 @@ PRT_115200 = {"portID": 1, "mode": 0x8C0, "baudRate": 115200, "inProtoMask": 0x1
 
 
 @pytest.fixture
-def emulator_factory():  # noqa: ANN201
+def emulator_factory():
     emus: list[ReceiverEmulator] = []
 
-    def make(model: str, world, speed: float = 5.0, **kw) -> ReceiverEmulator:  # noqa: ANN001, ANN003
+    def make(model: str, world, speed: float = 5.0, **kw) -> ReceiverEmulator:
         link = kw.pop("link", None)
         emu = ReceiverEmulator(model, ReceiverOptions(**kw), world, speed=speed, link=link)
         emus.append(emu)
@@ -45,13 +46,13 @@ def payload(name: str, head: dict) -> tuple[int, int, bytes]:
     return lay.msg_class, lay.msg_id, enc.pack(lay, head)
 
 
-def is_ack(frame) -> bool:  # noqa: ANN001
+def is_ack(frame) -> bool:
     return frame is not None and frame.msg_id == 0x01
 
 
 @pytest.mark.parametrize("model", ["lea6t", "m8t"])
-def test_factory_state_answers_mon_ver_at_9600_and_streams_nmea(model, standin_world, emulator_factory,  # noqa: ANN001
-                                                                 pty_client_factory) -> None:  # noqa: ANN001
+def test_factory_state_answers_mon_ver_at_9600_and_streams_nmea(model, standin_world, emulator_factory,
+                                                                 pty_client_factory) -> None:
     emu = emulator_factory(model, standin_world)
     client = pty_client_factory(emu.path, 9600)
     reply, _ = client.request(0x0A, 0x04, reply=(0x0A, 0x04))
@@ -63,7 +64,7 @@ def test_factory_state_answers_mon_ver_at_9600_and_streams_nmea(model, standin_w
     assert not client.ubx(0x02, 0x15) and not client.ubx(0x02, 0x10)
 
 
-def test_client_at_the_wrong_rate_gets_only_garbage(standin_world, emulator_factory, pty_client_factory) -> None:  # noqa: ANN001
+def test_client_at_the_wrong_rate_gets_only_garbage(standin_world, emulator_factory, pty_client_factory) -> None:
     emu = emulator_factory("m8t", standin_world)
     client = pty_client_factory(emu.path, 115200)  # receiver still at its factory 9600
     client.send(0x0A, 0x04)
@@ -73,8 +74,8 @@ def test_client_at_the_wrong_rate_gets_only_garbage(standin_world, emulator_fact
 
 
 @pytest.mark.parametrize("model", ["lea6t", "m8t"])
-def test_configuration_sequence_with_baud_change_then_raw_epochs(model, standin_world, emulator_factory,  # noqa: ANN001
-                                                                 pty_client_factory) -> None:  # noqa: ANN001
+def test_configuration_sequence_with_baud_change_then_raw_epochs(model, standin_world, emulator_factory,
+                                                                 pty_client_factory) -> None:
     emu = emulator_factory(model, standin_world, speed=5.0)
     client = pty_client_factory(emu.path, 9600)
     _, ack = client.request(*payload("CFG-PRT", PRT_115200), timeout_s=0.5)
@@ -116,10 +117,10 @@ def test_configuration_sequence_with_baud_change_then_raw_epochs(model, standin_
         tows = [m.rcvTow for m in msgs]
     else:
         tows = [m.iTOW / 1e3 for m in msgs]
-    assert all(abs((b - a) - 0.2) < 1e-6 for a, b in zip(tows, tows[1:], strict=False))
+    assert all(abs((b - a) - 0.2) < 1e-6 for a, b in itertools.pairwise(tows))
 
 
-def test_time_marks_arrive_over_the_pty(standin_world, emulator_factory, pty_client_factory) -> None:  # noqa: ANN001
+def test_time_marks_arrive_over_the_pty(standin_world, emulator_factory, pty_client_factory) -> None:
     t0 = standin_world.start
     flashes = [t0.add_s(4.3 + 2 * k + 0.064) for k in range(3)]
     for k, f in enumerate(flashes):
@@ -138,8 +139,8 @@ def test_time_marks_arrive_over_the_pty(standin_world, emulator_factory, pty_cli
         assert m.newFallingEdge == 1 and abs(GpsTime.from_ms_subms(m.wnF, m.towMsF, m.towSubMsF).diff_ns(f)) < 50
 
 
-def test_corrupt_bytes_fault_breaks_checksums_but_frames_still_arrive(standin_world, emulator_factory,  # noqa: ANN001
-                                                                      pty_client_factory) -> None:  # noqa: ANN001
+def test_corrupt_bytes_fault_breaks_checksums_but_frames_still_arrive(standin_world, emulator_factory,
+                                                                      pty_client_factory) -> None:
     emu = emulator_factory("m8t", standin_world, speed=5.0, faults=FaultOptions(seed=2, corrupt_byte_rate=0.003))
     client = pty_client_factory(emu.path, 9600)
     client.pump(3.0)
@@ -148,8 +149,8 @@ def test_corrupt_bytes_fault_breaks_checksums_but_frames_still_arrive(standin_wo
     assert sum(f.protocol is Protocol.NMEA for f in client.frames) > 20
 
 
-def test_port_disappears_and_comes_back_at_the_link(tmp_path: Path, standin_world, emulator_factory,  # noqa: ANN001
-                                                    pty_client_factory) -> None:  # noqa: ANN001
+def test_port_disappears_and_comes_back_at_the_link(tmp_path: Path, standin_world, emulator_factory,
+                                                    pty_client_factory) -> None:
     link = tmp_path / "gnss0"
     emu = emulator_factory("m8t", standin_world, speed=4.0, link=link,
                            faults=FaultOptions(unplug_windows_s=((3.0, 4.0),)))
@@ -176,7 +177,7 @@ def test_port_disappears_and_comes_back_at_the_link(tmp_path: Path, standin_worl
     assert again.request(0x0A, 0x04, reply=(0x0A, 0x04))[0] is not None
 
 
-def test_silent_receiver_never_answers_over_the_pty(standin_world, emulator_factory, pty_client_factory) -> None:  # noqa: ANN001
+def test_silent_receiver_never_answers_over_the_pty(standin_world, emulator_factory, pty_client_factory) -> None:
     emu = emulator_factory("lea6t", standin_world, silent=True)
     client = pty_client_factory(emu.path, 9600)
     reply, ack = client.request(0x0A, 0x04, reply=(0x0A, 0x04), timeout_s=0.5)
