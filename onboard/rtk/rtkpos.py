@@ -129,8 +129,9 @@ def _slots(obs: ObsEpoch, store: EphemerisStore) -> _Receiver:
 
 def _model_range_m(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr, Arr, Arr]:
     """Modelled range (geometric + Sagnac − sat clock + dry/wet troposphere), LOS, az, el for every slot."""
-    r, e = geometric_range(rcv.sats.pos_m, pos_ecef_m)
-    az, el = sat_az_el(pos_ecef_m, e)
+    with np.errstate(invalid="ignore", divide="ignore"):  # empty slots (zero positions) give NaN, unused
+        r, e = geometric_range(rcv.sats.pos_m, pos_ecef_m)
+        az, el = sat_az_el(pos_ecef_m, e)
     lat, _, h = ecef_to_llh(pos_ecef_m)
     trop = saastamoinen_m(lat, h, el)
     return r - CLIGHT_M_S * rcv.sats.clock_s + trop, e, az, el
@@ -569,6 +570,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         amb = NX0 + np.flatnonzero(st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
         st.p[amb, amb] += 0.5**2
         if bad_phase.size >= 1:
+            st.slips += int(bad_phase.size)
             _reset_amb(st, bad_phase)
             use_phase[bad_phase] = False
 
