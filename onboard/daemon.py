@@ -22,7 +22,7 @@ import os
 import shutil
 import signal
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,7 +35,9 @@ from onboard.logger.journal import EVENTS_NAME, Journal, JournalOptions, flight_
 from onboard.receiver.framing import Frame, StreamFramer
 from onboard.sdnotify import SdNotifier, WatchdogGate
 from onboard.settings import Settings, receiver_options
+from onboard.rtk.types import CameraMark
 from onboard.status import SatelliteStatus, StatusSnapshot, write_status
+from onboard.timepulse.marks import EVENT_FORMAT_VERSION, PairingOptions, mark_record, pair_marks, pairing_record, timepulse_record
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +46,8 @@ EXIT_IO_ERROR = 1
 EXIT_DISK_FULL = 3
 READ_CHUNK_BYTES = 4096
 TIM_TM2 = (0x0D, 0x03)
+# A pairing is final once a mark this much later arrived (TIM-TM2 reports an edge within one navigation epoch).
+PAIRING_SETTLE_NS = 5_000_000_000
 
 
 def disk_free_bytes(path: Path) -> int:
@@ -80,6 +84,48 @@ def choose_flight_dir(data_dir: Path, wall_ns: int) -> Path:
     return candidate
 
 
+class OnlinePairer:
+    """Pulse/flash pairing while recording (pure): `add` the marks of each TIM-TM2 report, get the event records.
+
+    Every mark is returned at once as a `mark` record. Pairings come from `onboard.timepulse.marks.pair_marks`
+    over the marks so far and are emitted (as `pairing` records) once final: when the newest mark is more than
+    `settle_ns` later than the pairing, so no later report can change it. `finish` emits the rest.
+    """
+
+    def __init__(self, options: PairingOptions, settle_ns: int) -> None:
+        self.options = options
+        self.settle_ns = settle_ns
+        self.marks: list[CameraMark] = []
+        self.emitted = 0
+        self.last_ns: int | None = None
+
+    def add(self, marks: Sequence[CameraMark]) -> list[dict[str, Any]]:
+        """Records for these new marks, plus any pairing that became final."""
+        out = [mark_record(m) for m in marks]
+        for m in marks:
+            if m.valid and m.time is not None:
+                self.marks.append(m)
+                self.last_ns = m.time.total_ns if self.last_ns is None else max(self.last_ns, m.time.total_ns)
+        if marks and self.last_ns is not None:
+            out += self._pairings(self.last_ns - self.settle_ns)
+        return out
+
+    def finish(self) -> list[dict[str, Any]]:
+        """Every pairing not emitted yet (end of recording)."""
+        return self._pairings(None)
+
+    def _pairings(self, horizon_ns: int | None) -> list[dict[str, Any]]:
+        pairs = pair_marks(self.marks, self.options)
+        out = []
+        for p in pairs[self.emitted :]:
+            t = p.pulse_time if p.pulse_time is not None else p.flash_time
+            if horizon_ns is not None and (t is None or t.total_ns > horizon_ns):
+                break
+            out.append(pairing_record(p))
+            self.emitted += 1
+        return out
+
+
 class Recorder:
     """The recorder: owns the journal, event log, port thread, decoder hook-up and status."""
 
@@ -111,7 +157,16 @@ class Recorder:
         self._gate = WatchdogGate(int(settings.watchdog_writer_stall_s * 1e9))
         self._decode_stats: Any = None
         self._decode: Callable[..., Any] | None = None
-        self._marks_handler: Callable[[Any], list[dict[str, Any]]] | None = None
+        self._pairer = OnlinePairer(self._pairing_options(), settle_ns=PAIRING_SETTLE_NS)
+
+    def _pairing_options(self) -> PairingOptions:
+        opts = receiver_options(self.settings)
+        return PairingOptions(
+            # GPIO trigger edges are not wired into the recorder yet: only TIM-TM2 channel 1 counts as measured.
+            trigger_measured=opts.trigger == "extint1",
+            trigger_edge="rising" if opts.pulse_rising else "falling",
+            max_delay_ns=min(1_000_000_000, round(opts.camera_period_s * 1e9) // 2),
+        )
 
     # -- lifecycle --------------------------------------------------------------------------------------
     def check_disk(self) -> int:
@@ -191,6 +246,9 @@ class Recorder:
         reason = self.stop_reason or "stopped"
         try:
             if self.events is not None:
+                for rec in self._pairer.finish():
+                    self.events.append(rec)
+                self.status.events = self.events.records
                 self.events.close()
             if self.journal is not None:
                 with self._journal_lock:
@@ -376,8 +434,10 @@ class Recorder:
                                      "hwVersion")
             st.config_state = "configuring"
             profile = build_profile(model, opts)
-            report = await apply_profile(link, profile, opts, receiver=info, current_baud=s.port_baud)
+            current_baud = getattr(self._port, "baud", None)  # after a probe, the rate that answered
+            report = await apply_profile(link, profile, opts, receiver=info, current_baud=current_baud)
             st.config_report = report.to_json()
+            self._append_event(self._timepulse_event(report.to_json(), opts))
             if report.ok:
                 st.config_state = "verified"
             else:
@@ -394,6 +454,19 @@ class Recorder:
             st.config_error = f"link: {exc}"
             log.error("receiver configuration interrupted: %s", exc)
 
+    @staticmethod
+    def _timepulse_event(report: dict[str, Any], opts: Any) -> dict[str, Any]:
+        """The `timepulse` record: what the receiver applied to the camera pulse (as polled back)."""
+        align: int | None = None
+        for msg in report.get("messages", []):
+            if msg.get("name") == "CFG-TP5" and "camera" in msg.get("label", "").lower():
+                value = msg.get("applied", {}).get("alignToTow")
+                align = None if value is None else int(value)
+        return timepulse_record(
+            report.get("camera_timepulse", ""), round(opts.camera_period_s * 1e6), round(opts.pulse_len_ms * 1e3),
+            bool(opts.pulse_rising), align, report.get("trigger", opts.trigger),
+        )
+
     def _record_config(self, receiver: dict[str, Any] | None, report: dict[str, Any]) -> None:
         if self.journal is not None and not self.journal.closed:
             with self._journal_lock:
@@ -402,7 +475,7 @@ class Recorder:
                 except OSError as exc:
                     log.error("manifest write failed: %s", exc)
         if self.events is not None:
-            self._append_event({"type": "config", "host_wall_ns": self.clock.wall_ns(), "receiver": receiver,
+            self._append_event({"v": EVENT_FORMAT_VERSION, "kind": "config", "host_wall_ns": self.clock.wall_ns(), "receiver": receiver,
                                 "ok": bool(report.get("ok")), "errors": report.get("errors", [])})
 
     # -- loop side: bytes → frames → decoded ------------------------------------------------------------
@@ -461,8 +534,7 @@ class Recorder:
             for mark in item.marks:
                 if mark.time is not None:
                     st.last_mark_gpst = str(mark.time)
-            records = self._marks_handler(item) if self._marks_handler is not None else []
-            for rec in records:
+            for rec in self._pairer.add(item.marks):
                 self._append_event(rec)
             if self.events is not None:
                 self._sync_events()

@@ -1,0 +1,136 @@
+"""End to end: the real daemon (`python -m onboard run`, a subprocess) against the hil_sim receiver emulator
+over a real pseudo-terminal, for the LEA-6T and the M8T.
+
+The emulator starts at the factory 9600 Bd while the daemon opens the port at 115200 Bd, so the run also
+covers baud probing and the CFG-PRT rate change. The camera misses some flashes and bounces others (seeded),
+and the trigger pulse is wired to EXTINT1. Truth is the emulator's own World: every camera event in the
+recorded window must come out of `events.jsonl` paired, with the simulator's delay to ±1 µs, or flagged.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from onboard.logger.events import read_events
+from onboard.logger.journal import iter_journal_bytes, read_manifest
+from onboard.receiver.decode import iter_journal
+from onboard.rtk.types import ObsEpoch
+from onboard.timepulse.marks import BOUNCE, MISSED_FLASH, PULSE_WITHOUT_FLASH, parse_records
+from tests.daemon.helpers import status, wait_until
+
+hil_scenario = pytest.importorskip("hil_sim.scenario")
+from hil_sim.pty_server import ReceiverEmulator  # noqa: E402
+from hil_sim.receiver import ReceiverOptions  # noqa: E402
+from hil_sim.world import World  # noqa: E402
+
+PROJECT = Path(__file__).resolve().parents[2]
+SPEED = 4.0  # simulated seconds per real second
+VALID_AFTER_S = 4.0  # simulated time to the first fix (no camera pulses before)
+RECORD_SIM_S = 48.0  # simulated seconds recorded after configuration: ~24 camera pulses at 2 s
+pytestmark = [pytest.mark.timeout(180), pytest.mark.slow]
+
+
+def start_daemon(tmp_path: Path, port: str) -> tuple[subprocess.Popen[bytes], Path, Path]:
+    cfg = tmp_path / "recorder.toml"
+    cfg.write_text(
+        "[receiver]\ncamera_period_s = 2.0\ntrigger = \"extint1\"\nmeas_rate_ms = 500\n"
+        "[journal]\ndisk_floor_mb = 1.0\n"
+    )
+    data_dir, status_path = tmp_path / "data", tmp_path / "run" / "status.json"
+    env = dict(os.environ, PYTHONPATH=str(PROJECT))
+    env.pop("NOTIFY_SOCKET", None)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "onboard", "run", "--config", str(cfg), "--port", port, "--baud", "115200",
+         "--data-dir", str(data_dir), "--status", str(status_path)],
+        cwd=PROJECT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+    )
+    return proc, data_dir, status_path
+
+
+@pytest.mark.parametrize("model", ["lea6t", "m8t"])
+def test_daemon_against_emulator(tmp_path: Path, model: str) -> None:
+    scenario = hil_scenario.Scenario.default(
+        model=model,
+        camera=hil_scenario.CameraPlan(valid_after_s=VALID_AFTER_S, missed_flash_probability=0.15,
+                                       bounce_probability=0.15),
+    )
+    world = World(scenario)
+    emu = ReceiverEmulator(model, ReceiverOptions(trigger_extint=True, time_valid_after_s=VALID_AFTER_S), world,
+                           speed=SPEED, t_start=scenario.start)
+    port = emu.start()
+    proc, data_dir, status_path = start_daemon(tmp_path, port)
+    try:
+        st = wait_until(lambda: (s := status(status_path)).get("config_state") in ("verified", "failed") and s,
+                        timeout_s=60, what="configuration result")
+        assert st["config_state"] == "verified", st["config_error"]
+        configured_at = emu.sim_time()
+        wait_until(lambda: emu.sim_time().diff_s(configured_at) > RECORD_SIM_S, timeout_s=60, what="recording")
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=30)
+        assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
+        end = emu.sim_time()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        emu.stop()
+    assert emu.error is None
+
+    # --- configuration verified by poll-back, receiver identified
+    st = status(status_path)
+    assert st["state"] == "stopped" and st["receiver_model"] == model
+    report = st["config_report"]
+    assert report["ok"] and report["baud"] == 115200
+    assert any(m["polled_back"] for m in report["messages"])
+    assert all(m["status"] in ("ok", "altered", "sent", "replaced") for m in report["messages"]), report
+    flight = next(data_dir.glob("flight-*"))
+    manifest = read_manifest(flight)
+    assert manifest is not None and manifest.closed and manifest.config_report is not None
+    assert manifest.receiver is not None and manifest.receiver["model"] == model
+
+    # --- raw epochs recorded (2 Hz for the recorded span, allowing the configuration time)
+    recorded = b"".join(iter_journal_bytes(flight))
+    assert len(recorded) == st["bytes_recorded"] == manifest.to_json()["total_bytes"]
+    epochs = [e for e in iter_journal(flight) if isinstance(e, ObsEpoch)]
+    assert len(epochs) >= 0.8 * RECORD_SIM_S * 2
+    assert st["epochs"] == len(epochs)
+    assert all(len(e.sv_id) >= 4 for e in epochs)
+
+    # --- every camera event in the recorded window paired or flagged, delays to ±1 µs
+    marks, pairings, other = parse_records(read_events(flight / "events.jsonl").records)
+    assert any(r.get("kind") == "timepulse" for r in other)
+    with_pulse = [p for p in pairings if p.pulse_time is not None]
+    assert with_pulse, "no trigger pulse was recorded"
+    first = min(p.pulse_time.total_ns for p in with_pulse)  # type: ignore[union-attr]
+    last = max(p.pulse_time.total_ns for p in with_pulse)  # type: ignore[union-attr]
+    truth = [ev for ev in world.camera_events(scenario.start, end)
+             if first - 1_000_000 <= ev.pulse_time.total_ns <= last + 1_000_000]  # marks carry ns noise
+    assert len(truth) >= 15
+    by_pulse = {round(p.pulse_time.total_ns / 1e6): p for p in with_pulse}  # type: ignore[union-attr]
+    kinds = {"clean": 0, "missed": 0, "bounced": 0}
+    for ev in truth:
+        p = by_pulse.get(round(ev.pulse_time.total_ns / 1e6))
+        assert p is not None, f"pulse at {ev.pulse_time} not recorded"
+        assert abs(p.pulse_time.diff_ns(ev.pulse_time)) <= 1_000  # type: ignore[union-attr]
+        if ev.flash_time is None:
+            assert PULSE_WITHOUT_FLASH in p.flags, p
+            kinds["missed"] += 1
+        elif ev.bounce_time is not None:
+            assert BOUNCE in p.flags or MISSED_FLASH in p.flags, p
+            kinds["bounced"] += 1
+        else:
+            assert p.flags == (), p
+            assert p.delay_ns is not None
+            assert abs(p.delay_ns - round(ev.delay_s * 1e9)) <= 1_000, (p, ev)
+            kinds["clean"] += 1
+    assert kinds["missed"] >= 1 and kinds["bounced"] >= 1 and kinds["clean"] >= 10, kinds
+    # nothing invented: no pairing outside the truth
+    assert len(with_pulse) == len(truth)
+    assert all(m.source == "tim-tm2" for m in marks)
