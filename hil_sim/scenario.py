@@ -126,11 +126,11 @@ class FlightPlan:
     static_s: float = 60.0
     climb_rate_m_s: float = 2.5
     survey_height_m: float = 60.0
-    line_length_m: float = 240.0
+    line_length_m: float = 300.0
     line_spacing_m: float = 30.0
-    n_lines: int = 4
+    n_lines: int = 6
     line_azimuth_deg: float = 30.0
-    line_speeds_m_s: tuple[float, ...] = (4.0, 4.6, 5.0, 4.3)
+    line_speeds_m_s: tuple[float, ...] = (4.0, 4.6, 5.0, 4.3, 4.8, 4.2)
     accel_m_s2: float = 1.5
     land: bool = True
     descent_rate_m_s: float = 1.5
@@ -170,7 +170,7 @@ class Scenario:
     """
 
     start: GpsTime = DEFAULT_START
-    duration_s: float = 1200.0
+    duration_s: float = 900.0
     seed: int = 1
     site_lat_deg: float = 47.40
     site_lon_deg: float = 8.50

@@ -23,7 +23,7 @@ time t (GPS time):
 
     pr  = ρ + c·(b_r − dt_s) + T + I + MP_code + ε_code
     cp  = (ρ + c·(b_r − dt_s) + T − I + MP_phase + ε_phase)/λ + N (+ ½ during an unresolved half cycle)
-    dop = −(ρ̇ + c·(ḃ_r − ḋt_s))/λ + ε_dop
+    dop = −(ρ̇ + c·(ḃ_r − ḋt_s) + d(T − I)/dt)/λ + ε_dop
 
 - ρ: geometric range from the antenna to the satellite at transmission time t − ρ/c (light-time iteration),
   satellite position rotated by the Earth's rotation during the travel time (exact Sagnac rotation).
@@ -312,7 +312,9 @@ class World:
             "antenna_enu_m": st.pos_enu_m, "camera_ecef_m": st.camera_ecef_m, "camera_enu_m": st.camera_enu_m,
             "r_cam_to_enu": st.r_cam_to_enu, "roll_deg": math.degrees(st.roll_rad),
             "pitch_deg": math.degrees(st.pitch_rad), "yaw_deg": math.degrees(st.yaw_rad), "armed": st.armed,
-            "phase": st.phase, "line_index": st.line_index, "base_ecef_m": self.base_ecef_m.copy(),
+            "phase": st.phase, "line_index": st.line_index, "rover_ecef_m": st.pos_ecef_m,
+            "rover_vel_ecef_m_s": st.vel_ecef_m_s, "base_ecef_m": self.base_ecef_m.copy(),
+            "base_vel_ecef_m_s": np.zeros(3),
             "enu_origin_ecef_m": self.trajectory.origin_ecef_m.copy(),
             "lever_arm_cam_m": np.asarray(self.scenario.flight.lever_arm_cam_m, dtype=float),
         }
@@ -328,41 +330,56 @@ class World:
         """The L1 observables `receiver` reports for its nominal epoch `t_rx_nominal` (time = its tag)."""
         return self._simulate(receiver, t_rx_nominal)[0]
 
+    def observe_detailed(self, receiver: str, t_rx_nominal: GpsTime) -> tuple[ObsEpoch, dict[str, Any]]:
+        """`observe` and `components` in one computation (for tests and truth logging)."""
+        return self._simulate(receiver, t_rx_nominal)
+
     def components(self, receiver: str, t_rx_nominal: GpsTime) -> dict[str, Any]:
         """Every term of the observation equations for one epoch (arrays aligned with the epoch's sv_id)."""
         return self._simulate(receiver, t_rx_nominal, update_state=False)[1]
 
     # ------------------------------------------------------------------------------------ internals
-    def _sat_state(self, prn: int, t_tx: GpsTime, t_rx: GpsTime) -> tuple[Vec, Vec, float, float]:
-        """True satellite position (m) and velocity (m/s) at `t_tx` (ECEF of t_tx), clock (s) and drift (s/s)."""
-        eph = self._eph[prn]
-        pos, vel, clk, drift = eph_position_velocity(eph, t_tx)
-        pos = pos + self._slow.interp(self._orbit_err[:, prn - 1, :], t_rx)
-        clk = clk - eph.tgd_s + float(self._slow.interp(self._satclk_err_m[:, prn - 1], t_rx)) / CLIGHT_M_S
-        return pos, vel, clk, drift
-
     def _geometry(self, prn: int, t: GpsTime, rcv_ecef: Vec, rcv_vel: Vec) -> dict[str, Any]:
-        """Light-time solution: range, range rate, satellite clock for a receiver at `rcv_ecef` at time t."""
+        """Light-time solution for a receiver at `rcv_ecef` (ECEF m, moving at `rcv_vel`) at GPS time t:
+        range (m), range rate (m/s), satellite position/velocity rotated into the ECEF frame of reception,
+        satellite clock (s, incl. relativity, −TGD and the clock error) and drift (s/s)."""
+        eph = self._eph[prn]
+        orbit_err = self._slow.interp(self._orbit_err[:, prn - 1, :], t)
+        clk_err_s = float(self._slow.interp(self._satclk_err_m[:, prn - 1], t)) / CLIGHT_M_S
         tau = 0.075
-        pos = vel = np.zeros(3)
-        clk = drift = 0.0
+        rot = np.eye(3)
+        pos_r = np.zeros(3)
         rho = 0.0
-        t_tx = t
-        for _ in range(4):
-            t_tx = t.add_s(-tau)
-            pos, vel, clk, drift = self._sat_state(prn, t_tx, t)
+        for _ in range(3):  # converges to < 1e-12 s: the first guess is within ~10 ms
+            pos, _ = eph_position(eph, t.add_s(-tau))
             th = OMEGA_E_RAD_S * tau
             c, s = math.cos(th), math.sin(th)
             rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-            pos_r = rot @ pos
+            pos_r = rot @ (pos + orbit_err)
             rho = float(np.linalg.norm(pos_r - rcv_ecef))
             tau = rho / CLIGHT_M_S
+        t_tx = t.add_s(-tau)
+        pos, vel, clk, drift = eph_position_velocity(eph, t_tx)
+        pos_r = rot @ (pos + orbit_err)
+        rho = float(np.linalg.norm(pos_r - rcv_ecef))
         los = (pos_r - rcv_ecef) / rho
         vel_r = rot @ vel
         e_vs = float(los @ vel_r)
         rho_dot = (e_vs - float(los @ rcv_vel)) / (1.0 + e_vs / CLIGHT_M_S)
-        return {"rho_m": rho, "rho_dot_m_s": rho_dot, "sat_pos_m": pos_r, "sat_clock_s": clk,
-                "sat_drift_s_s": drift, "los": los, "t_tx": t_tx}
+        return {"rho_m": rho, "rho_dot_m_s": rho_dot, "sat_pos_m": pos_r, "sat_vel_m_s": vel_r,
+                "sat_clock_s": clk - eph.tgd_s + clk_err_s, "sat_drift_s_s": drift, "los": los, "t_tx": t_tx}
+
+    def _delays(self, t: GpsTime, lat: float, lon: float, h: float, az: Vec, el: Vec, d_enu: Vec,
+                col: npt.NDArray[np.int_]) -> tuple[Vec, Vec, Vec, Vec]:
+        """(troposphere, ionosphere, Saastamoinen part, Klobuchar part) slant delays (m) on L1."""
+        sin_el = np.sin(np.maximum(el, math.radians(1.0)))
+        tropo_model = saastamoinen_m(lat, h, el)
+        tropo = tropo_model + float(self._slow.interp(self._tropo_res_m, t)) / sin_el
+        iono_model = klobuchar_m(t.tow_s, lat, lon, az, el, self._alpha, self._beta)
+        obliquity = 1.0 + 16.0 * (0.53 - el / math.pi) ** 3
+        grad = self._iono_grad_enu[col] @ d_enu[:2] if col.size else np.zeros(0)
+        iono = iono_model * (1.0 + self._slow.interp(self._iono_err, t)[col]) + grad * obliquity
+        return tropo, iono, tropo_model, iono_model
 
     def _elevation_grid(self, receiver: str) -> Vec:
         """Elevation (rad) of every PRN (NaN without ephemeris) at the slow grid's instants, for `receiver`."""
@@ -473,12 +490,21 @@ class World:
         dts_dot = np.array([r["sat_drift_s_s"] for r in rows])
         sin_el = np.sin(np.maximum(el, math.radians(1.0)))
 
-        tropo_model = saastamoinen_m(lat, h, el)
-        tropo = tropo_model + float(self._slow.interp(self._tropo_res_m, t)) / sin_el
-        iono_model = klobuchar_m(t.tow_s, lat, lon, az, el, self._alpha, self._beta)
-        obliquity = 1.0 + 16.0 * (0.53 - el / math.pi) ** 3
-        grad = self._iono_grad_enu[col] @ d_enu[:2] if n else np.zeros(0)
-        iono = iono_model * (1.0 + self._slow.interp(self._iono_err, t)[col]) + grad * obliquity
+        tropo, iono, tropo_model, iono_model = self._delays(t, lat, lon, h, az, el, d_enu, col)
+        # Rate of the atmospheric terms (phase rate = Doppler): central difference along the motion of the
+        # line of sight (elevation rate from the relative velocity) and of the receiver.
+        los = np.array([r["los"] for r in rows]).reshape(n, 3)
+        v_rel = np.array([r["sat_vel_m_s"] for r in rows]).reshape(n, 3) - rcv_vel
+        up = r_enu[2]
+        de_dt = (v_rel - los * np.sum(los * v_rel, axis=1)[:, None]) / rho[:, None]
+        el_rate = (de_dt @ up) / np.maximum(np.cos(el), 1e-6)
+        vel_enu = r_enu @ rcv_vel
+        h_step = 0.5
+        tp, ip, _, _ = self._delays(t.add_s(h_step), lat, lon, h + vel_enu[2] * h_step, az,
+                                    el + el_rate * h_step, d_enu + vel_enu * h_step, col)
+        tm, im, _, _ = self._delays(t.add_s(-h_step), lat, lon, h - vel_enu[2] * h_step, az,
+                                    el - el_rate * h_step, d_enu - vel_enu * h_step, col)
+        atmo_rate = ((tp - ip) - (tm - im)) / (2 * h_step)
 
         mp_code = em.mp_code_sigma_zenith_m / sin_el * self._fast.interp(self._mp_code[receiver], t)[col]
         mp_phase = em.mp_phase_sigma_zenith_m / sin_el * self._fast.interp(self._mp_phase[receiver], t)[col]
@@ -517,7 +543,7 @@ class World:
 
         pr = rho + clocks_m + tropo + iono + mp_code + eps_code
         cp = (rho + clocks_m + tropo - iono + mp_phase + eps_phase) / LAMBDA_L1_M + amb + half
-        dop = -(rho_dot + CLIGHT_M_S * (timing.clock_drift_s_s - dts_dot)) / LAMBDA_L1_M + eps_dop
+        dop = -(rho_dot + CLIGHT_M_S * (timing.clock_drift_s_s - dts_dot) + atmo_rate) / LAMBDA_L1_M + eps_dop
         pr_std = np.hypot(em.code_sigma_zenith_m, em.mp_code_sigma_zenith_m) / sin_el
         cp_std = np.hypot(em.phase_sigma_zenith_m, em.mp_phase_sigma_zenith_m) / sin_el / LAMBDA_L1_M
         clock_reset = timing.jumps != prev_jumps
