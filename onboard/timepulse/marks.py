@@ -37,6 +37,7 @@ kind           fields
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -130,7 +131,7 @@ def _lost_edges(all_marks: list[CameraMark], flashes: list[CameraMark], options:
                      and m.edge != options.flash_edge and m.valid and m.time is not None),
                     key=lambda m: m.time)  # type: ignore[arg-type, return-value]
     if rising:
-        for a, b in zip(rising, rising[1:]):
+        for a, b in itertools.pairwise(rising):
             jump = (b.count - a.count) % COUNT_MODULO - 1
             if jump > 0:
                 assert a.time is not None

@@ -9,7 +9,7 @@ from __future__ import annotations
 import asyncio
 import os
 import termios
-from collections.abc import AsyncIterator, Callable, Iterator
+from collections.abc import AsyncIterator, Iterator
 from contextlib import asynccontextmanager, contextmanager
 from typing import Any
 

@@ -6,7 +6,9 @@ import struct
 
 import pytest
 from pyubx2 import SET, UBXMessage, UBXReader
+from pyubx2.exceptions import UBXTypeError
 
+from onboard.errors import ReceiverError
 from onboard.receiver.framing import iter_frames, ubx_frame
 from onboard.receiver.profiles import ReceiverOptions, build_profile, decode_cfg
 from onboard.receiver.ubx_tables import CFG_TP, pack_payload, poll_frame, unpack_payload
@@ -156,7 +158,7 @@ def test_legacy_cfg_tp_codec_round_trip_and_pyubx2_cannot() -> None:
     assert struct.unpack("<IIbBBBhhi", payload) == (2_500_000, 100_000, -1, 1, 1, 0, 50, 0, -20)
     assert unpack_payload(CFG_TP, payload) == fields | {"reserved1": 0}
     assert decode_cfg(ubx_frame(0x06, 0x07, payload)) == fields | {"reserved1": 0}
-    with pytest.raises(Exception):  # the pyubx2 1.4.0 quirk this codec exists for (`length` field)
+    with pytest.raises(UBXTypeError):  # the pyubx2 1.4.0 quirk this codec exists for (`length` field)
         UBXMessage("CFG", "CFG-TP", SET, **fields).serialize()
 
 
@@ -167,7 +169,7 @@ def test_cfg_tp_codec_refuses_bad_values_naming_the_field() -> None:
     with pytest.raises(ValueError, match="CFG-TP.status"):
         pack_payload(CFG_TP, {"interval": 1, "length": 1, "status": 200, "timeRef": 1, "flags": 0,
                               "antennaCableDelay": 0, "rfGroupDelay": 0, "userDelay": 0})
-    with pytest.raises(Exception, match="20"):
+    with pytest.raises(ReceiverError, match="20"):
         unpack_payload(CFG_TP, b"\x00" * 19)  # truncated answer
 
 

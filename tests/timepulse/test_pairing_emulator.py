@@ -13,7 +13,7 @@ import pytest
 from onboard.receiver.configure import apply_profile
 from onboard.receiver.profiles import ReceiverOptions, build_profile
 from onboard.rtk.types import CameraMark
-from onboard.timepulse.marks import BOUNCE, PULSE_WITHOUT_FLASH, MISSED_FLASH, pair_marks
+from onboard.timepulse.marks import BOUNCE, MISSED_FLASH, PULSE_WITHOUT_FLASH, pair_marks
 from tests.conftest import shared_file
 
 emu_mod = pytest.importorskip("hil_sim.pty_server", reason="hil_sim receiver emulator not available")
