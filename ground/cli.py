@@ -125,6 +125,7 @@ def run_adjust(req: AdjustRequest, out_dir: Path) -> dict[str, Any]:
     oset = read_orientations(req.orientations)
     events, matching = _read_events(req, [p.image for p in oset.poses])
     origin = np.asarray(traj.pos_ecef_m[0], dtype=float)
+    crsmod.ecef_to_crs(origin, req.crs)  # a missing geoid grid fails here, before the work
     control = []
     if req.gcp is not None:
         suffix = req.gcp.suffix.lower()

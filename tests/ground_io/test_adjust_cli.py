@@ -1,0 +1,104 @@
+"""`python -m ground adjust` end to end on a synthetic flight written in the real formats (truth in, truth out),
+the value/σ/--estimate rules, exports in a projected CRS, and the failure exits."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ground.cli import AdjustRequest, main, parameter_specs
+from ground.io import crs as crsmod
+from ground.io.orientations import read_micmac_folder, read_opk_csv
+from onboard.errors import InputError
+from tests.ground_io.flightgen import ORIGIN_ECEF, write_synthetic_flight
+
+pytest.importorskip("ground.adjust.solve")
+
+
+def _args(d: Path, *extra: str) -> list[str]:
+    return ["adjust", "--trajectory", str(d / "SOL.pos"), "--events", str(d / "events.csv"),
+            "--orientations", str(d / "poses.csv"), "--gcp", str(d / "gcp.csv"), "-o", str(d / "out"), *extra]
+
+
+def test_parameter_rules() -> None:
+    """Value alone → fixed; value + σ → prior; nothing → free; --estimate with a value but no σ → error."""
+    base = AdjustRequest(Path("t"), Path("e"), Path("o"))
+    lever, delay = parameter_specs(base)
+    assert lever.mode == "free" and delay.mode == "free"
+    r = AdjustRequest(Path("t"), Path("e"), Path("o"), lever_arm_m=(0.1, 0.0, -0.1), delay_s=0.06, delay_sigma_s=0.002)
+    lever, delay = parameter_specs(r)
+    assert lever.mode == "fixed" and lever.value_m == (0.1, 0.0, -0.1)
+    assert delay.mode == "prior" and delay.sigma_s == 0.002
+    with pytest.raises(InputError, match="lever-arm-sigma"):
+        parameter_specs(AdjustRequest(Path("t"), Path("e"), Path("o"), lever_arm_m=(0, 0, 0), estimate=("lever-arm",)))
+    with pytest.raises(InputError, match="--estimate"):
+        parameter_specs(AdjustRequest(Path("t"), Path("e"), Path("o"), estimate=("scale",)))
+    with pytest.raises(InputError, match="needs --delay"):
+        parameter_specs(AdjustRequest(Path("t"), Path("e"), Path("o"), delay_sigma_s=0.001))
+
+
+def test_adjust_free_recovers_truth_and_exports_utm(tmp_path: Path) -> None:
+    truth = write_synthetic_flight(tmp_path)
+    assert main(_args(tmp_path, "--estimate", "lever-arm,delay", "--crs", "EPSG:32630")) == 0
+    res = json.loads((tmp_path / "out" / "results.json").read_text())
+    np.testing.assert_allclose(res["lever_arm_m"], truth.lever_arm_m, atol=4 * max(res["lever_arm_sigma_m"]) + 0.002)
+    assert res["delay_s"] == pytest.approx(truth.delay_s, abs=4 * res["delay_sigma_s"] + 0.001)
+    assert res["n_images"] == truth.n_images and res["inputs"]["lever_arm"]["mode"] == "free"
+    assert {"correlations", "residuals", "checkpoints", "sigma0"} <= set(res)
+    assert len(res["checkpoints"]) == 2 and max(abs(c["abs_m"]) for c in res["checkpoints"]) < 0.05
+    # exports: OPK CSV in UTM 30N; its centres, taken back to ENU, are the antenna minus the lever arm
+    opk = read_opk_csv(tmp_path / "out" / "exports" / "opk.csv")
+    assert opk.crs == "EPSG:32630"
+    geo = (tmp_path / "out" / "exports" / "geo.txt").read_text().splitlines()
+    assert geo[0] == "EPSG:32630" and len(geo) == truth.n_images + 1
+    enu = crsmod.crs_to_enu(np.array([p.centre_rel for p in opk.poses]), "EPSG:32630", ORIGIN_ECEF)
+    from tests.ground_io.flightgen import START, antenna_enu
+
+    t_exp = np.array([float(line.split(",")[2]) for line in
+                      (tmp_path / "events.csv").read_text().splitlines()[1:]]) - START.tow_s + truth.delay_s
+    g, _, _ = antenna_enu(t_exp)
+    # camera centre = antenna − R·O: at most |O| (0.15 m) plus noise from the antenna
+    dist = np.linalg.norm(enu - g, axis=1)
+    assert np.all(np.abs(dist - np.linalg.norm(truth.lever_arm_m)) < 0.05)
+    # the MicMac export reads back with the same poses
+    mm = read_micmac_folder(tmp_path / "out" / "exports" / "Ori-directgeo").by_image()
+    for p in opk.poses:
+        np.testing.assert_allclose(mm[p.image].centre_rel, p.centre_rel, atol=1e-3)
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert html.count("data:image/png;base64,") >= 4 and "http://" not in html and "https://" not in html
+
+
+def test_adjust_fixed_values_are_kept(tmp_path: Path) -> None:
+    truth = write_synthetic_flight(tmp_path, n_lines=2)
+    lever = ",".join(str(v) for v in truth.lever_arm_m)
+    assert main(_args(tmp_path, "--lever-arm", lever, "--delay", "0.065")) == 0
+    res = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert res["lever_arm_m"] == pytest.approx(list(truth.lever_arm_m), abs=1e-12)
+    assert res["delay_s"] == pytest.approx(0.065, abs=1e-12)
+    assert res["lever_arm_sigma_m"] == [0.0, 0.0, 0.0]
+
+
+def test_adjust_failures_exit_with_clear_messages(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Missing geoid grid (2), lever arm free without GCP (3, refused), corrupt events file (2)."""
+    write_synthetic_flight(tmp_path, n_lines=1)
+    assert main(_args(tmp_path, "--lever-arm", "0.05,-0.12,-0.08", "--crs", "EPSG:2154+5720")) == 2
+    assert "geoid grid" in capsys.readouterr().err
+    args = [a for a in _args(tmp_path) if a not in ("--gcp", str(tmp_path / "gcp.csv"))]
+    assert main(args) == 3
+    assert "refused" in capsys.readouterr().err
+    (tmp_path / "events.csv").write_text("image,week,tow\nIMG_0000.JPG,2300,\n")
+    assert main(_args(tmp_path, "--lever-arm", "0,0,0")) == 2
+    assert "events.csv:2" in capsys.readouterr().err
+    assert not (tmp_path / "out" / "results.json").exists()
+
+
+def test_module_entry_point_runs(tmp_path: Path) -> None:
+    """`python -m ground --help` in a fresh interpreter: nothing at import, the adjust and serve commands exist."""
+    out = subprocess.run([sys.executable, "-m", "ground", "--help"], capture_output=True, text=True, timeout=60,
+                         cwd=Path(__file__).resolve().parents[2])
+    assert out.returncode == 0 and "adjust" in out.stdout and "serve" in out.stdout
