@@ -21,6 +21,7 @@ import numpy as np
 
 from ground.adjust.types import ImageEvent
 from ground.io.errors import FormatError
+from onboard.errors import InputError
 from onboard.gnsstime import NS_PER_S, GpsTime
 
 log = logging.getLogger(__name__)
@@ -82,30 +83,26 @@ def read_events_csv(path: str | Path, default_kind: str = "trigger") -> list[Ima
     return events
 
 
-def mark_from_record(rec: dict[str, Any]) -> Mark | None:
-    """A `Mark` from one events.jsonl record, or None when the record is not an image event.
+def marks_from_records(records: list[dict[str, Any]]) -> list[Mark]:
+    """Image marks from decoded events.jsonl records (format of `onboard.timepulse.marks`).
 
-    Accepted keys (onboard.timepulse writes them): a `type`/`kind` naming a mark ("mark", "time_mark",
-    "flash", "trigger", "pulse_flash"), the time as `week` + `tow_ns` (or `tow_s`), optional `count` and
-    `delay_s`/`measured_delay_s`.
+    One mark per `pairing` record: its flash time (kind "flash", with the measured pulse→flash delay) or, with
+    no flash, its measured pulse time (kind "trigger"). A log without pairing records falls back to its valid
+    flash-channel `mark` records. Raises `InputError` on malformed or newer-format records.
     """
-    kind = str(rec.get("type", rec.get("kind", "")))
-    if kind not in ("mark", "time_mark", "flash", "trigger", "pulse_flash", "camera_mark"):
-        return None
-    try:
-        week = int(rec["week"])
-        tow_ns = int(rec["tow_ns"]) if "tow_ns" in rec else round(float(rec["tow_s"]) * NS_PER_S)
-    except (KeyError, TypeError, ValueError):
-        return None
-    mark_kind = "trigger" if kind == "trigger" or rec.get("edge") == "trigger" else "flash"
-    delay = rec.get("measured_delay_s", rec.get("delay_s"))
-    count = rec.get("count")
-    return Mark(
-        time=GpsTime.from_week_tow_ns(week, tow_ns),
-        kind=mark_kind,
-        count=int(count) if isinstance(count, int | float) else None,
-        measured_delay_s=float(delay) if isinstance(delay, int | float) else None,
-    )
+    from onboard.timepulse.marks import FLASH_CHANNEL, parse_records
+
+    marks, pairings, _ = parse_records(records)
+    out: list[Mark] = []
+    for p in pairings:
+        if p.flash_time is not None:
+            out.append(Mark(p.flash_time, "flash", p.flash_count, p.delay_s))
+        elif p.pulse_time is not None:
+            out.append(Mark(p.pulse_time, "trigger", None, None))
+    if not pairings:
+        out = [Mark(m.time, "flash", m.count) for m in marks
+               if m.channel == FLASH_CHANNEL and m.valid and m.time is not None]
+    return sorted(out, key=lambda m: m.time)
 
 
 def read_marks_jsonl(path: str | Path) -> list[Mark]:
@@ -118,10 +115,13 @@ def read_marks_jsonl(path: str | Path) -> list[Mark]:
     got = read_events(p)
     if got.skipped_lines:
         log.warning("%s: %d torn or corrupt lines skipped", p, got.skipped_lines)
-    marks = [m for m in (mark_from_record(r) for r in got.records) if m is not None]
+    try:
+        marks = marks_from_records(got.records)
+    except InputError as exc:
+        raise FormatError(p, str(exc)) from exc
     if not marks:
         raise FormatError(p, f"no image mark among {len(got.records)} records")
-    return sorted(marks, key=lambda m: m.time)
+    return marks
 
 
 def read_capture_times(path: str | Path) -> dict[str, dt.datetime]:

@@ -60,18 +60,34 @@ def test_events_csv_bad_rows(tmp_path: Path, content: str, match: str) -> None:
         read_events_csv(f)
 
 
-def test_events_jsonl_skips_torn_line_and_non_marks(tmp_path: Path) -> None:
-    """A power cut tears the last line: it is skipped, the marks before it are kept; config records ignored."""
+def test_events_jsonl_pairings_torn_line_and_other_records(tmp_path: Path) -> None:
+    """Records written by onboard.timepulse.marks: one mark per pairing (flash time, measured delay; pulse time
+    when the flash is missing); timepulse records ignored; a torn last line (power cut) skipped."""
+    from onboard.rtk.types import CameraMark
+    from onboard.timepulse.marks import ImagePairing, format_line, mark_record, pairing_record, timepulse_record
+
+    t = [T0.add_s(2.0 * i) for i in range(3)]
+    lines = [format_line(timepulse_record("TIMEPULSE2", 2_000_000, 1000, True, None, "extint1"))]
+    lines += [format_line(pairing_record(ImagePairing(i, t[i], "tim-tm2", None, t[i].add_s(0.064), 10 + i, 20,
+                                                      64_000_000))) for i in range(2)]
+    lines.append(format_line(pairing_record(ImagePairing(2, t[2], "tim-tm2", None, None, None, None, None,
+                                                         ("pulse_without_flash",)))))
     f = tmp_path / "events.jsonl"
-    recs = [{"type": "config", "ok": True}]
-    recs += [{"type": "mark", "week": 2300, "tow_ns": 100_000_000_000_000 + i * 2_000_000_000, "count": i}
-             for i in range(3)]
-    f.write_text("\n".join(json.dumps(r) for r in recs) + '\n{"type":"mark","week":23')
+    f.write_text("".join(lines) + '{"v":1,"kind":"pairing","ind')
     marks = read_marks_jsonl(f)
-    assert [m.count for m in marks] == [0, 1, 2]
-    assert marks[1].time == GpsTime(2300, 100_002_000_000_000)
-    f.write_text(json.dumps({"type": "config"}) + "\n")
+    assert [m.kind for m in marks] == ["flash", "flash", "trigger"]
+    assert marks[1].time == t[1].add_s(0.064) and marks[1].measured_delay_s == pytest.approx(0.064)
+    assert marks[2].time == t[2] and marks[0].count == 10
+    # an older log with marks only: the valid flash-channel edges are the events
+    mk = CameraMark(channel=0, edge="falling", count=5, time=t[0], acc_est_ns=20, time_base=1, valid=True,
+                    source="tim-tm2")
+    f.write_text(format_line(mark_record(mk)))
+    assert [m.time for m in read_marks_jsonl(f)] == [t[0]]
+    f.write_text(format_line(timepulse_record("TIMEPULSE2", 2_000_000, 1000, True, None, "none")))
     with pytest.raises(FormatError, match="no image mark"):
+        read_marks_jsonl(f)
+    f.write_text('{"v":1,"kind":"mark","channel":0}\n')
+    with pytest.raises(FormatError, match="lacks field"):
         read_marks_jsonl(f)
 
 
