@@ -218,6 +218,10 @@ L1_SIG_IDS: dict[int, frozenset[int]] = {
     GNSS_BEIDOU: frozenset({0, 1}), GNSS_QZSS: frozenset({0, 1}), GNSS_GLONASS: frozenset({0}),
 }
 
+_L1_LOOKUP = np.zeros((256, 256), bool)
+for _g, _sigs in L1_SIG_IDS.items():
+    _L1_LOOKUP[_g, sorted(_sigs)] = True
+
 CP_STD_CYC_PER_CODE = 0.004
 """RXM-RAWX cpStdev: n · 0.004 cycles."""
 PR_STD_M_BASE = 0.01
@@ -303,21 +307,19 @@ def decode_rxm_rawx(payload: bytes, glo_fcn: dict[int, int] | None = None) -> Ob
     gnss = m["gnssId"]
     sig = m["sigId"]
     svid = m["svId"]
-    keep = np.zeros(num_meas, bool)
-    seen: set[tuple[int, int]] = set()
-    for i in range(num_meas):
-        g = int(gnss[i])
-        if int(sig[i]) not in L1_SIG_IDS.get(g, ()):
-            continue
-        if g == GNSS_GLONASS and not 1 <= int(svid[i]) <= 24:
-            continue  # slot unknown (255): RTKLIB drops these too
-        key = (g, int(svid[i]))
-        if key in seen:
-            continue  # Galileo E1C and E1B of one satellite: keep the first, as one RINEX row
-        seen.add(key)
-        keep[i] = True
-        if g == GNSS_GLONASS and glo_fcn is not None:
-            glo_fcn.setdefault(int(svid[i]), int(m["freqId"][i]) - 7)
+    keep = _L1_LOOKUP[gnss, sig]  # L1 signals only (L1_SIG_IDS)
+    glo = gnss == GNSS_GLONASS
+    keep &= ~glo | ((svid >= 1) & (svid <= 24))  # GLONASS slot unknown (255): RTKLIB drops these too
+    keys = gnss.astype(np.int32)[keep] * 256 + svid[keep]
+    if np.unique(keys).size != keys.size:
+        # Galileo E1C and E1B of one satellite: keep the first, as one RINEX row
+        idx = np.flatnonzero(keep)
+        _, first = np.unique(keys, return_index=True)
+        keep = np.zeros(num_meas, bool)
+        keep[idx[first]] = True
+    if glo_fcn is not None and glo.any():
+        for slot, freq in zip(svid[keep & glo].tolist(), m["freqId"][keep & glo].tolist()):
+            glo_fcn.setdefault(slot, freq - 7)
     m = m[keep]
     trk = m["trkStat"]
     pr = m["prMes"].astype(np.float64)

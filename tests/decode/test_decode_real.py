@@ -265,3 +265,26 @@ def test_week_zero_polls_and_unknown_messages_are_ignored_not_failures() -> None
     assert stats.failures == 0 and stats.ignored == 5
     nmea = Frame(Protocol.NMEA, b"$GPGGA*56\r\n", 0)
     assert decode_frame(nmea, stats) is None and stats.frames == 5
+
+
+def test_dual_frequency_rawx_keeps_one_l1_entry_per_satellite() -> None:
+    """F9-class RXM-RAWX (L1+L2, Galileo E1C and E1B) -> one L1 entry per satellite, the first one reported."""
+    frames = [f for f in iter_frames(shared_file("ubx/pygnssutils_pygpsdata_testobsnavdata.log").read_bytes(),
+                                     frozenset({Protocol.UBX})) if (f.msg_class, f.msg_id) == (0x02, 0x15)]
+    assert len(frames) == 75
+    for frame in frames:
+        ours = decode_frame(frame)
+        assert isinstance(ours, ObsEpoch)
+        msg = UBXReader.parse(frame.raw, parsebitfield=1)
+        expect: dict[tuple[int, int], float] = {}
+        payload = frame.payload
+        for k in range(msg.numMeas):
+            off = 16 + 32 * k
+            gnss, sv, sig = payload[off + 20], payload[off + 21], payload[off + 22]
+            l1 = sig == 0 or (sig == 1 and gnss in (2, 3, 5))
+            if l1 and gnss != 4 and not (gnss == GNSS_GLONASS and sv == 255):
+                expect.setdefault((gnss, sv), getattr(msg, f"prMes_{k + 1:02d}"))
+        got = list(zip(ours.gnss_id.tolist(), ours.sv_id.tolist()))
+        assert got == list(expect) and len(set(got)) == len(got)
+        for pr, want in zip(ours.pr_m.tolist(), expect.values()):
+            assert pr == want or math.isnan(pr)  # NaN where prValid is clear
