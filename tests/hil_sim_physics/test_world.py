@@ -299,7 +299,7 @@ def test_cycle_slips_with_and_without_lli() -> None:
     world = make_world(errors=errors, flight=FlightPlan(fly=False))
     prev: dict[int, tuple[float, float, float]] = {}
     seen_lli = seen_undetected = 0
-    for k in range(0, 900):
+    for k in range(900):
         ep, comp = world.observe_detailed("base", nominal(world, float(k)))
         cmc = (ep.pr_m - ep.cp_cyc * LAMBDA_L1_M - 2 * comp["iono_m"]) / LAMBDA_L1_M
         for i, sv in enumerate(ep.sv_id):
@@ -323,7 +323,7 @@ def test_half_cycle_flag_after_acquisition_then_subtracted() -> None:
     errors = _only(slip_lli_rate_per_h=20.0, half_cycle_probability=1.0, half_cycle_resolve_s=2.0)
     world = make_world(errors=errors, flight=FlightPlan(fly=False))
     checked = 0
-    for k in range(0, 900):
+    for k in range(900):
         ep, comp = world.observe_detailed("base", nominal(world, float(k)))
         for i in range(len(ep)):
             if ep.lock_ms[i] < 2000.0:
