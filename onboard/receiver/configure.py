@@ -371,6 +371,8 @@ async def _apply_entry(
         if changes_baud:
             assert entry.baud_change is not None
             # The receiver answers at the new rate or not at all: move over, then let the poll-back decide.
+            # First let the frame leave at the old rate (a pty or USB bridge buffers past tcdrain).
+            await asyncio.sleep(options.baud_settle_s)
             await link.reopen(entry.baud_change)
             result.ack = await _wait_ack(link, entry, options.ack_timeout_s)
             if result.ack == "nak":

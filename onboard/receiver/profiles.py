@@ -54,7 +54,9 @@ class ReceiverOptions:
     from TIMEPULSE2 and keep TIMEPULSE at 1 PPS; `trigger` where the trigger pulse is measured ("extint1":
     TIM-TM2 channel 1, "gpio": a Pi input, "none": not measured); `*_every_n` message rates in measurement
     epochs (0 off); `ant_cable_delay_ns` CFG-TP5 antenna cable delay; `save_to_bbr` end with CFG-CFG save;
-    `ack_timeout_s` ACK/NAK and poll-answer wait; `retries` extra attempts after silence.
+    `ack_timeout_s` ACK/NAK and poll-answer wait; `retries` extra attempts after silence; `baud_settle_s` wait
+    between sending a baud-changing CFG-PRT and reopening at the new rate (the frame must have left and been
+    read at the old rate; the ACK may then be missed, the poll-back confirms).
     """
 
     port_id: int = 1
@@ -73,6 +75,7 @@ class ReceiverOptions:
     save_to_bbr: bool = False
     ack_timeout_s: float = 1.0
     retries: int = 2
+    baud_settle_s: float = 0.1
 
     def __post_init__(self) -> None:
         if self.port_id not in PORT_RATE_FIELD:
@@ -86,8 +89,8 @@ class ReceiverOptions:
         for name in ("raw_every_n", "subframes_every_n", "time_mark_every_n", "nav_every_n"):
             if not 0 <= getattr(self, name) <= 255:
                 raise ValueError(f"{name} must be within 0–255, got {getattr(self, name)}")
-        if self.ack_timeout_s <= 0 or self.retries < 0:
-            raise ValueError("ack_timeout_s must be > 0 and retries ≥ 0")
+        if self.ack_timeout_s <= 0 or self.retries < 0 or not 0 <= self.baud_settle_s <= 2:
+            raise ValueError("ack_timeout_s must be > 0, retries ≥ 0 and baud_settle_s within 0–2 s")
         camera_pulse_spec(self.camera_period_s, self.pulse_len_ms, self.pulse_rising)  # validates both
 
 

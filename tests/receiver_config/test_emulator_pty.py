@@ -68,9 +68,7 @@ class PtyLink:
         termios.tcdrain(self.fd)
 
     async def _reopen(self, baud: int) -> None:
-        # A pty has no transmitter: tcdrain returns at once, and the emulator judges the line rate when it
-        # *reads*. Give it time to read what we sent at the old rate (what a UART's tcdrain guarantees).
-        await asyncio.sleep(0.1)
+        # No sleep here: apply_profile's baud_settle_s lets the emulator read the CFG-PRT at the old rate.
         self._set_baud(baud)
         self.framer = StreamFramer()
 
