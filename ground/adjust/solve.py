@@ -240,6 +240,14 @@ class _Model:
         return res, jac
 
 
+def _tr_solver(n_unknowns: int) -> dict[str, object]:
+    """least_squares trust-region solver: LSMR (no SVD of the m×n Jacobian: threaded LAPACK SVDs of tall thin
+    matrices were 20× slower than the whole LSMR solve on 2 cores); scipy's LSMR path fails for one unknown."""
+    if n_unknowns < 2:
+        return {"tr_solver": "exact"}
+    return {"tr_solver": "lsmr", "tr_options": {"atol": 1e-14, "btol": 1e-14}}
+
+
 def _delay_start(c: Arr, g: Arr, v: Arr) -> float:
     """Linear 13-unknown start: G = A·C + T − V·d (A general 3×3); returns d (s), 0 when ill-posed."""
     n = c.shape[0]
@@ -391,7 +399,7 @@ def adjust(problem: AdjustmentProblem, options: AdjustmentOptions | None = None)
 
         sol = least_squares(
             lambda x: both(x)[0], x0, jac=lambda x: both(x)[1], method="trf", loss=loss, f_scale=opt.f_scale,
-            x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-10, max_nfev=200,
+            x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-10, max_nfev=200, **_tr_solver(x0.size),
         )  # fmt: skip
         return np.asarray(sol.x, dtype=float)
 
@@ -450,7 +458,7 @@ def adjust(problem: AdjustmentProblem, options: AdjustmentOptions | None = None)
         for gcp, d in zip(problem.gcps, pred - model.gcp_ground, strict=True):
             gcp_res[gcp.name] = (float(d[0]), float(d[1]), float(d[2]))
 
-    warnings = _warnings(problem, opt, names, corr, cond, weakest, rot, inlier, sigma0, inflation)
+    warnings = _warnings(problem, opt, names, corr, cond, weakest, rot, inlier, sigma0, inflation, sd_full)
     outliers = tuple((problem.images[i], float(chi2n[i])) for i in np.flatnonzero(outlier))
     if outliers:
         warnings.append(f"{len(outliers)} image(s) flagged as outliers and left out of the final pass")
@@ -581,6 +589,7 @@ def _warnings(
     inlier: npt.NDArray[np.bool_],
     sigma0: float,
     inflation: float,
+    sd_full: Arr,
 ) -> list[str]:
     out: list[str] = []
     idx = {n: k for k, n in enumerate(names)}
@@ -615,6 +624,11 @@ def _warnings(
         out.append(f"{not_fixed} image(s) use a trajectory that is not RTK-fixed (q ≠ 1); consider relative control")
     if problem.skipped:
         out.append(f"{len(problem.skipped)} image(s) skipped while building the problem (no event, gap, outside)")
+    for k, name in enumerate(("O_x", "O_y", "O_z")):
+        if name in idx and not sd_full[7 + k] < 0.05:
+            out.append(f"lever arm {name} is practically not determined (σ = {sd_full[7 + k]:.3g} m): fix it or give a prior")
+    if "t_d" in idx and not sd_full[10] < 0.01:
+        out.append(f"shutter delay t_d is practically not determined (σ = {sd_full[10]:.3g} s): fix it or give a prior")
     if inflation > 2.0:
         out.append(
             f"residuals are correlated in time: covariance inflated ×{inflation:.1f} (float or unstable RTK?)"
