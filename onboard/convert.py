@@ -94,9 +94,8 @@ def collect(chunks: Iterator[bytes], options: ConvertOptions = ConvertOptions())
             out.ephemerides.append(item)
         elif isinstance(item, MonVer):
             out.mon_ver = item
-        elif isinstance(item, NavFix):
-            if item.fix_type is None or item.fix_type >= 3:
-                out.fixes_ecef_m.append(item.pos_ecef_m)
+        elif isinstance(item, NavFix) and (item.fix_type is None or item.fix_type >= 3):
+            out.fixes_ecef_m.append(item.pos_ecef_m)
     return out
 
 
@@ -171,7 +170,7 @@ def convert_one(path: Path, out_dir: Path, options: ConvertOptions = ConvertOpti
         raise InputError(f"{path}: no raw observations or ephemerides found "
                          f"({collected.stats.frames} UBX frames, {collected.stats.failures} undecodable)")
     stem = output_stem(path)
-    when = now_utc or _dt.datetime.now(_dt.timezone.utc)
+    when = now_utc or _dt.datetime.now(_dt.UTC)
     info = header_info(collected, options.marker_name or stem, when)
     out_dir.mkdir(parents=True, exist_ok=True)
     obs_path = out_dir / f"{stem}.obs"

@@ -36,7 +36,7 @@ import zlib
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Union
+from typing import Any
 
 import numpy as np
 from pyubx2 import UBXReader
@@ -144,7 +144,7 @@ class CfgReply:
     payload: bytes
 
 
-Decoded = Union[ObsEpoch, SubframeWords, Ephemeris, TimeMarks, Ack, MonVer, NavFix, CfgReply]
+Decoded = ObsEpoch | SubframeWords | Ephemeris | TimeMarks | Ack | MonVer | NavFix | CfgReply
 
 
 @dataclass
@@ -637,7 +637,7 @@ def iter_file_bytes(path: str | Path, chunk_bytes: int = CHUNK_BYTES) -> Iterato
     """
     path = Path(path)
     try:
-        f = open(path, "rb")
+        f = open(path, "rb")  # noqa: SIM115  (closed by the `with` below; open errors need their own message)
     except OSError as exc:
         raise InputError(f"cannot read {path}: {exc.strerror or exc}") from exc
     with f:

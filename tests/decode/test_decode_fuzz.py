@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -17,7 +17,7 @@ KNOWN_IDS = [(0x02, 0x10), (0x02, 0x15), (0x02, 0x11), (0x02, 0x13), (0x0B, 0x31
              (0x06, 0x00), (0x06, 0x08), (0x06, 0x01), (0x01, 0x22), (0x27, 0x03)]
 
 
-@lru_cache(maxsize=None)
+@cache
 def _capture(name: str) -> bytes:
     return shared_file(name).read_bytes()
 
@@ -93,7 +93,7 @@ def test_damaged_capture_resynchronises(name: str, kind: str, where: int, junk: 
         end = len(original)
         damaged = original[:pos]
         shift = 0
-    frames, stats = _decode_all(damaged, chunk)
+    frames, _stats = _decode_all(damaged, chunk)
     got = {(f.offset, f.raw) for f in frames}
     for f in ref_frames:
         before = f.offset + len(f.raw) <= pos

@@ -23,7 +23,7 @@ from onboard.receiver.decode import (
 )
 from onboard.receiver.framing import Frame, Protocol, StreamFramer, iter_frames, ubx_frame
 from onboard.rtk.ephemeris import eph_position, geometric_range
-from onboard.rtk.types import GNSS_GLONASS, GNSS_GPS, GNSS_SBAS, LLI_HALF_CYCLE, LLI_SLIP, Ephemeris, ObsEpoch
+from onboard.rtk.types import GNSS_GLONASS, GNSS_GPS, GNSS_SBAS, LLI_HALF_CYCLE, Ephemeris, ObsEpoch
 from tests.conftest import shared_file
 
 M8P_ROVER = "gnss/ublox-m8p-galway-2018/raw/rover-20181004-1237.ubx.gz"
