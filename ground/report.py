@@ -108,7 +108,7 @@ def _parameter_rows(res: dict[str, Any]) -> list[tuple[str, str, str, str]]:
     for k, axis in enumerate("xyz"):
         rows.append((f"lever arm O_{axis}", f"{res['lever_arm_m'][k] * 1000:.1f}", f"{res['lever_arm_sigma_m'][k] * 1000:.1f}", "mm"))
     rows.append(("shutter delay t_d", f"{res['delay_s'] * 1000:.2f}", f"{res['delay_sigma_s'] * 1000:.2f}", "ms"))
-    rows.append(("scale μ − 1", f"{(res['scale'] - 1) * 1e6:.1f}", f"{res['scale_sigma'] * 1e6:.1f}", "ppm"))
+    rows.append(("scale μ", f"{res['scale']:.7f}", f"{res['scale_sigma'] * 1e6:.1f} ppm", ""))
     for k, axis in enumerate("ENU"):
         rows.append((f"translation T_{axis}", f"{res['translation_m'][k]:.4f}", f"{res['translation_sigma_m'][k]:.4f}", "m"))
     for k, axis in enumerate("ENU"):
