@@ -10,6 +10,7 @@ above 15° (10 above the 5° receiver mask).
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -196,6 +197,12 @@ class Scenario:
         if "nav_path" in values:
             values["nav_path"] = Path(str(values["nav_path"]))
         return cls(**values)  # type: ignore[arg-type]
+
+    @staticmethod
+    def base_offset_for(baseline_m: float, azimuth_deg: float = 127.0, up_m: float = 2.0) -> tuple[float, float, float]:
+        """`base_offset_enu_m` for a horizontal baseline of `baseline_m` towards `azimuth_deg` (from north)."""
+        az = math.radians(azimuth_deg)
+        return (baseline_m * math.sin(az), baseline_m * math.cos(az), up_m)
 
     @property
     def baseline_m(self) -> float:
