@@ -14,6 +14,7 @@ the stale bytes a real UART would never have delivered.
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import logging
 import os
@@ -117,17 +118,21 @@ class ReceiverEmulator:
 
     `speed` runs the simulated GPS clock N× real time (the byte budget follows simulated time). `link` makes a
     stable symlink to the current slave (re-pointed when a port-loss fault recreates the pty). `t_start` is
-    the simulated GPS time at power-on (default: the World scenario's start).
+    the simulated GPS time at power-on (default: the World scenario's start). `receiver="base"` makes it the
+    world's static base receiver (run a second emulator for it on its own pty).
     """
 
     def __init__(self, model: ModelName | str, options: ReceiverOptions | None = None,
                  world: WorldLike | None = None, *, speed: float = 1.0, link: str | os.PathLike[str] | None = None,
-                 t_start: GpsTime | None = None, initial_baud: int = 9600, clock: Clock | None = None) -> None:
+                 t_start: GpsTime | None = None, initial_baud: int = 9600, clock: Clock | None = None,
+                 receiver: str | None = None) -> None:
         if world is None:
             raise ValueError("ReceiverEmulator needs a World (hil_sim.world.World or a WorldLike)")
         if speed <= 0:
             raise ValueError(f"speed must be > 0, got {speed}")
         self.options = options or ReceiverOptions()
+        if receiver is not None:  # "rover" or "base": which of the world's receivers this port is
+            self.options = dataclasses.replace(self.options, receiver=receiver)  # type: ignore[arg-type]
         if t_start is None:
             scenario: Any = getattr(world, "scenario", None)
             t_start = getattr(scenario, "start", None)

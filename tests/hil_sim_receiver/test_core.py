@@ -303,3 +303,28 @@ def test_cfg_cfg_save_load_and_clear(standin_world) -> None:
     assert acked(send(core, "CFG-CFG", {"clearMask": 0xFFFF, "loadMask": 0xFFFF}))
     assert core.baud_rate == 9600 and poll(core, "CFG-RATE")["measRate"] == 1000
     assert acked(send(core, "CFG-CFG", raw_payload=b"\x00" * 5)) is False
+
+
+def test_nav_sol_and_tim_tp_once_time_is_valid(standin_world) -> None:
+    core = core_for("m8t", standin_world, time_valid_after_s=2.0, nav_noise_m=1.0)
+    assert acked(send(core, "CFG-PRT", CONFIGURED_PRT))
+    for msg in ((0x01, 0x06), (0x0D, 0x01)):
+        assert acked(send(core, "CFG-MSG3", {"msgClass": msg[0], "msgID": msg[1], "rate": 1}))
+    out = run(core, 5.0)
+    sols = [UBXReader.parse(f.raw) for f in ubx_of(out, (0x01, 0x06))]
+    assert [s.gpsFix for s in sols] == [0, 3, 3, 3, 3]  # epochs at 1..5 s: no fix before 2 s
+    site = standin_world.site_ecef_m
+    for s in sols[1:]:
+        err = np.array([s.ecefX, s.ecefY, s.ecefZ]) / 100 - site
+        assert np.linalg.norm(err) < 6.0 and s.numSV >= 4
+    tps = [UBXReader.parse(f.raw) for f in ubx_of(out, (0x0D, 0x01))]
+    # TIM-TP announces the next whole-second pulse at each epoch once time is valid
+    assert [tp.towMS % 1000 for tp in tps] == [0] * 4 and len({tp.towMS for tp in tps}) == 4
+
+
+def test_scenario_end_stops_measurements_but_configuration_still_answers(standin_world) -> None:
+    core = core_for("m8t", standin_world)
+    core.t_end = standin_world.start.add_s(2.0)
+    configure(core, meas_ms=1000)
+    assert len(ubx_of(run(core, 5.0), RXM_RAWX)) == 2
+    assert poll(core, "CFG-RATE")["measRate"] == 1000
