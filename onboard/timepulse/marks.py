@@ -252,31 +252,40 @@ class PairingRecorder:
     mark by `settle_ns`: later marks can still bring its flash, a bounce, or the count that reveals a lost
     edge). `flush()` returns the remaining pairings at the end of a flight. Pure: no clock, no I/O.
 
-    Keeps every mark of the flight (four small records per image; a 2-hour flight at 3 s is ~10 k marks)
-    and re-pairs the tail; fine at one report per second.
+    Only a window of marks is kept: those newer than the last emitted image minus `settle_ns` (its context:
+    the previous pulse window and flash for bounces) plus the last rising flash-line edge before them (the
+    counter reference), so the cost per report stays constant over a long flight.
     """
 
     def __init__(self, options: PairingOptions = PairingOptions(), settle_ns: int | None = None) -> None:
         self.options = options
-        self.settle_ns = settle_ns if settle_ns is not None else options.max_delay_ns + options.bounce_window_ns + 1_000_000_000
+        floor_ns = options.max_delay_ns + options.bounce_window_ns + 1_000_000_000
+        self.settle_ns = max(settle_ns, floor_ns) if settle_ns is not None else floor_ns
         self._marks: list[CameraMark] = []
         self._emitted = 0
         self._latest_ns: int | None = None
+        self._last_when_ns: int | None = None
 
     @property
     def emitted(self) -> int:
         """Pairings already returned."""
         return self._emitted
 
+    @property
+    def window(self) -> int:
+        """Marks currently held."""
+        return len(self._marks)
+
     def add(self, marks: Iterable[CameraMark], tick_ns: int | None = None) -> list[dict[str, Any]]:
         """Records for these marks and for every image that became final."""
         out: list[dict[str, Any]] = []
         for mark in marks:
             out.append(mark_record(mark, tick_ns))
+            if mark.time is None or not mark.valid:
+                continue  # recorded, but never part of a pairing
             self._marks.append(mark)
-            if mark.time is not None and mark.valid:
-                t = mark.time.total_ns
-                self._latest_ns = t if self._latest_ns is None else max(self._latest_ns, t)
+            t = mark.time.total_ns
+            self._latest_ns = t if self._latest_ns is None else max(self._latest_ns, t)
         return out + self._pairings(final=False)
 
     def flush(self) -> list[dict[str, Any]]:
@@ -284,16 +293,36 @@ class PairingRecorder:
         return self._pairings(final=True)
 
     def _pairings(self, final: bool) -> list[dict[str, Any]]:
-        pairs = pair_marks(self._marks, self.options)
         out = []
-        for p in pairs[self._emitted :]:
-            t = p.pulse_time if p.pulse_time is not None else p.flash_time
-            assert t is not None
-            if not final and (self._latest_ns is None or self._latest_ns - t.total_ns < self.settle_ns):
+        for p in pair_marks(self._marks, self.options):
+            when = _when_ns(p)
+            if self._last_when_ns is not None and when <= self._last_when_ns:
+                continue  # emitted before (kept as context)
+            if not final and (self._latest_ns is None or self._latest_ns - when < self.settle_ns):
                 break
-            out.append(pairing_record(p))
+            out.append(pairing_record(dataclasses.replace(p, index=self._emitted)))
             self._emitted += 1
+            self._last_when_ns = when
+        if out:
+            self._prune()
         return out
+
+    def _prune(self) -> None:
+        assert self._last_when_ns is not None
+        cut = self._last_when_ns - self.settle_ns
+        old = [m for m in self._marks if m.time.total_ns < cut]  # type: ignore[union-attr]
+        if not old:
+            return
+        ref = [m for m in old if m.source == "tim-tm2" and m.channel == self.options.flash_channel
+               and m.edge != self.options.flash_edge]
+        keep = [max(ref, key=lambda m: m.time.total_ns)] if ref else []  # type: ignore[union-attr]
+        self._marks = keep + [m for m in self._marks if m.time.total_ns >= cut]  # type: ignore[union-attr]
+
+
+def _when_ns(p: ImagePairing) -> int:
+    t = p.pulse_time if p.pulse_time is not None else p.flash_time
+    assert t is not None
+    return t.total_ns
 
 
 # --- GPIO edge times --------------------------------------------------------------------------------------
