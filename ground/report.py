@@ -135,8 +135,8 @@ def render_report(res: dict[str, Any], problem: AdjustmentProblem | None = None,
     parts = [
         "<h2>Parameters</h2>",
         _table(["parameter", "value", "σ", "unit"], _parameter_rows(res), "parameters"),
-        f"<p>condition number {res['condition_number']:.3g}; weakest combination: "
-        f"{html.escape(str(res['weakest_combination']))}</p>",
+        (f"<p>condition number {res['condition_number']:.3g}; weakest combination: "
+         f"{html.escape(str(res['weakest_combination']))}</p>"),
     ]
     if res["warnings"]:
         parts.append("<h3>Warnings</h3><ul>" + "".join(f"<li>{html.escape(w)}</li>" for w in res["warnings"]) + "</ul>")
@@ -149,7 +149,7 @@ def render_report(res: dict[str, Any], problem: AdjustmentProblem | None = None,
                             "outliers"))
     parts.append("<h2>Check points</h2>")
     if res["checkpoints"]:
-        rows = [(c["name"], f"{c['de_m'] * 100:.1f}", f"{c['dn_m'] * 100:.1f}", f"{c['du_m'] * 100:.1f}",
+        rows: list[tuple[str, ...]] = [(c["name"], f"{c['de_m'] * 100:.1f}", f"{c['dn_m'] * 100:.1f}", f"{c['du_m'] * 100:.1f}",
                  f"{c['abs_m'] * 100:.1f}", f"{c['sigma_m'] * 100:.1f}") for c in res["checkpoints"]]
         for stat in ("mean", "std", "rms"):
             d = res[f"checkpoint_{stat}_m"]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hmac
+from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
@@ -25,10 +26,12 @@ def get_store(request: Request) -> Store:
     return store
 
 
-def require_token(
-    credentials: HTTPAuthorizationCredentials | None = Depends(_bearer),
-    settings: ApiSettings = Depends(get_settings),
-) -> None:
+SettingsDep = Annotated[ApiSettings, Depends(get_settings)]
+StoreDep = Annotated[Store, Depends(get_store)]
+CredentialsDep = Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
+
+
+def require_token(credentials: CredentialsDep, settings: SettingsDep) -> None:
     """401 unless `Authorization: Bearer <token>` matches the configured token (compared in constant time)."""
     supplied = credentials.credentials if credentials is not None else ""
     if not hmac.compare_digest(supplied.encode(), settings.token.encode()):

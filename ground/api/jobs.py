@@ -20,7 +20,7 @@ JobFunction = Callable[[ApiSettings, dict[str, Any], dict[str, str | None], Path
 
 
 def _now() -> dt.datetime:
-    return dt.datetime.now(dt.timezone.utc)
+    return dt.datetime.now(dt.UTC)
 
 
 class JobRunner:

@@ -159,11 +159,11 @@ def parse_capture_time(text: str) -> dt.datetime | None:
     if len(s) >= 19 and s[4] == ":" and s[7] == ":":
         s = s[:4] + "-" + s[5:7] + "-" + s[8:]
     try:
-        t = dt.datetime.fromisoformat(s.replace("Z", "+00:00"))
+        t = dt.datetime.fromisoformat(s)  # Python ≥ 3.11 accepts a trailing Z
     except ValueError:
         return None
     if t.tzinfo is not None:
-        t = t.astimezone(dt.timezone.utc).replace(tzinfo=None)
+        t = t.astimezone(dt.UTC).replace(tzinfo=None)
     return t
 
 

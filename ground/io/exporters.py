@@ -69,8 +69,7 @@ def write_odm_geo_txt(path: str | Path, cams: ExportedCameras) -> None:
     g = cams.geographic
     with Path(path).open("w", encoding="utf-8") as fh:
         fh.write(cams.crs + "\n")
-        for name, p in zip(cams.images, cams.xyz):
-            fh.write(f"{name} {_fmt(p[0], g)} {_fmt(p[1], g)} {p[2]:.4f}\n")
+        fh.writelines(f"{name} {_fmt(p[0], g)} {_fmt(p[1], g)} {p[2]:.4f}\n" for name, p in zip(cams.images, cams.xyz))
 
 
 def write_pix4d_csv(path: str | Path, cams: ExportedCameras) -> None:

@@ -70,4 +70,4 @@ def live(api_settings: ApiSettings) -> Iterator[LiveServer]:
         srv.stop()
 
 
-__all__ = ["LiveServer", "TOKEN", "start_server", "replace"]
+__all__ = ["TOKEN", "LiveServer", "replace", "start_server"]

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ground.io.orientations import write_opk_csv
 from ground.adjust.types import CameraPose
+from ground.io.orientations import write_opk_csv
 from ground.io.rotations import r_cam_to_world_from_opk_deg
 from onboard.formats.pos import write_pos
 from onboard.gnsstime import GpsTime
@@ -79,7 +79,7 @@ def write_synthetic_flight(folder: Path, seed: int = 1, n_lines: int = 3, noise_
     scale, r_sim, t_sim = 0.8, _rot_z(0.3), np.array([10.0, -5.0, 2.0])
     # exposures every 2 s, trigger events t_d before exposure
     t_exp = np.arange(3.0, 40.0 * n_lines - 3.0, 2.0) + 0.013
-    g_exp, v_exp, heading = antenna_enu(t_exp)
+    g_exp, _, heading = antenna_enu(t_exp)
     poses, events = [], []
     for i, (te, g, h) in enumerate(zip(t_exp, g_exp, heading)):
         r_c2enu = _rot_z(-h) @ r_cam_to_world_from_opk_deg(rng.normal(0, 2), rng.normal(0, 2), 0.0)

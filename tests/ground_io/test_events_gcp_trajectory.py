@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import datetime as dt
-import json
 from pathlib import Path
 
 import numpy as np
@@ -64,7 +63,13 @@ def test_events_jsonl_pairings_torn_line_and_other_records(tmp_path: Path) -> No
     """Records written by onboard.timepulse.marks: one mark per pairing (flash time, measured delay; pulse time
     when the flash is missing); timepulse records ignored; a torn last line (power cut) skipped."""
     from onboard.rtk.types import CameraMark
-    from onboard.timepulse.marks import ImagePairing, format_line, mark_record, pairing_record, timepulse_record
+    from onboard.timepulse.marks import (
+        ImagePairing,
+        format_line,
+        mark_record,
+        pairing_record,
+        timepulse_record,
+    )
 
     t = [T0.add_s(2.0 * i) for i in range(3)]
     lines = [format_line(timepulse_record("TIMEPULSE2", 2_000_000, 1000, True, None, "extint1"))]

@@ -91,7 +91,7 @@ def test_opensfm_gps_enu_needs_grid_convergence() -> None:
     gps, centres = rec.extras["gps_position_enu_m"], rec.by_image()
     d_rot = np.array([r @ gps[k] - centres[k].centre_rel for k in gps])
     d_raw = np.array([gps[k] - centres[k].centre_rel for k in gps])
-    rms = lambda d: float(np.sqrt(((d - d.mean(0)) ** 2).sum(1).mean()))  # noqa: E731
+    rms = lambda d: float(np.sqrt(((d - d.mean(0)) ** 2).sum(1).mean()))
     assert rms(d_rot) == pytest.approx(0.026, abs=0.003)
     assert rms(d_raw) > 0.3
 

@@ -8,18 +8,25 @@ import logging
 import os
 import threading
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
 from sqlalchemy import select
 
+from ground.api.deps import SettingsDep, StoreDep, require_token
 from ground.api.jobs import JobRunner
-from ground.api.deps import get_settings, get_store, require_token
 from ground.api.schemas import FileOut, FlightCreate, FlightOut, FlightSummary, JobCreate, JobOut
 from ground.api.settings import ApiSettings
-from ground.api.upload import Limits, UploadRejected, check_chunk, check_file_name, check_manifest_files, check_sha256
+from ground.api.upload import (
+    Limits,
+    UploadRejected,
+    check_chunk,
+    check_file_name,
+    check_manifest_files,
+    check_sha256,
+)
 from ground.store import Flight, FlightFile, Job, Store, UploadSession
 
 log = logging.getLogger(__name__)
@@ -91,8 +98,8 @@ def _get_flight(store: Store, flight_id: str) -> Flight:
 @router.post("", response_model=FlightOut, status_code=status.HTTP_201_CREATED,
              responses={200: {"model": FlightOut, "description": "identical flight already exists (resume)"},
                         400: {}, 409: {}, 413: {}})
-def create_flight(body: FlightCreate, response: Response, settings: ApiSettings = Depends(get_settings),
-                  store: Store = Depends(get_store)) -> FlightOut:
+def create_flight(body: FlightCreate, response: Response, settings: SettingsDep,
+                  store: StoreDep) -> FlightOut:
     """Create a flight from its upload manifest; the same name and files again returns the existing flight."""
     try:
         check_file_name(body.name)
@@ -116,16 +123,16 @@ def create_flight(body: FlightCreate, response: Response, settings: ApiSettings 
         s.add(flight)
         s.commit()
         flight_dir(settings, flight.id).mkdir(parents=True, exist_ok=True)
-        for f in flight.files:
-            if f.size == 0:  # nothing to send: verify the empty file's hash now
-                _finish_file(settings, s, flight, f, safe_path(settings, flight.id, f.name))
+        for ff in flight.files:
+            if ff.size == 0:  # nothing to send: verify the empty file's hash now
+                _finish_file(settings, s, flight, ff, safe_path(settings, flight.id, ff.name))
         s.commit()
         log.info("flight %s (%s) created with %d files", flight.id, flight.name, len(flight.files))
         return _flight_out(flight)
 
 
 @router.get("", response_model=list[FlightSummary])
-def list_flights(store: Store = Depends(get_store)) -> list[FlightSummary]:
+def list_flights(store: StoreDep) -> list[FlightSummary]:
     """All flights, newest first."""
     with store.session() as s:
         rows = s.scalars(select(Flight).order_by(Flight.created_at.desc())).all()
@@ -135,7 +142,7 @@ def list_flights(store: Store = Depends(get_store)) -> list[FlightSummary]:
 
 
 @router.get("/{flight_id}", response_model=FlightOut)
-def get_flight(flight_id: str, store: Store = Depends(get_store)) -> FlightOut:
+def get_flight(flight_id: str, store: StoreDep) -> FlightOut:
     """A flight with its files and jobs."""
     return _flight_out(_get_flight(store, flight_id))
 
@@ -151,8 +158,8 @@ def _lookup_file(s: Any, flight_id: str, name: str) -> tuple[Flight, FlightFile]
 
 
 @router.get("/{flight_id}/files/{name}/content", response_class=FileResponse)
-def download_file(flight_id: str, name: str, settings: ApiSettings = Depends(get_settings),
-                  store: Store = Depends(get_store)) -> FileResponse:
+def download_file(flight_id: str, name: str, settings: SettingsDep,
+                  store: StoreDep) -> FileResponse:
     """The bytes of a completely uploaded file."""
     try:
         path = safe_path(settings, flight_id, name)
@@ -166,16 +173,16 @@ def download_file(flight_id: str, name: str, settings: ApiSettings = Depends(get
 
 
 @router.head("/{flight_id}/files/{name:path}")
-def file_offset_head(flight_id: str, name: str, settings: ApiSettings = Depends(get_settings),
-                     store: Store = Depends(get_store)) -> Response:
+def file_offset_head(flight_id: str, name: str, settings: SettingsDep,
+                     store: StoreDep) -> Response:
     """Upload-Offset (bytes received, where to resume) and Upload-Length (promised size) as headers."""
     out = file_status(flight_id, name, settings, store)
     return Response(status_code=200, headers={OFFSET_HEADER: str(out.received), LENGTH_HEADER: str(out.size)})
 
 
 @router.get("/{flight_id}/files/{name:path}", response_model=FileOut)
-def file_status(flight_id: str, name: str, settings: ApiSettings = Depends(get_settings),
-                store: Store = Depends(get_store)) -> FileOut:
+def file_status(flight_id: str, name: str, settings: SettingsDep,
+                store: StoreDep) -> FileOut:
     """Upload state of one file (received bytes = where an interrupted upload resumes)."""
     try:
         safe_path(settings, flight_id, name)
@@ -206,9 +213,9 @@ async def put_chunk(
     flight_id: str,
     name: str,
     request: Request,
-    offset: int = Query(ge=0, description="byte offset of this chunk in the file (= bytes received so far)"),
-    settings: ApiSettings = Depends(get_settings),
-    store: Store = Depends(get_store),
+    settings: SettingsDep,
+    store: StoreDep,
+    offset: Annotated[int, Query(ge=0, description="byte offset of this chunk in the file (= bytes received so far)")],
 ) -> FileOut:
     """Append one chunk at `offset`. Header `X-Chunk-SHA256` (hex) must match the body or the chunk is refused.
 
@@ -265,7 +272,7 @@ def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str
         f.status = "partial"
         sess.bytes_received += len(body)
         sess.chunks += 1
-        sess.updated_at = dt.datetime.now(dt.timezone.utc)
+        sess.updated_at = dt.datetime.now(dt.UTC)
         if f.received == f.size:
             _finish_file(settings, s, flight, f, path)
         s.commit()
@@ -322,7 +329,7 @@ def _maybe_auto_adjust(store: Store, flight_id: str, jobs: JobRunner) -> None:
 
 
 @router.post("/{flight_id}/jobs", response_model=JobOut, status_code=status.HTTP_202_ACCEPTED)
-def create_job(flight_id: str, body: JobCreate, request: Request, store: Store = Depends(get_store)) -> JobOut:
+def create_job(flight_id: str, body: JobCreate, request: Request, store: StoreDep) -> JobOut:
     """Queue a processing job (runs in the background; poll its status)."""
     with store.session() as s:
         flight = s.get(Flight, flight_id)
@@ -339,7 +346,7 @@ def create_job(flight_id: str, body: JobCreate, request: Request, store: Store =
 
 
 @router.get("/{flight_id}/jobs/{job_id}", response_model=JobOut)
-def get_job(flight_id: str, job_id: str, store: Store = Depends(get_store)) -> JobOut:
+def get_job(flight_id: str, job_id: str, store: StoreDep) -> JobOut:
     """A job's status and message."""
     with store.session() as s:
         job = s.get(Job, job_id)
@@ -363,16 +370,16 @@ def _latest_output(settings: ApiSettings, store: Store, flight_id: str, filename
 
 
 @router.get("/{flight_id}/results", response_class=JSONResponse)
-def get_results(flight_id: str, settings: ApiSettings = Depends(get_settings),
-                store: Store = Depends(get_store)) -> Response:
+def get_results(flight_id: str, settings: SettingsDep,
+                store: StoreDep) -> Response:
     """`results.json` of the latest finished adjustment."""
     path = _latest_output(settings, store, flight_id, "results.json")
     return Response(content=path.read_bytes(), media_type="application/json")
 
 
 @router.get("/{flight_id}/report", response_class=HTMLResponse)
-def get_report(flight_id: str, settings: ApiSettings = Depends(get_settings),
-               store: Store = Depends(get_store)) -> Response:
+def get_report(flight_id: str, settings: SettingsDep,
+               store: StoreDep) -> Response:
     """The self-contained HTML report of the latest finished adjustment."""
     path = _latest_output(settings, store, flight_id, "report.html")
     return HTMLResponse(content=path.read_text(encoding="utf-8"))
