@@ -66,6 +66,14 @@ def pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: A
     """
     n = pr_m.shape[0]
     base_ok = sats.ok & np.isfinite(pr_m)
+    with np.errstate(invalid="ignore", divide="ignore"):  # slots without a satellite give NaN, never used
+        return _pntpos(pr_m, sats, tow_s, elmask_rad, dop_hz, iono, x0_ecef_m, max_iter, outlier_m, max_gdop,
+                       n, base_ok)
+
+
+def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: Arr | None,
+            iono: tuple | None, x0_ecef_m: Arr | None, max_iter: int, outlier_m: float, max_gdop: float,
+            n: int, base_ok: npt.NDArray[np.bool_]) -> SppSolution:
     x = np.zeros(4) if x0_ecef_m is None else np.r_[x0_ecef_m, 0.0]
     excluded = np.zeros(n, bool)
     az = np.zeros(n)

@@ -1,0 +1,79 @@
+"""Base/rover epoch pairing, forward/backward/combined runs and their combination rules."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from onboard.formats.rinex_nav import read_rinex_nav
+from onboard.formats.rinex_obs import read_rinex_obs
+from onboard.gnsstime import GpsTime
+from onboard.rtk.ephemeris import EphemerisStore
+from onboard.rtk.options import RtkOptions
+from onboard.rtk.postpro import combine, pair_epochs, postprocess
+from onboard.rtk.rtkpos import Nav
+from onboard.rtk.types import GNSS_GLONASS, GNSS_GPS, Q_FIX, Q_FLOAT, ObsEpoch, Solution
+from tests.conftest import shared_file
+
+
+def _epoch(tow_s: float, gnss: int = GNSS_GPS) -> ObsEpoch:
+    one = np.ones(1)
+    return ObsEpoch(GpsTime.from_week_tow_s(2021, tow_s), np.array([gnss], np.int8), np.array([5], np.int16),
+                    one * 2e7, one, one, one, one * np.nan, np.zeros(1, np.uint8))
+
+
+def test_rover_at_999_and_992_ms_pairs_with_the_base_epoch_on_the_second():
+    base = [_epoch(100.0), _epoch(101.0), _epoch(102.0)]
+    rover = [_epoch(100.999), _epoch(101.992), _epoch(100.5)]
+    paired = pair_epochs(rover, base)
+    assert [p.time.tow_s for p in paired] == [101.0, 102.0, 100.0]
+    age = [r.time.diff_s(p.time) for r, p in zip(rover, paired)]
+    assert age == pytest.approx([-0.001, -0.008, 0.5])
+
+
+def test_pairing_is_causal_with_missing_base_epochs_and_skips_glonass_only_epochs():
+    base = [_epoch(100.0), _epoch(103.0, GNSS_GLONASS), _epoch(105.0)]
+    rover = [_epoch(99.0), _epoch(103.999), _epoch(104.0), _epoch(106.0), _epoch(140.0)]
+    paired = pair_epochs(rover, base, max_age_s=30.0)
+    assert paired[0] is None  # nothing before the first base epoch
+    assert paired[1].time.tow_s == 100.0  # the GLONASS-only 103 s epoch is skipped, 105 s is in the future
+    assert paired[2].time.tow_s == 100.0
+    assert paired[3].time.tow_s == 105.0
+    assert paired[4] is None  # 35 s old: too old
+
+
+def _sol(q: int, pos, sd: float = 0.01) -> Solution:
+    return Solution(GpsTime(2021, 0), np.asarray(pos, float), np.zeros(3), q, 8, np.eye(3) * sd**2,
+                    np.eye(3), 1.0, 5.0)
+
+
+def test_combine_rules():
+    a = np.array([1.0, 2.0, 3.0])
+    both = combine(_sol(Q_FIX, a, 0.003), _sol(Q_FIX, a + 0.004, 0.003))
+    assert both.q == Q_FIX and np.allclose(both.pos_ecef_m, a + 0.002)
+    disagree = combine(_sol(Q_FIX, a, 0.003), _sol(Q_FIX, a + [0.19, 0, 0], 0.003))
+    assert disagree.q == Q_FLOAT  # two different integer sets: neither is trusted
+    one = combine(_sol(Q_FIX, a, 0.003), _sol(Q_FLOAT, a + 0.1, 0.3))
+    assert one.q == Q_FIX and np.allclose(one.pos_ecef_m, a)
+    clash = combine(_sol(Q_FIX, a, 0.003), _sol(Q_FLOAT, a + 2.0, 0.05))
+    assert clash.q == Q_FLOAT  # the fix is outside the other direction's float ellipsoid
+
+
+def test_combined_run_on_geonet_is_fixed_and_matches_the_reference():
+    d = "gnss/geonet-0759-3040-20050402/"
+    nav = read_rinex_nav(shared_file(d + "07590920.05n.gz"))
+    rov = read_rinex_obs(shared_file(d + "07590920.05o.gz")).epochs[:40]
+    bas = read_rinex_obs(shared_file(d + "30400920.05o.gz")).epochs
+    sols, stats = postprocess(rov, bas, Nav(EphemerisStore(nav.ephemerides), (nav.iono_alpha, nav.iono_beta)),
+                              np.array([-3978241.958, 3382840.234, 3649900.853]), RtkOptions(), "combined")
+    assert len(stats) == 2 and len(sols) == 40
+    q = np.array([s.q for s in sols])
+    assert np.mean(q == Q_FIX) >= 0.9
+    ref = np.array([-3976219.1873, 3382371.6051, 3652511.1423])
+    err = np.array([np.linalg.norm(s.pos_ecef_m - ref) for s in sols])
+    assert err[q == Q_FIX].max() < 0.03
+
+
+def test_unknown_direction_is_refused():
+    with pytest.raises(ValueError, match="direction"):
+        postprocess([], [], Nav(EphemerisStore()), None, RtkOptions(), "sideways")

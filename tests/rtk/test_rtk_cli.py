@@ -1,0 +1,121 @@
+"""`onboard rtk` end to end on real data (short slices) and its errors for unusable inputs."""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+
+import numpy as np
+import pytest
+
+from onboard.formats.pos import read_pos
+from onboard.rtk_cli import add_rtk_parser, main
+from tests.conftest import shared_file
+
+GEONET = "gnss/geonet-0759-3040-20050402/"
+BASE_3040 = "-3978241.958,3382840.234,3649900.853"
+
+
+def _slice_rinex_v3(src, dst, n_epochs: int) -> None:
+    """Write the header and the first n epochs of a RINEX 3 file (a short test input, made on the fly)."""
+    out = []
+    count = 0
+    for line in gzip.decompress(src.read_bytes()).decode().splitlines():
+        if line.startswith(">"):
+            count += 1
+            if count > n_epochs:
+                break
+        out.append(line)
+    dst.write_text("\n".join(out) + "\n")
+
+
+def test_parser_registers_the_documented_options():
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers()
+    add_rtk_parser(sub)
+    args = parser.parse_args(["rtk", "--rover", "r", "--base", "b", "--nav", "n1", "--nav", "n2",
+                              f"--base-pos={BASE_3040}", "--direction", "combined", "--velocity", "-o", "o.pos"])
+    assert args.nav == ["n1", "n2"] and args.direction == "combined" and args.velocity
+    assert args.ar_mode == "fix-and-hold" and args.elmask == 15.0
+
+
+def test_geonet_end_to_end_writes_an_rtklib_pos(tmp_path, capsys):
+    out = tmp_path / "g.pos"
+    rc = main(["rtk", "--rover", str(shared_file(GEONET + "07590920.05o.gz")),
+               "--base", str(shared_file(GEONET + "30400920.05o.gz")),
+               "--nav", str(shared_file(GEONET + "07590920.05n.gz")),
+               "--base-pos", *BASE_3040.split(","), "--direction", "combined", "-o", str(out)])
+    assert rc == 0
+    assert "120 epochs" in capsys.readouterr().out
+    text = out.read_text().splitlines()
+    title = next(ln for ln in text if ln.startswith("%  GPST"))
+    assert "x-ecef(m)" in title and "ratio" in title
+    data = [ln.split() for ln in text if not ln.startswith("%")]
+    assert len(data) == 120 and all(len(t) == 15 for t in data)
+    track = read_pos(out)
+    assert set(track.q) <= {1, 2, 5}
+    assert np.mean(track.q == 1) >= 0.9
+    ref = np.array([-3976219.1873, 3382371.6051, 3652511.1423])
+    err = np.linalg.norm(track.pos_ecef_m[track.q == 1] - ref, axis=1)
+    assert err.max() < 0.05
+    assert track.time[0].week == 1316 and track.time[0].tow_s == pytest.approx(518400.0, abs=1e-3)
+
+
+def test_m8p_slice_with_header_base_position_llh_and_velocity(tmp_path):
+    d = "gnss/ublox-m8p-galway-2018/rinex/"
+    rover = tmp_path / "rover.obs"
+    _slice_rinex_v3(shared_file(d + "rover-20181004-1237.obs.gz"), rover, 90)
+    out = tmp_path / "m.pos"
+    rc = main(["rtk", "--rover", str(rover), "--base", str(shared_file(d + "base-20181004-1236.rtcm.obs.gz")),
+               "--nav", str(shared_file(d + "rover-20181004-1237.nav.gz")), "--llh", "--velocity", "-o", str(out)])
+    assert rc == 0
+    track = read_pos(out)
+    assert track.llh and track.vel_m_s is not None
+    assert 80 <= len(track.q) <= 90  # the slice also counted a few event (TIM-TM2) records
+    assert np.sum(track.q == 1) >= 30
+    ref = np.array([3774088.9931, -601661.8217, 5089321.3853])
+    err = np.linalg.norm(track.pos_ecef_m[track.q == 1] - ref, axis=1)
+    assert err.max() < 0.05
+    assert np.all(np.abs(track.vel_m_s[-10:]) < 0.05)  # static rover: n/e/u velocity ≈ 0
+    # solution time = receiver tag (…08.991) minus the clock bias: on the whole GPS second, as RTKLIB
+    assert all(abs(t.tow_s - round(t.tow_s)) < 1e-3 for t in track.time)
+
+
+def _run_err(capsys, argv) -> str:
+    assert main(argv) == 2
+    return capsys.readouterr().err
+
+
+def test_missing_navigation_is_a_clear_error(tmp_path, capsys):
+    err = _run_err(capsys, ["rtk", "--rover", str(shared_file(GEONET + "07590920.05o.gz")),
+                            "--base", str(shared_file(GEONET + "30400920.05o.gz")), "-o", str(tmp_path / "x.pos")])
+    assert "no GPS ephemeris" in err and not (tmp_path / "x.pos").exists()
+
+
+def test_no_common_epochs_is_a_clear_error(tmp_path, capsys):
+    d = "gnss/ublox-m8p-galway-2018/rinex/"
+    err = _run_err(capsys, ["rtk", "--rover", str(shared_file(GEONET + "07590920.05o.gz")),
+                            "--base", str(shared_file(d + "base-20181004-1236.rtcm.obs.gz")),
+                            "--nav", str(shared_file(GEONET + "07590920.05n.gz")), "-o", str(tmp_path / "x.pos")])
+    assert "no common epochs" in err
+
+
+def test_base_without_position_is_a_clear_error(tmp_path, capsys):
+    src = gzip.decompress(shared_file(GEONET + "30400920.05o.gz").read_bytes()).decode().splitlines()
+    base = tmp_path / "nopos.05o"
+    base.write_text("\n".join(ln for ln in src if "APPROX POSITION" not in ln) + "\n")
+    err = _run_err(capsys, ["rtk", "--rover", str(shared_file(GEONET + "07590920.05o.gz")), "--base", str(base),
+                            "--nav", str(shared_file(GEONET + "07590920.05n.gz")), "-o", str(tmp_path / "x.pos")])
+    assert "no base position" in err and "--base-pos" in err
+
+
+def test_unreadable_rover_and_bad_coordinates(tmp_path, capsys):
+    bad = tmp_path / "junk.obs"
+    bad.write_bytes(b"\x00\x01 not a log")
+    err = _run_err(capsys, ["rtk", "--rover", str(bad), "--base", str(shared_file(GEONET + "30400920.05o.gz")),
+                            "-o", str(tmp_path / "x.pos")])
+    assert "junk.obs" in err
+    err = _run_err(capsys, ["rtk", "--rover", "a", "--base", "b", "--base-pos", "1,2", "-o", "x"])
+    assert "X,Y,Z" in err
+    err = _run_err(capsys, ["rtk", "--rover", str(tmp_path / "missing.obs"), "--base", "b", "-o", "x"])
+    assert "no such file" in err

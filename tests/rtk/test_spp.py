@@ -1,0 +1,96 @@
+"""Satellite positions and single-point positioning on real data against surveyed coordinates."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from onboard.formats.rinex_nav import read_rinex_nav
+from onboard.formats.rinex_obs import read_rinex_obs
+from onboard.rtk.ephemeris import EphemerisStore, satellite_states
+from onboard.rtk.geodesy import ecef_to_enu, ecef_to_llh
+from onboard.rtk.models import klobuchar_m, saastamoinen_m
+from onboard.rtk.pntpos import pntpos
+from tests.conftest import shared_file
+
+ROVER_0759 = np.array([-3976219.1873, 3382371.6051, 3652511.1423])
+
+
+@pytest.fixture(scope="module")
+def geonet():
+    nav = read_rinex_nav(shared_file("gnss/geonet-0759-3040-20050402/07590920.05n.gz"))
+    obs = read_rinex_obs(shared_file("gnss/geonet-0759-3040-20050402/07590920.05o.gz"))
+    return nav, obs
+
+
+def test_broadcast_orbits_are_on_the_gps_shell_and_move_at_orbital_speed(geonet):
+    nav, obs = geonet
+    e = obs.epochs[0]
+    sats = satellite_states(EphemerisStore(nav.ephemerides), e.sv_id, e.time, e.pr_m)
+    assert sats.ok.all()
+    r = np.linalg.norm(sats.pos_m, axis=1)
+    a = np.array([next(x for x in nav.ephemerides if x.prn == p).sqrt_a ** 2 for p in e.sv_id])
+    ecc = np.array([next(x for x in nav.ephemerides if x.prn == p).e for p in e.sv_id])
+    assert np.all(np.abs(r - a) <= a * ecc + 2e3)  # r = a(1 − e cos E) + harmonic corrections < 2 km
+    v = np.linalg.norm(sats.vel_m_s, axis=1)  # ECEF speed of a GPS satellite: 1.9–4.0 km/s
+    assert np.all((v > 1500) & (v < 4200))
+    assert np.all(np.abs(sats.clock_s) < 1e-3)
+
+
+def test_spp_on_geonet_within_a_few_metres_of_the_surveyed_marker(geonet):
+    nav, obs = geonet
+    store = EphemerisStore(nav.ephemerides)
+    errs = []
+    for e in obs.epochs[::10]:
+        sats = satellite_states(store, e.sv_id, e.time, e.pr_m)
+        sol = pntpos(e.pr_m, sats, e.time.tow_s, np.radians(10), None, (nav.iono_alpha, nav.iono_beta))
+        assert sol.ok, sol.message
+        errs.append(ecef_to_enu(sol.pos_ecef_m, ROVER_0759))
+        assert abs(sol.clock_bias_m) < 0.01 * 299792458.0  # receiver clock within its ±1 ms steering range
+    errs = np.array(errs)
+    assert np.sqrt(np.mean(errs[:, 0] ** 2 + errs[:, 1] ** 2)) < 4.0
+    assert np.sqrt(np.mean(errs[:, 2] ** 2)) < 8.0
+
+
+def test_spp_excludes_a_faulty_pseudorange(geonet):
+    nav, obs = geonet
+    store = EphemerisStore(nav.ephemerides)
+    e = obs.epochs[0]
+    pr = e.pr_m.copy()
+    pr[2] += 300.0
+    sats = satellite_states(store, e.sv_id, e.time, pr)
+    sol = pntpos(pr, sats, e.time.tow_s, np.radians(5), None, (nav.iono_alpha, nav.iono_beta))
+    assert sol.ok and not sol.used[2]
+    assert np.linalg.norm(sol.pos_ecef_m - ROVER_0759) < 15.0
+
+
+def test_spp_velocity_from_doppler_of_a_static_receiver():
+    d = "gnss/ublox-m8p-galway-2018/rinex/"
+    nav = read_rinex_nav(shared_file(d + "rover-20181004-1237.nav.gz"))
+    obs = read_rinex_obs(shared_file(d + "rover-20181004-1237.obs.gz"))
+    store = EphemerisStore(nav.ephemerides)
+    e = obs.epochs[100].gps_only()
+    sats = satellite_states(store, e.sv_id, e.time, e.pr_m)
+    sol = pntpos(e.pr_m, sats, e.time.tow_s, np.radians(15), e.dop_hz, (nav.iono_alpha, nav.iono_beta))
+    assert sol.ok
+    assert np.linalg.norm(sol.vel_ecef_m_s) < 0.1
+    ref = np.array([3774088.9931, -601661.8217, 5089321.3853])
+    assert np.linalg.norm(sol.pos_ecef_m - ref) < 10.0
+
+
+def test_atmosphere_models_have_textbook_magnitudes():
+    lat = np.radians(35.0)
+    zen = saastamoinen_m(lat, 0.0, np.array([np.pi / 2]))[0]
+    assert 2.3 < zen < 2.6  # ≈2.3 m dry + wet at sea level
+    low = saastamoinen_m(lat, 0.0, np.array([np.radians(15.0)]))[0]
+    assert low == pytest.approx(zen / np.sin(np.radians(15.0)), rel=0.02)
+    iono = klobuchar_m(50400.0, lat, np.radians(139.0), np.array([0.0]), np.array([np.pi / 2]), None, None)[0]
+    assert 1.0 < iono < 30.0
+    # at 02:00 local time (t = 60200 s GPST at 139° E) only the 5 ns night-time floor remains
+    night = klobuchar_m(60200.0, lat, np.radians(139.0), np.array([0.0]), np.array([np.pi / 2]), None, None)
+    assert night[0] == pytest.approx(5e-9 * 299792458.0, rel=1e-3)
+
+
+def test_ecef_llh_sanity():
+    lat, lon, h = ecef_to_llh(ROVER_0759)
+    assert 35 < np.degrees(lat) < 36.5 and 139 < np.degrees(lon) < 141 and -50 < h < 500
