@@ -374,7 +374,8 @@ async def _apply_entry(
             # First let the frame leave at the old rate (a pty or USB bridge buffers past tcdrain).
             await asyncio.sleep(options.baud_settle_s)
             await link.reopen(entry.baud_change)
-            result.ack = await _wait_ack(link, entry, options.ack_timeout_s)
+            # The ACK, if we catch it at all, is already due: the poll-back below is the real confirmation.
+            result.ack = await _wait_ack(link, entry, max(options.baud_settle_s, 0.05))
             if result.ack == "nak":
                 if current_baud is not None:
                     await link.reopen(current_baud)
