@@ -51,6 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--tp5-on-u6", choices=("ack", "nak"), default="ack")
     r.add_argument("--silent", action="store_true", help="never answer; stream the factory output")
     r.add_argument("--ack-invalid-rates", action="store_true", help="ACK too-fast CFG-RATE, apply the minimum")
+    r.add_argument("--camera-tp", type=int, choices=(0, 1), default=1,
+                   help="TIMEPULSE driving the camera: 0 TIMEPULSE, 1 TIMEPULSE2 (default)")
     r.add_argument("--trigger-extint", action="store_true", help="trigger pulse on EXTINT1 (TIM-TM2 ch 1)")
     r.add_argument("--time-valid-after", type=float, default=None,
                    help="simulated s to valid time (default: the scenario camera's valid_after_s)")
@@ -89,6 +91,7 @@ def run_receiver(args: argparse.Namespace) -> int:
     options = ReceiverOptions(
         align_to_tow=args.align, rawx_on_u6=args.rawx_on_u6, tp5_on_u6=args.tp5_on_u6, silent=args.silent,
         ack_invalid_rates=args.ack_invalid_rates, trigger_extint=args.trigger_extint,
+        camera_tp_idx=args.camera_tp,
         time_valid_after_s=valid_after, receiver=args.receiver,
         faults=FaultOptions(seed=args.seed, corrupt_byte_rate=args.corrupt_rate,
                             drop_epoch_rate=args.drop_epoch_rate, bounce_prob=args.bounce_prob,

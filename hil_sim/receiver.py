@@ -58,6 +58,7 @@ RXM_RAWX = (0x02, 0x15)
 RXM_SFRB = (0x02, 0x11)
 RXM_SFRBX = (0x02, 0x13)
 NAV_SOL = (0x01, 0x06)
+NAV_PVT = (0x01, 0x07)
 TIM_TP = (0x0D, 0x01)
 TIM_TM2 = (0x0D, 0x03)
 AID_EPH = (0x0B, 0x31)
@@ -112,8 +113,9 @@ class ModelSpec:
 
 
 MODELS: dict[str, ModelSpec] = {
-    # LEA-6T FW 7.03 strings as u-blox 6 MON-VER reports them (no extension strings before protocol 14.00)
-    "lea6t": ModelSpec("lea6t", "7.03 (45969)", "00040007", ("PROTVER 14.00",), RXM_RAW, RXM_SFRB, True, 200,
+    # u-blox 6 ROM 7.03: swVersion "7.03 (45969)", hwVersion "00040007" and no extension strings (public
+    # NEO-6M captures and drivers report none; protocol version 13/14 is implied, not advertised)
+    "lea6t": ModelSpec("lea6t", "7.03 (45969)", "00040007", (), RXM_RAW, RXM_SFRB, True, 200,
                        0xFF, (0, 1)),
     # the real NEO-M8T MON-VER of the rtkbase dump
     "m8t": ModelSpec("m8t", "EXT CORE 3.01 (111141)", "00080000",
@@ -264,7 +266,10 @@ class Config:
 
     @classmethod
     def factory(cls, model: ModelSpec) -> Config:
-        tp5 = {i: {**d, "flags": d["flags"] & model.tp5_flags_mask} for i, d in enumerate(M8T_TP5_DEFAULTS)}
+        # u-blox 6 has no CFG-TP5 version byte (reserved, reads 0) and only 8 flag bits
+        version = 1 if model.name == "m8t" else 0
+        tp5 = {i: {**d, "version": version, "flags": d["flags"] & model.tp5_flags_mask}
+               for i, d in enumerate(M8T_TP5_DEFAULTS)}
         return cls(_factory_ports(), _factory_msg_rates(), {"measRate": 1000, "navRate": 1, "timeRef": 1},
                    tp5, dict(LEA6T_TP_DEFAULT))
 
@@ -415,6 +420,8 @@ class ReceiverCore:
             return [self._ack(key)]  # acknowledged, never produced
         if self.model.name == "m8t" and msg in (RXM_RAW, RXM_SFRB):
             return [self._nak(key)]
+        if self.model.name == "lea6t" and msg in (RXM_SFRBX, NAV_PVT):
+            return [self._nak(key)]  # u-blox 7/8 messages a FW 7.03 does not know
         self.config.msg_rates[msg] = rates
         return [self._ack(key)]
 
@@ -467,6 +474,8 @@ class ReceiverCore:
                 flags &= ~TP5_ALIGN_TO_TOW
                 log.info("CFG-TP5 tpIdx %d: period does not divide 1 s, alignToTow cleared", new["tpIdx"])
         new["flags"] = flags
+        if self.model.name == "lea6t":
+            new["version"] = 0  # a reserved byte on u-blox 6: polls read it back as 0
         self.config.tp5[new["tpIdx"]] = new
         return [self._ack(key)]
 
@@ -588,6 +597,9 @@ class ReceiverCore:
             if due(NAV_SOL):
                 pos, vel = fix if fix is not None else (None, None)
                 self._send(out, enc.nav_sol(t, pos, vel, num_sv=len(obs) if valid else 0, p_acc_m=2.5, pdop=1.6))
+            if due(NAV_PVT) and self.model.name == "m8t":
+                pos, vel = fix if fix is not None else (None, None)
+                self._send(out, enc.nav_pvt(t, pos, vel, num_sv=len(obs) if valid else 0, h_acc_m=2.0, pdop=1.6))
             if due(self.model.raw_msg):
                 if self.faults.drop_epoch():
                     self.stats.epochs_dropped_fault += 1

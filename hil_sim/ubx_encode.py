@@ -88,6 +88,10 @@ LAYOUTS: dict[str, Layout] = {lay.name: lay for lay in (
     _L("TIM-TM2", 0x0D, 0x03, "ch:B flags:B count:H wnR:H wnF:H towMsR:I towSubMsR:I towMsF:I towSubMsF:I "
                               "accEst:I"),
     _L("TIM-TP", 0x0D, 0x01, "towMS:I towSubMS:I qErr:i week:H flags:B refInfo:B"),
+    _L("NAV-PVT", 0x01, 0x07, "iTOW:I year:H month:B day:B hour:B min:B second:B valid:B tAcc:I nano:i "
+                              "fixType:B flags:B flags2:B numSV:B lon:i lat:i height:i hMSL:i hAcc:I vAcc:I "
+                              "velN:i velE:i velD:i gSpeed:i headMot:i sAcc:I headAcc:I pDOP:H flags3:H "
+                              "reserved0:I headVeh:i magDec:h magAcc:H"),
     _L("NAV-SOL", 0x01, 0x06, "iTOW:I fTOW:i week:h gpsFix:B flags:B ecefX:i ecefY:i ecefZ:i pAcc:I "
                               "ecefVX:i ecefVY:i ecefVZ:i sAcc:I pDOP:H reserved1:B numSV:B reserved2:I"),
 )}
@@ -323,6 +327,32 @@ def nav_sol(t: GpsTime, pos_ecef_m: Sequence[float] | np.ndarray | None,
     else:
         head.update(gpsFix=0, flags=0x00, pAcc=999_999_99, sAcc=999_99, pDOP=9999)
     return frame("NAV-SOL", head)
+
+
+def nav_pvt(t: GpsTime, pos_ecef_m: Sequence[float] | np.ndarray | None,
+            vel_ecef_m_s: Sequence[float] | np.ndarray | None, num_sv: int, h_acc_m: float, pdop: float) -> bytes:
+    """NAV-PVT (u-blox 8, 92 bytes): UTC date/time of `t`, 3D fix with WGS 84 lat/lon/height (hMSL = height,
+    no geoid model) and NED velocity, or fixType 0 when `pos_ecef_m` is None."""
+    from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
+
+    utc = t.to_utc()
+    itow_ms = round(t.tow_ns / 1e6)
+    head: dict[str, Any] = {"iTOW": itow_ms, "year": utc.year, "month": utc.month, "day": utc.day,
+                            "hour": utc.hour, "min": utc.minute, "second": utc.second, "numSV": num_sv,
+                            "nano": utc.microsecond * 1000, "pDOP": round(pdop * 100)}
+    if pos_ecef_m is None:
+        head.update(valid=0x00, tAcc=0xFFFFFFFF, fixType=0, hAcc=0xFFFFFFFF, vAcc=0xFFFFFFFF, sAcc=0xFFFFFFFF,
+                    headAcc=0xFFFFFFFF, pDOP=9999)
+        return frame("NAV-PVT", head)
+    lat, lon, h = (float(v) for v in ecef_to_llh(np.asarray(pos_ecef_m, float)))
+    enu = enu_rotation(lat, lon) @ np.asarray(vel_ecef_m_s if vel_ecef_m_s is not None else np.zeros(3), float)
+    g_speed = math.hypot(enu[0], enu[1])
+    head.update(valid=0x07, tAcc=20, fixType=3, flags=0x01, flags2=0xE0, lon=round(math.degrees(lon) * 1e7),
+                lat=round(math.degrees(lat) * 1e7), height=round(h * 1000), hMSL=round(h * 1000),
+                hAcc=round(h_acc_m * 1000), vAcc=round(h_acc_m * 1500), velN=round(enu[1] * 1000),
+                velE=round(enu[0] * 1000), velD=round(-enu[2] * 1000), gSpeed=round(g_speed * 1000),
+                headMot=round(math.degrees(math.atan2(enu[0], enu[1])) % 360 * 1e5), sAcc=100, headAcc=5_000_000)
+    return frame("NAV-PVT", head)
 
 
 # ---------------------------------------------------------------------------------------------------------

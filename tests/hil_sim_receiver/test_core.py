@@ -328,3 +328,17 @@ def test_scenario_end_stops_measurements_but_configuration_still_answers(standin
     configure(core, meas_ms=1000)
     assert len(ubx_of(run(core, 5.0), RXM_RAWX)) == 2
     assert poll(core, "CFG-RATE")["measRate"] == 1000
+
+
+def test_u_blox_6_specifics_nav_pvt_naked_and_tp5_version_reads_zero(standin_world) -> None:
+    lea = core_for("lea6t", standin_world)
+    assert acked(send(lea, "CFG-MSG3", {"msgClass": 0x01, "msgID": 0x07, "rate": 1})) is False
+    assert acked(send(lea, "CFG-MSG3", {"msgClass": 0x02, "msgID": 0x13, "rate": 1})) is False
+    assert acked(send(lea, "CFG-TP5", {**M8T_TP5_DEFAULTS[1], "version": 1, "flags": 0x7FE}))
+    back = poll(lea, "CFG-TP5", b"\x01")
+    assert back["version"] == 0 and back["flags"] == 0xFE  # the M8 grid bits 8-10 do not exist on u-blox 6
+    m8 = core_for("m8t", standin_world, time_valid_after_s=0.5)
+    assert acked(send(m8, "CFG-PRT", CONFIGURED_PRT))
+    assert acked(send(m8, "CFG-MSG3", {"msgClass": 0x01, "msgID": 0x07, "rate": 1}))
+    pvts = [UBXReader.parse(f.raw) for f in ubx_of(run(m8, 3.0), (0x01, 0x07))]
+    assert len(pvts) == 3 and all(p.fixType == 3 for p in pvts)

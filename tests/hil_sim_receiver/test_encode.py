@@ -174,3 +174,22 @@ def test_frames_pass_our_own_framer() -> None:
     frames = iter_frames(data)
     assert [f.protocol.value for f in frames] == ["ubx", "nmea", "ubx"]
     assert parse(enc.frame("CFG-TP5", M8T_TP5_DEFAULTS[0]), POLL) is not None
+
+
+def test_nav_pvt_decodes_with_pyubx2_to_the_position_and_velocity() -> None:
+    from onboard.rtk.geodesy import enu_rotation, llh_to_ecef
+
+    lat, lon, h = np.radians(47.4), np.radians(8.5), 512.25
+    pos = llh_to_ecef(lat, lon, h)
+    vel = enu_rotation(lat, lon).T @ np.array([3.0, 4.0, -0.5])  # 3 m/s east, 4 north, 0.5 down
+    t = GpsTime(1590, 392_400_200_000_000)
+    msg = parse(enc.nav_pvt(t, pos, vel, 9, 2.0, 1.6))
+    assert len(enc.nav_pvt(t, pos, vel, 9, 2.0, 1.6)) == 8 + 92
+    assert msg.fixType == 3 and msg.gnssFixOk == 1 and msg.numSV == 9 and msg.iTOW == 392_400_200
+    assert msg.lat == pytest.approx(47.4, abs=1e-7) and msg.lon == pytest.approx(8.5, abs=1e-7)
+    assert msg.height == round(h * 1000) and (msg.velN, msg.velE, msg.velD) == (4000, 3000, 500)
+    assert msg.gSpeed == 5000 and msg.headMot == pytest.approx(36.87, abs=0.01)
+    utc = t.to_utc()
+    assert (msg.year, msg.month, msg.day, msg.hour, msg.min, msg.second) == (
+        utc.year, utc.month, utc.day, utc.hour, utc.minute, utc.second)
+    assert parse(enc.nav_pvt(t, None, None, 0, 0, 0)).fixType == 0
