@@ -185,12 +185,14 @@ def adjust_job(settings: Any, params: dict[str, Any], files: dict[str, str | Non
                out_dir: Path) -> str:
     """API job: the adjustment on a flight's uploaded files (params as `python -m ground adjust` options)."""
     chosen = {role: _pick(files, params, role) for role in ("trajectory", "events", "orientations", "gcp")}
-    missing = [r for r in ("trajectory", "events", "orientations") if chosen[r] is None]
+    trajectory = flight_dir / str(chosen["trajectory"]) if chosen["trajectory"] else _reprocessed(out_dir)
+    missing = [r for r in ("events", "orientations") if chosen[r] is None] + ([] if trajectory else ["trajectory"])
     if missing:
         raise InputError(f"missing uploaded {', '.join(missing)} (set roles in the manifest or name the files)")
+    assert trajectory is not None
     lever = params.get("lever_arm")
     req = AdjustRequest(
-        trajectory=flight_dir / str(chosen["trajectory"]),
+        trajectory=trajectory,
         events=flight_dir / str(chosen["events"]),
         orientations=flight_dir / str(chosen["orientations"]),
         gcp=flight_dir / str(chosen["gcp"]) if chosen["gcp"] else None,
@@ -205,6 +207,12 @@ def adjust_job(settings: Any, params: dict[str, Any], files: dict[str, str | Non
     res = run_adjust(req, out_dir)
     return (f"adjusted {res['n_images']} images: lever arm {np.round(res['lever_arm_m'], 4).tolist()} m, "
             f"delay {res['delay_s'] * 1e3:.1f} ms, sigma0 {res['sigma0']:.2f}")
+
+
+def _reprocessed(out_dir: Path) -> Path | None:
+    """The newest `SOL.pos` written by an RTK job of the same flight (sibling job folders), if any."""
+    sols = sorted(out_dir.parent.glob("*/SOL.pos"), key=lambda p: p.stat().st_mtime)
+    return sols[-1] if sols else None
 
 
 def _opt_float(v: Any) -> float | None:

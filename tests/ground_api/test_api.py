@@ -263,3 +263,33 @@ def test_uploaded_orientations_trigger_the_adjustment(live: LiveServer, tmp_path
         c.post(f"/flights/{rep.flight_id}/jobs", json={"kind": "rtk"})
         rtk = _wait_job(c, rep.flight_id)
         assert rtk["status"] == "failed" and "base_obs" in rtk["message"]
+
+
+def test_base_data_triggers_rtk_reprocessing(live: LiveServer, tmp_path: Path) -> None:
+    """Real rover + base RINEX (Yamatogawa, u-blox L1 rover, 26 m base) uploaded with roles: the RTK job runs by
+    itself and writes a .pos trajectory of every rover epoch; a corrupt rover file fails the job with a message."""
+    from tests.conftest import shared_file
+
+    src = {"rover.obs.gz": "rover_obs", "master.obs.gz": "base_obs", "brdc0060.10n.gz": "nav"}
+    folder = tmp_path / "flight-yamatogawa"
+    folder.mkdir()
+    for name, orig in zip(src, ("yamatogawa_rover.obs.gz", "yamatogawa_master.obs.gz", "brdc0060.10n.gz")):
+        (folder / name).write_bytes(shared_file(f"gnss/ublox-yamatogawa-20100106/{orig}").read_bytes())
+    rep = Uploader(live.url, TOKEN, UploaderOptions(chunk_bytes=60_000), sleep=lambda s: None).upload_flight(
+        folder, src)
+    with live.client() as c:
+        job = _wait_job(c, rep.flight_id)
+        assert job["kind"] == "rtk" and job["status"] == "done", job["message"]
+        assert "203 epochs" in job["message"]
+    sol = live.settings.data_dir / "outputs" / rep.flight_id / job["id"] / "SOL.pos"
+    from ground.io.trajectory import read_trajectory
+
+    traj = read_trajectory(str(sol))
+    assert len(traj.t_ns) == 203 and traj.vel_ecef_m_s is not None
+    (folder / "rover.obs.gz").write_bytes(b"\x1f\x8b garbage")
+    folder.rename(tmp_path / "flight-broken")
+    rep2 = Uploader(live.url, TOKEN, UploaderOptions(chunk_bytes=60_000), sleep=lambda s: None).upload_flight(
+        tmp_path / "flight-broken", src)
+    with live.client() as c:
+        bad = _wait_job(c, rep2.flight_id)
+        assert bad["kind"] == "rtk" and bad["status"] == "failed" and bad["message"]

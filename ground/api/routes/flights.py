@@ -307,25 +307,30 @@ def _finish_file(settings: ApiSettings, s: Any, flight: Flight, f: FlightFile, p
 
 # ------------------------------------------------------------------------------------------------- jobs
 
-ADJUST_ROLES = ("trajectory", "events", "orientations")
+ADJUST_ROLES = ("events", "orientations")
+RTK_ROLES = ("rover_obs", "base_obs")
 
 
 def _maybe_auto_adjust(store: Store, flight_id: str, jobs: JobRunner) -> None:
-    """Queue the adjustment once every file is in, when the manifest has trajectory, events and orientations."""
+    """Once every file is in, queue the automatic jobs (only on a flight that has none yet):
+    RTK re-processing when rover and base observations were uploaded, then the adjustment when events and
+    orientations were uploaded with a trajectory (uploaded, or the one the RTK job will write)."""
     with store.session() as s:
         flight = s.get(Flight, flight_id)
         if flight is None or flight.jobs:
             return
         roles = {f.role for f in flight.files}
-        if not all(r in roles for r in ADJUST_ROLES):
-            return
-        job = Job(flight_id=flight_id, kind="adjust", params={})
-        s.add(job)
+        queued: list[Job] = []
+        if all(r in roles for r in RTK_ROLES):
+            queued.append(Job(flight_id=flight_id, kind="rtk", params={}))
+        if all(r in roles for r in ADJUST_ROLES) and ("trajectory" in roles or queued):
+            queued.append(Job(flight_id=flight_id, kind="adjust", params={}))
+        s.add_all(queued)
         s.commit()
-        job_id = job.id
-    log.info("flight %s complete with trajectory, events and orientations: adjustment job %s queued",
-             flight_id, job_id)
-    jobs.submit(job_id)
+        ids = [(j.id, j.kind) for j in queued]
+    for job_id, kind in ids:  # one worker by default: the RTK job runs before the adjustment
+        log.info("flight %s complete: %s job %s queued", flight_id, kind, job_id)
+        jobs.submit(job_id)
 
 
 @router.post("/{flight_id}/jobs", response_model=JobOut, status_code=status.HTTP_202_ACCEPTED)
