@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import errno
+import functools
 import logging
 import os
 import shutil
@@ -33,11 +34,18 @@ from onboard.logger.events import EventLog
 from onboard.logger.files import FileLayer, OsFileLayer
 from onboard.logger.journal import EVENTS_NAME, Journal, JournalOptions, flight_name, read_manifest
 from onboard.receiver.framing import Frame, StreamFramer
+from onboard.rtk.types import CameraMark
 from onboard.sdnotify import SdNotifier, WatchdogGate
 from onboard.settings import Settings, receiver_options
-from onboard.rtk.types import CameraMark
 from onboard.status import SatelliteStatus, StatusSnapshot, write_status
-from onboard.timepulse.marks import EVENT_FORMAT_VERSION, PairingOptions, mark_record, pair_marks, pairing_record, timepulse_record
+from onboard.timepulse.marks import (
+    EVENT_FORMAT_VERSION,
+    PairingOptions,
+    mark_record,
+    pair_marks,
+    pairing_record,
+    timepulse_record,
+)
 
 log = logging.getLogger(__name__)
 
@@ -303,7 +311,7 @@ class Recorder:
                 continue
             if data:
                 mono, wall = self.clock.monotonic_ns(), self.clock.wall_ns()
-                if not self._journal_op(lambda: self.journal.append(data, mono, wall)):  # type: ignore[union-attr]
+                if not self._journal_op(functools.partial(self.journal.append, data, mono, wall)):
                     return
                 self._post(self._on_bytes, data)
             if not self._journal_op(self.journal.maybe_sync):

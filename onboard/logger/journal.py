@@ -141,7 +141,7 @@ class Manifest:
 
 def flight_name(wall_ns: int) -> str:
     """`flight-YYYYmmddTHHMMSSZ` for a host wall time in ns (UTC)."""
-    t = _dt.datetime.fromtimestamp(wall_ns / 1e9, tz=_dt.timezone.utc)
+    t = _dt.datetime.fromtimestamp(wall_ns / 1e9, tz=_dt.UTC)
     return "flight-" + t.strftime("%Y%m%dT%H%M%SZ")
 
 

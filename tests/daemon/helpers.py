@@ -43,17 +43,17 @@ def tim_tm2(count: int, week: int = 2200, tow_ms: int = 100_000, sub_ns: int = 0
 
 def make_settings(tmp_path: Path, **kw: Any) -> Settings:
     """Settings for in-process runs: fast status, no disk floor, short configuration timeouts."""
-    base: dict[str, Any] = dict(
-        port_device="fake",
-        data_dir=tmp_path / "data",
-        status_path=tmp_path / "run" / "status.json",
-        status_interval_s=0.05,
-        disk_floor_mb=0.0,
-        disk_check_interval_s=0.05,
-        port_reopen_min_s=0.05,
-        port_reopen_max_s=0.2,
-        receiver_options=MappingProxyType({"ack_timeout_s": 0.2, "retries": 0}),
-    )
+    base: dict[str, Any] = {
+        "port_device": "fake",
+        "data_dir": tmp_path / "data",
+        "status_path": tmp_path / "run" / "status.json",
+        "status_interval_s": 0.05,
+        "disk_floor_mb": 0.0,
+        "disk_check_interval_s": 0.05,
+        "port_reopen_min_s": 0.05,
+        "port_reopen_max_s": 0.2,
+        "receiver_options": MappingProxyType({"ack_timeout_s": 0.2, "retries": 0}),
+    }
     base.update(kw)
     return Settings(**base)
 

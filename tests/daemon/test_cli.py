@@ -19,7 +19,7 @@ def onboard(*args: str, cwd: Path = PROJECT) -> subprocess.CompletedProcess[str]
     env = dict(os.environ, PYTHONPATH=str(PROJECT))
     env.pop("NOTIFY_SOCKET", None)
     return subprocess.run([sys.executable, "-m", "onboard", *args], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=60)
+                          text=True, timeout=60, check=False)
 
 
 def test_help_lists_commands() -> None:

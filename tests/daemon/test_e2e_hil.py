@@ -13,7 +13,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -26,9 +25,9 @@ from onboard.timepulse.marks import BOUNCE, MISSED_FLASH, PULSE_WITHOUT_FLASH, p
 from tests.daemon.helpers import status, wait_until
 
 hil_scenario = pytest.importorskip("hil_sim.scenario")
-from hil_sim.pty_server import ReceiverEmulator  # noqa: E402
-from hil_sim.receiver import ReceiverOptions  # noqa: E402
-from hil_sim.world import World  # noqa: E402
+from hil_sim.pty_server import ReceiverEmulator
+from hil_sim.receiver import ReceiverOptions
+from hil_sim.world import World
 
 PROJECT = Path(__file__).resolve().parents[2]
 SPEED = 4.0  # simulated seconds per real second

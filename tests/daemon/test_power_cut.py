@@ -50,7 +50,8 @@ def test_power_cuts_lose_nothing_older_than_a_second(tmp_path: Path) -> None:
         for cycle in range(CYCLES + 1):
             proc = subprocess.Popen(cmd, cwd=PROJECT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
             try:
-                wait_until(lambda: (s := status(status_path)).get("pid") == proc.pid and s.get("port_open"),
+                pid = proc.pid
+                wait_until(lambda: (s := status(status_path)).get("pid") == pid and s.get("port_open"),  # noqa: B023
                            timeout_s=30, what="daemon ready")
                 sent: list[tuple[int, float]] = []
                 marks: list[tuple[int, float]] = []
