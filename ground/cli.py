@@ -39,6 +39,7 @@ class AdjustRequest:
     gcp_rel: Path | None = None
     gcp_crs: str = crsmod.WGS84_ECEF
     capture_times: Path | None = None
+    images_dir: Path | None = None
     lever_arm_m: tuple[float, float, float] | None = None
     lever_arm_sigma_m: float | None = None
     delay_s: float | None = None
@@ -86,11 +87,21 @@ def parameter_specs(req: AdjustRequest) -> tuple[LeverArmSpec, DelaySpec]:
 
 
 def _read_events(req: AdjustRequest, images: list[str]) -> tuple[list[ImageEvent], dict[str, Any]]:
-    from ground.io.events import match_marks_to_images, read_capture_times, read_events_csv, read_marks_jsonl
+    from ground.io.events import (
+        exif_capture_time,
+        match_marks_to_images,
+        read_capture_times,
+        read_events_csv,
+        read_marks_jsonl,
+    )
 
     if req.events.suffix.lower() == ".jsonl":
         marks = read_marks_jsonl(req.events)
         caps = read_capture_times(req.capture_times) if req.capture_times else None
+        if caps is None and req.images_dir is not None:
+            found = {n: exif_capture_time(req.images_dir / n) for n in images}
+            caps = {n: t for n, t in found.items() if t is not None}
+            log.info("EXIF capture times read for %d of %d images in %s", len(caps), len(images), req.images_dir)
         try:
             rep = match_marks_to_images(marks, images, caps)
         except ValueError as exc:
@@ -273,6 +284,7 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--events-kind", choices=("trigger", "flash"), default="trigger",
                    help="what the CSV times are (default trigger pulse)")
     a.add_argument("--capture-times", type=Path, help="CSV/JSON image→capture time (to match events.jsonl)")
+    a.add_argument("--images", type=Path, help="folder of the photos: EXIF capture times to match events.jsonl")
     a.add_argument("--orientations", required=True, type=Path,
                    help="OpenSfM .json, COLMAP images.txt, MicMac Ori-* folder, Metashape .xml or OPK .csv")
     a.add_argument("--gcp", type=Path, help="GCP CSV name,role,x_rel,y_rel,z_rel,X,Y,Z, ODM gcp_list.txt or "
@@ -308,7 +320,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "adjust":
         req = AdjustRequest(
             trajectory=args.trajectory, events=args.events, orientations=args.orientations, gcp=args.gcp,
-            gcp_rel=args.gcp_rel, gcp_crs=args.gcp_crs, capture_times=args.capture_times,
+            gcp_rel=args.gcp_rel, gcp_crs=args.gcp_crs, capture_times=args.capture_times, images_dir=args.images,
             lever_arm_m=args.lever_arm, lever_arm_sigma_m=args.lever_arm_sigma, delay_s=args.delay,
             delay_sigma_s=args.delay_sigma, estimate=tuple(e for e in args.estimate.split(",") if e),
             crs=args.crs, relative_control=args.relative_control, events_kind=args.events_kind,

@@ -3,6 +3,7 @@ the value/σ/--estimate rules, exports in a projected CRS, and the failure exits
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import subprocess
 import sys
@@ -102,3 +103,86 @@ def test_module_entry_point_runs(tmp_path: Path) -> None:
     out = subprocess.run([sys.executable, "-m", "ground", "--help"], capture_output=True, text=True, timeout=60, check=False,
                          cwd=Path(__file__).resolve().parents[2])
     assert out.returncode == 0 and "adjust" in out.stdout and "serve" in out.stdout
+
+
+def _events_jsonl_from_csv(d: Path, drop: int | None = None) -> list[str]:
+    """Rewrite the synthetic events as onboard pairing records (flash marks, counter); returns image names."""
+    from onboard.gnsstime import GpsTime
+    from onboard.timepulse.marks import ImagePairing, format_line, pairing_record
+
+    rows = [line.split(",") for line in (d / "events.csv").read_text().splitlines()[1:]]
+    lines = []
+    for i, (_, week, tow) in enumerate(rows):
+        if i == drop:
+            continue  # the receiver missed this flash: the counter jumps
+        t = GpsTime.from_week_tow_s(int(week), float(tow))
+        lines.append(format_line(pairing_record(ImagePairing(i, None, None, "no trigger measurement", t, 100 + i,
+                                                             20, None))))
+    (d / "events.jsonl").write_text("".join(lines))
+    return [r[0] for r in rows]
+
+
+def test_events_jsonl_matched_by_exif_capture_times(tmp_path: Path) -> None:
+    """Onboard events.jsonl + photos whose EXIF clock is 1 h 12.3 s off GPS, one flash missed: the image without
+    a mark is flagged and left out, every other image adjusted (delay now = exposure − flash ≈ 65 ms here)."""
+    pil = pytest.importorskip("PIL.Image")
+    from onboard.gnsstime import GpsTime
+
+    truth = write_synthetic_flight(tmp_path, n_lines=2)
+    names = _events_jsonl_from_csv(tmp_path, drop=5)
+    rows = [line.split(",") for line in (tmp_path / "events.csv").read_text().splitlines()[1:]]
+    imgs = tmp_path / "images"
+    imgs.mkdir()
+    for name, (_, week, tow) in zip(names, rows):
+        t = GpsTime.from_week_tow_s(int(week), float(tow)).to_gpst_datetime().replace(tzinfo=None)
+        t = t.replace(microsecond=0) + dt.timedelta(hours=1, seconds=12.3)
+        im = pil.new("RGB", (8, 8))
+        exif = im.getexif()
+        exif.get_ifd(0x8769)[0x9003] = t.strftime("%Y:%m:%d %H:%M:%S")
+        im.save(imgs / name, exif=exif)
+    args = ["adjust", "--trajectory", str(tmp_path / "SOL.pos"), "--events", str(tmp_path / "events.jsonl"),
+            "--images", str(imgs), "--orientations", str(tmp_path / "poses.csv"), "--gcp", str(tmp_path / "gcp.csv"),
+            "--lever-arm", ",".join(map(str, truth.lever_arm_m)), "-o", str(tmp_path / "out")]
+    assert main(args) == 0
+    res = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert res["matching"]["method"] == "capture_time"
+    assert res["matching"]["missing_marks"] == [names[5]]
+    assert res["matching"]["count_jumps"] == [[104, 106]]
+    assert res["n_images"] == truth.n_images - 1
+    assert {s["image"] for s in res["skipped"]} == {names[5]}
+    assert res["delay_s"] == pytest.approx(truth.delay_s, abs=0.005)
+
+
+def test_gcp_in_projected_crs_and_odm_list_with_relative_file(tmp_path: Path) -> None:
+    """GCP ground coordinates given in UTM 30N (--gcp-crs) or as an ODM gcp_list.txt + --gcp-rel give the same
+    adjustment as the ECEF CSV."""
+    truth = write_synthetic_flight(tmp_path, n_lines=2)
+    rows = [line.split(",") for line in (tmp_path / "gcp.csv").read_text().splitlines()]
+    ecef = np.array([[float(v) for v in r[5:8]] for r in rows[1:]])
+    utm = crsmod.ecef_to_crs(ecef, "EPSG:32630")
+    with (tmp_path / "gcp_utm.csv").open("w") as fh:
+        fh.write(",".join(rows[0]) + "\n")
+        for r, u in zip(rows[1:], utm):
+            fh.write(",".join(r[:5] + [f"{v:.4f}" for v in u]) + "\n")
+    with (tmp_path / "gcp_list.txt").open("w") as fh:
+        fh.write("EPSG:32630\n")
+        for r, u in zip(rows[1:], utm):
+            label = r[0] if r[1] == "gcp" else f"chk_{r[0]}"
+            fh.write(f"{u[0]:.4f} {u[1]:.4f} {u[2]:.4f} 100 200 IMG_0001.JPG {label}\n")
+    with (tmp_path / "rel.csv").open("w") as fh:
+        fh.write("name,x_rel,y_rel,z_rel\n")
+        for r in rows[1:]:
+            fh.write(",".join([r[0] if r[1] == "gcp" else f"chk_{r[0]}"] + r[2:5]) + "\n")
+    lever = ",".join(map(str, truth.lever_arm_m))
+    base = ["adjust", "--trajectory", str(tmp_path / "SOL.pos"), "--events", str(tmp_path / "events.csv"),
+            "--orientations", str(tmp_path / "poses.csv"), "--lever-arm", lever, "--lever-arm-sigma", "0.01"]
+    outs = {}
+    for tag, extra in {"ecef": ["--gcp", str(tmp_path / "gcp.csv")],
+                       "utm": ["--gcp", str(tmp_path / "gcp_utm.csv"), "--gcp-crs", "EPSG:32630"],
+                       "odm": ["--gcp", str(tmp_path / "gcp_list.txt"), "--gcp-rel", str(tmp_path / "rel.csv")]}.items():
+        assert main([*base, *extra, "-o", str(tmp_path / tag)]) == 0, tag
+        outs[tag] = json.loads((tmp_path / tag / "results.json").read_text())
+    for tag in ("utm", "odm"):
+        np.testing.assert_allclose(outs[tag]["translation_m"], outs["ecef"]["translation_m"], atol=2e-3)
+        np.testing.assert_allclose(outs[tag]["lever_arm_m"], outs["ecef"]["lever_arm_m"], atol=2e-3)
+    assert len(outs["odm"]["checkpoints"]) == 2  # chk_ labels became check points
