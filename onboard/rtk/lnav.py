@@ -507,6 +507,14 @@ class LnavAssembler:
         self._last[prn] = eph
         return eph
 
+    def add(self, prn: int, words: Sequence[int], reference_week: int | None = None) -> Ephemeris | None:
+        """Add one subframe in either form (the ARCHITECTURE contract): 24-bit data words (RXM-SFRB) or
+        RXM-SFRBX dwords. Told apart by the TLM word: 24-bit form keeps it below 2**24, while the SFRBX form
+        has the preamble in bits 29..22 (≥ 2**29)."""
+        if len(words) and int(words[0]) >> 24:
+            return self.add_subframe_words30(prn, words, reference_week=reference_week)
+        return self.add_subframe(prn, words, reference_week)
+
     def add_subframe_words30(
         self, prn: int, words30: Sequence[int], transmitted: bool = False, reference_week: int | None = None
     ) -> Ephemeris | None:

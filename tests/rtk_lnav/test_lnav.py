@@ -275,3 +275,14 @@ def test_rtklib_decodes_our_subframes_to_the_same_ephemeris(brdc_ephemerides: li
         assert r.week == ours.week == 1590
         checked += 1
     assert checked >= 50
+
+
+def test_add_accepts_either_word_form(brdc_ephemerides: list[Ephemeris]) -> None:
+    eph = brdc_ephemerides[2]
+    sfs = lnav.encode_subframes(eph, _frame_start(eph))
+    a24, a30 = lnav.LnavAssembler(1590), lnav.LnavAssembler(1590)
+    got24 = got30 = None
+    for sf in sfs:
+        got30 = a30.add(eph.prn, sf) or got30
+        got24 = a24.add(eph.prn, lnav.sfrbx_words24(sf)[0]) or got24
+    assert got24 is not None and got24 == got30
