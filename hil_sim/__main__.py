@@ -62,6 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--unplug", type=_window, action="append", default=[], metavar="AT_S:DURATION_S",
                    help="port disappears at simulated AT_S for DURATION_S (repeatable)")
     r.add_argument("-v", "--verbose", action="store_true")
+    from hil_sim.mission import add_parser as add_flight_parser
+
+    add_flight_parser(sub)
     return p
 
 
@@ -125,10 +128,13 @@ def run_receiver(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of `python -m hil_sim`."""
     args = build_parser().parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, stream=sys.stderr,
+    logging.basicConfig(level=logging.DEBUG if getattr(args, "verbose", False) else logging.INFO, stream=sys.stderr,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     if args.command == "receiver":
         return run_receiver(args)
+    if args.command == "flight":
+        logging.getLogger().setLevel(logging.WARNING)
+        return int(args.func(args))
     return 2
 
 

@@ -1,0 +1,274 @@
+"""`python -m hil_sim flight`: one whole simulated survey flight through the real onboard code paths.
+
+The simulator's receivers (rover on the drone, base on the ground) run on real pseudo-terminals; the real
+recorder daemon (`python -m onboard run`, one process per receiver, as on the drone and at the base) configures
+them, journals every byte and pairs the camera's trigger pulses with its flashes. After landing the flight goes
+through the same tools a user runs: RINEX conversion, post-processed RTK against the base and the final
+adjustment. Each stage is checked against the simulator's truth and the summary says where everything is.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from onboard.gnsstime import GpsTime
+
+PROJECT_ROOT = Path(__file__).resolve().parents[1]
+
+
+@dataclass
+class StageResult:
+    """What one stage of the mission produced: `ok`, a one-line summary, figures and output paths."""
+
+    name: str
+    ok: bool
+    summary: str
+    figures: dict[str, Any] = field(default_factory=dict)
+    outputs: dict[str, str] = field(default_factory=dict)
+
+
+def _wait(predicate: Callable[[], Any], timeout_s: float, what: str, poll_s: float = 0.2) -> Any:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(poll_s)
+    raise TimeoutError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+
+
+def _status(path: Path) -> dict[str, Any]:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _progress(label: str, done_s: float, total_s: float) -> None:
+    if not sys.stderr.isatty():
+        return
+    frac = min(1.0, max(0.0, done_s / total_s)) if total_s > 0 else 1.0
+    bar = "#" * int(frac * 30)
+    sys.stderr.write(f"\r{label} [{bar:<30}] {done_s:6.0f}/{total_s:.0f} s simulated")
+    sys.stderr.flush()
+    if frac >= 1.0:
+        sys.stderr.write("\n")
+
+
+def _start_recorder(name: str, port: str, out: Path, camera_period_s: float, meas_rate_ms: int) -> tuple[subprocess.Popen[bytes], Path, Path]:
+    cfg = out / f"{name}.toml"
+    cfg.write_text(
+        "# written by python -m hil_sim flight\n"
+        f'[receiver]\ncamera_period_s = {camera_period_s}\ntrigger = "extint1"\nmeas_rate_ms = {meas_rate_ms}\n'
+        "[journal]\ndisk_floor_mb = 50.0\n"
+    )
+    data_dir, status_path = out / name, out / f"{name}-status.json"
+    env = dict(os.environ, PYTHONPATH=str(PROJECT_ROOT))
+    env.pop("NOTIFY_SOCKET", None)
+    log_file = open(out / f"{name}-recorder.log", "wb")  # noqa: SIM115 - handed to the child process
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "onboard", "run", "--config", str(cfg), "--port", port, "--baud", "115200",
+         "--data-dir", str(data_dir), "--status", str(status_path)],
+        cwd=PROJECT_ROOT, env=env, stdout=log_file, stderr=subprocess.STDOUT,
+    )
+    return proc, data_dir, status_path
+
+
+def _stop(proc: subprocess.Popen[bytes], timeout_s: float = 30.0) -> int:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return int(proc.returncode)
+
+
+def record_flight(args: argparse.Namespace, out: Path) -> tuple[list[StageResult], dict[str, Any]]:
+    """Stage 1: simulate rover and base receivers on ptys and record both with the real daemon."""
+    from hil_sim.pty_server import ReceiverEmulator
+    from hil_sim.receiver import ReceiverOptions
+    from hil_sim.scenario import CameraPlan, Scenario
+    from hil_sim.world import World
+
+    camera = CameraPlan(period_s=args.camera_period, valid_after_s=20.0,
+                        missed_flash_probability=args.missed_flash, bounce_probability=args.bounce)
+    scenario = Scenario.default(model=args.model, seed=args.seed, camera=camera)
+    world = World(scenario)
+    flight_s = world.trajectory.duration_s + 10.0
+    if args.flight_s:
+        flight_s = min(flight_s, args.flight_s)
+    opts = ReceiverOptions(trigger_extint=True, time_valid_after_s=camera.valid_after_s)
+    rover = ReceiverEmulator(args.model, opts, world, speed=args.speed, receiver="rover")
+    base = ReceiverEmulator(args.model, opts, world, speed=args.speed, receiver="base")
+    procs: dict[str, subprocess.Popen[bytes]] = {}
+    dirs: dict[str, Path] = {}
+    statuses: dict[str, Path] = {}
+    meas_rate_ms = 1000 if args.model == "lea6t" else 500
+    try:
+        for name, emu in (("rover", rover), ("base", base)):
+            port = emu.start()
+            procs[name], dirs[name], statuses[name] = _start_recorder(name, port, out, args.camera_period, meas_rate_ms)
+        for name in procs:
+            _wait(lambda n=name: _status(statuses[n]).get("config_state") in ("verified", "failed"), 90,
+                  f"{name} receiver configuration")
+        t0 = scenario.start
+        while (done := rover.sim_time().diff_s(t0)) < flight_s:
+            _progress("flying", done, flight_s)
+            for name, proc in procs.items():
+                if proc.poll() is not None:
+                    raise RuntimeError(f"the {name} recorder exited early (see {out}/{name}-recorder.log)")
+            time.sleep(0.5)
+        _progress("flying", flight_s, flight_s)
+        end = rover.sim_time()
+    finally:
+        codes = {name: _stop(p) for name, p in procs.items()}
+        rover.stop()
+        base.stop()
+    return [_recording_result(name, dirs[name], statuses[name], codes.get(name, -1)) for name in ("rover", "base")], {
+        "world": world, "scenario": scenario, "start": scenario.start, "end": end, "dirs": dirs,
+    }
+
+
+def _recording_result(name: str, data_dir: Path, status_path: Path, code: int) -> StageResult:
+    from onboard.logger.journal import read_manifest
+    from onboard.receiver.decode import iter_journal
+    from onboard.rtk.types import ObsEpoch
+
+    st = _status(status_path)
+    flights = sorted(data_dir.glob("flight-*"))
+    if not flights:
+        return StageResult(f"record {name}", False, f"no flight directory under {data_dir}")
+    flight = flights[-1]
+    manifest = read_manifest(flight)
+    problems = _verify_segments(flight, manifest)
+    epochs = sum(isinstance(e, ObsEpoch) for e in iter_journal(flight))
+    figures = {
+        "receiver": f"{st.get('receiver_model')} {st.get('receiver_sw_version')}",
+        "configuration": st.get("config_state"), "config_error": st.get("config_error"),
+        "segments": len(manifest.segments) if manifest else 0,
+        "bytes": st.get("bytes_recorded"), "frames": st.get("frames"), "raw_epochs": epochs,
+        "time_marks": st.get("time_marks"), "daemon_exit_code": code, "manifest_problems": problems,
+    }
+    ok = code == 0 and st.get("config_state") == "verified" and epochs > 0 and not problems
+    summary = (f"{figures['receiver']}, configuration {figures['configuration']}, {epochs} raw epochs, "
+               f"{figures['bytes']} bytes in {figures['segments']} segment(s), SHA-256 "
+               f"{'verified' if not problems else 'MISMATCH'}")
+    return StageResult(f"record {name}", ok, summary, figures, {"flight": str(flight)})
+
+
+def _verify_segments(flight: Path, manifest: Any) -> list[str]:
+    """Names of the manifest's segments whose size or SHA-256 does not match the file on disk."""
+    import hashlib
+
+    if manifest is None:
+        return ["no manifest"]
+    bad = []
+    for seg in manifest.segments:
+        data = (flight / seg.name).read_bytes() if (flight / seg.name).exists() else b""
+        if len(data) != seg.bytes or hashlib.sha256(data).hexdigest() != seg.sha256:
+            bad.append(seg.name)
+    return bad
+
+
+def check_pairing(rover_flight: Path, ctx: dict[str, Any]) -> StageResult:
+    """Stage 2: every simulated camera event paired (or flagged) in events.jsonl, delays vs truth."""
+    from onboard.logger.events import read_events
+    from onboard.timepulse.marks import parse_records
+
+    world, start, end = ctx["world"], ctx["start"], ctx["end"]
+    _marks, pairings, _other = parse_records(read_events(rover_flight / "events.jsonl").records)
+    with_pulse = [p for p in pairings if p.pulse_time is not None]
+    if not with_pulse:
+        return StageResult("pair pulses and flashes", False, "no trigger pulse recorded")
+    first = min(p.pulse_time.total_ns for p in with_pulse)  # type: ignore[union-attr]
+    last = max(p.pulse_time.total_ns for p in with_pulse)  # type: ignore[union-attr]
+    truth = [ev for ev in world.camera_events(start, end) if first - 10**6 <= ev.pulse_time.total_ns <= last + 10**6]
+    by_pulse = {round(p.pulse_time.total_ns / 1e6): p for p in with_pulse}  # type: ignore[union-attr]
+    errors_ns, missing, flagged, clean = [], 0, 0, 0
+    for ev in truth:
+        p = by_pulse.get(round(ev.pulse_time.total_ns / 1e6))
+        if p is None:
+            missing += 1
+        elif p.flags:
+            flagged += 1
+        elif p.delay_ns is not None and ev.delay_s is not None:
+            clean += 1
+            errors_ns.append(abs(p.delay_ns - round(ev.delay_s * 1e9)))
+    worst = max(errors_ns) if errors_ns else None
+    ok = missing == 0 and clean > 0 and worst is not None and worst <= 1000
+    figures = {"camera_events": len(truth), "paired": clean, "flagged": flagged, "missing": missing,
+               "max_delay_error_ns": worst,
+               "mean_delay_ms": (sum(p.delay_ns for p in with_pulse if p.delay_ns) / max(1, clean + flagged)) / 1e6}
+    summary = (f"{clean} images with a measured shutter delay (worst error vs simulator {worst} ns), "
+               f"{flagged} flagged (missed/bounced flash), {missing} pulses not recorded")
+    return StageResult("pair pulses and flashes", ok, summary, figures, {"events": str(rover_flight / "events.jsonl")})
+
+
+def convert_rinex(flight: Path, out: Path) -> StageResult:
+    """Stage 3: the flight's journal to RINEX 3.04 with the real `onboard convert` command."""
+    rinex = out / "rinex"
+    proc = subprocess.run([sys.executable, "-m", "onboard", "convert", str(flight), "-o", str(rinex)],
+                          cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=300)
+    files = sorted(str(p) for p in rinex.glob("*")) if rinex.exists() else []
+    ok = proc.returncode == 0 and any(f.endswith(".obs") for f in files)
+    summary = (proc.stdout.strip().splitlines() or [proc.stderr.strip()[-300:]])[-1] if proc.stdout or proc.stderr else ""
+    return StageResult("RINEX conversion", ok, summary, {"files": len(files)}, {"rinex": str(rinex)})
+
+
+def write_summary(out: Path, stages: list[StageResult]) -> Path:
+    """Write `summary.json` and return its path."""
+    path = out / "summary.json"
+    path.write_text(json.dumps([dataclasses.asdict(s) for s in stages], indent=1, default=str) + "\n")
+    return path
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Register `flight` on the hil_sim command line."""
+    p = sub.add_parser("flight", help="a whole simulated flight through the real daemon, RTK and adjustment",
+                       description=__doc__)
+    p.add_argument("--model", choices=("lea6t", "m8t"), default="m8t")
+    p.add_argument("--speed", type=float, default=4.0, help="simulated seconds per real second (default 4)")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--flight-s", type=float, default=0.0, help="stop after this many simulated s (default: landing)")
+    p.add_argument("--camera-period", type=float, default=2.0, help="TimePulse camera period, s (2–3)")
+    p.add_argument("--missed-flash", type=float, default=0.02, help="probability a flash is missed")
+    p.add_argument("--bounce", type=float, default=0.02, help="probability the hot-shoe contact bounces")
+    p.add_argument("--out", type=Path, default=Path("demo-output"), help="output folder (default demo-output)")
+    p.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> int:
+    """Fly, then print what was recorded and where. Exit 0 when every stage passed its checks."""
+    out = args.out.resolve() / time.strftime("flight-%Y%m%dT%H%M%S")
+    out.mkdir(parents=True, exist_ok=True)
+    t_wall = time.monotonic()
+    stages, ctx = record_flight(args, out)
+    rover = next((Path(s.outputs["flight"]) for s in stages if s.name == "record rover" and "flight" in s.outputs), None)
+    if rover is not None:
+        stages.append(check_pairing(rover, ctx))
+        stages.append(convert_rinex(rover, out))
+    summary = write_summary(out, stages)
+    print(f"directgeo simulated flight ({args.model}, {args.speed:g}× real time, "
+          f"{ctx['end'].diff_s(ctx['start']):.0f} s simulated in {time.monotonic() - t_wall:.0f} s)")
+    for s in stages:
+        print(f"  [{'ok' if s.ok else 'FAILED'}] {s.name}: {s.summary}")
+        for key, value in s.outputs.items():
+            print(f"        {key}: {value}")
+    print(f"summary: {summary}")
+    return 0 if all(s.ok for s in stages) else 1
+
+
+__all__ = ["add_parser", "main", "GpsTime"]
