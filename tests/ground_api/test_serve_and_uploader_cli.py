@@ -1,0 +1,127 @@
+"""The real entry points: `python -m ground serve` (token from the environment or a file, refusal without one)
+and `python -m onboard.uploader` against it; plus concurrent chunk writers and an empty file."""
+
+from __future__ import annotations
+
+import concurrent.futures
+import hashlib
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+from onboard.logger.journal import Manifest, SegmentInfo
+from tests.ground_api.conftest import LiveServer
+
+ROOT = Path(__file__).resolve().parents[2]
+TOKEN = "serve-token-0123456789abcdef"
+
+pytestmark = pytest.mark.timeout(120)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _env(**extra: str) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k not in ("DIRECTGEO_TOKEN", "DATABASE_URL")}
+    env.update(extra)
+    return env
+
+
+def test_serve_refuses_to_start_without_a_token(tmp_path: Path) -> None:
+    out = subprocess.run([sys.executable, "-m", "ground", "serve", "--data-dir", str(tmp_path)], cwd=ROOT,
+                         env=_env(), capture_output=True, text=True, timeout=60, check=False)
+    assert out.returncode == 2 and "DIRECTGEO_TOKEN" in out.stderr
+    (tmp_path / "short").write_text("abc\n")
+    out = subprocess.run([sys.executable, "-m", "ground", "serve", "--token-file", str(tmp_path / "short")],
+                         cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=60, check=False)
+    assert out.returncode == 2 and "at least 16" in out.stderr
+
+
+def test_serve_and_uploader_command_lines(tmp_path: Path) -> None:
+    """Server from `python -m ground serve --token-file`, flight sent by `python -m onboard.uploader` (token from
+    the environment), SQLite file in the data dir; a second uploader run sends nothing."""
+    token_file = tmp_path / "token"
+    token_file.write_text(TOKEN + "\n")
+    port = _free_port()
+    data = tmp_path / "data"
+    srv = subprocess.Popen([sys.executable, "-m", "ground", "serve", "--port", str(port), "--data-dir", str(data),
+                            "--token-file", str(token_file)], cwd=ROOT, env=_env(), stdout=subprocess.DEVNULL,
+                           stderr=subprocess.PIPE, text=True)
+    try:
+        url = f"http://127.0.0.1:{port}"
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                if httpx.get(f"{url}/health", timeout=1).status_code == 200:
+                    break
+            except httpx.TransportError:
+                pass
+            assert time.monotonic() < deadline and srv.poll() is None, "server did not start"
+            time.sleep(0.1)
+        assert httpx.get(f"{url}/flights").status_code == 401
+        flight = tmp_path / "flight-20240501T120000Z"
+        flight.mkdir()
+        seg = os.urandom(150_000)
+        (flight / "000000.ubx").write_bytes(seg)
+        m = Manifest(flight.name, 1, [SegmentInfo("000000.ubx", len(seg), hashlib.sha256(seg).hexdigest())])
+        (flight / "manifest.json").write_text(json.dumps(m.to_json()))
+        cmd = [sys.executable, "-m", "onboard.uploader", "--url", url, "--chunk-mib", "0.05", str(flight)]
+        up = subprocess.run(cmd, cwd=ROOT, env=_env(DIRECTGEO_TOKEN=TOKEN), capture_output=True, text=True,
+                            timeout=60, check=False)
+        assert up.returncode == 0, up.stderr
+        assert "complete" in up.stdout
+        again = subprocess.run(cmd, cwd=ROOT, env=_env(DIRECTGEO_TOKEN=TOKEN), capture_output=True, text=True,
+                               timeout=60, check=False)
+        assert again.returncode == 0 and " 0 bytes sent" in again.stdout
+        bad = subprocess.run(cmd, cwd=ROOT, env=_env(DIRECTGEO_TOKEN="wrong-token-0123456789"),
+                             capture_output=True, text=True, timeout=60, check=False)
+        assert bad.returncode == 1 and "401" in bad.stderr
+        flights = httpx.get(f"{url}/flights", headers={"Authorization": f"Bearer {TOKEN}"}).json()
+        fid = flights[0]["id"]
+        assert (data / "flights" / fid / "000000.ubx").read_bytes() == seg
+        assert (data / "directgeo.sqlite3").is_file()
+    finally:
+        srv.terminate()
+        srv.wait(timeout=20)
+
+
+def test_concurrent_writers_at_one_offset_one_wins(live: LiveServer) -> None:
+    """Two clients send different chunks at the same offset at once: exactly one is stored, the other gets 409."""
+    a, b = os.urandom(50_000), os.urandom(50_000)
+    whole = a + os.urandom(10)
+    with live.client() as c:
+        body = {"name": "race", "files": [{"name": "x.ubx", "size": len(whole),
+                                           "sha256": hashlib.sha256(whole).hexdigest()}]}
+        fid = c.post("/flights", json=body).json()["id"]
+
+    def put(chunk: bytes) -> int:
+        with live.client() as cc:
+            return cc.put(f"/flights/{fid}/files/x.ubx", params={"offset": 0}, content=chunk,
+                          headers={"X-Chunk-SHA256": hashlib.sha256(chunk).hexdigest()}).status_code
+
+    with concurrent.futures.ThreadPoolExecutor(2) as pool:
+        codes = sorted(pool.map(put, [a, b]))
+    assert codes == [200, 409]
+    with live.client() as c:
+        assert c.get(f"/flights/{fid}/files/x.ubx").json()["received"] == 50_000
+
+
+def test_empty_file_completes_at_creation(live: LiveServer) -> None:
+    """A 0-byte file (e.g. an events.jsonl with no mark) is verified at once; the flight can complete."""
+    with live.client() as c:
+        body = {"name": "empty", "files": [{"name": "events.jsonl", "size": 0,
+                                            "sha256": hashlib.sha256(b"").hexdigest()}]}
+        r = c.post("/flights", json=body)
+        assert r.status_code == 201
+        assert r.json()["files"][0]["status"] == "complete" and r.json()["status"] == "complete"
+        assert c.get(f"/flights/{r.json()['id']}/files/events.jsonl/content").content == b""
