@@ -12,16 +12,26 @@ Frames are serialised with pyubx2 `UBXMessage` (SET) where it can, with `ubx_tab
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
 from pyubx2 import GET, SET, UBXMessage, UBXReader
+from pyubx2.exceptions import UBXMessageError, UBXParseError, UBXTypeError
 
 from onboard.errors import ReceiverError
 from onboard.receiver.framing import UBX_SYNC
-from onboard.receiver.ubx_tables import LAYOUTS, UBX_IDS, UBX_NAMES, build_frame, poll_key, unpack_payload
+from onboard.receiver.ubx_tables import (
+    CFG_PAYLOAD_LENGTHS,
+    LAYOUTS,
+    UBX_IDS,
+    UBX_NAMES,
+    build_frame,
+    poll_key,
+    unpack_payload,
+)
 from onboard.timepulse.pulse import (
     TIMEPULSE,
     TIMEPULSE2,
@@ -40,7 +50,7 @@ PORT_RATE_FIELD: Mapping[int, str] = MappingProxyType(
 )
 UART_PORTS = (1, 2)
 NMEA_DEFAULT_ON = ("NMEA-GGA", "NMEA-GLL", "NMEA-GSA", "NMEA-GSV", "NMEA-RMC", "NMEA-VTG")
-# CFG-CFG mask bits (u-blox 6 / M8): ioPort, msgConf, infMsg, navConf, rxmConf, …, tpConf? kept to the common set.
+# CFG-CFG save mask: ioPort, msgConf, infMsg, navConf, rxmConf (bits 0–4, the same on u-blox 6 and M8).
 CFG_SAVE_MASK = 0x0000001F
 
 
@@ -160,9 +170,12 @@ def decode_cfg(raw: bytes, *, mode: int = GET) -> dict[str, int]:
     name = UBX_NAMES.get((raw[2], raw[3]), f"0x{raw[2]:02X} 0x{raw[3]:02X}")
     if name in LAYOUTS:
         return unpack_payload(LAYOUTS[name], raw[6:-2])
+    lengths = CFG_PAYLOAD_LENGTHS.get(name)
+    if lengths is not None and len(raw) - 8 not in lengths:
+        raise ReceiverError(f"{name}: payload is {len(raw) - 8} bytes, expected {' or '.join(map(str, lengths))}")
     try:
         msg = UBXReader.parse(raw, msgmode=mode)
-    except Exception as exc:  # pyubx2 raises several unrelated types on bad input
+    except (UBXParseError, UBXMessageError, UBXTypeError, ValueError, KeyError, IndexError, struct.error) as exc:
         raise ReceiverError(f"{name}: cannot parse ({exc})") from exc
     out: dict[str, int] = {}
     for key, value in vars(msg).items():

@@ -125,6 +125,17 @@ def build_frame(layout: Layout, values: Mapping[str, int]) -> bytes:
     return ubx_frame(cls, mid, pack_payload(layout, values))
 
 
+# Payload lengths of the CFG messages we send and read back. pyubx2 1.4.0 parses a short or long payload
+# without complaint (missing fields read as 0), so a truncated poll answer must be caught here.
+CFG_PAYLOAD_LENGTHS: Mapping[str, tuple[int, ...]] = {
+    "CFG-PRT": (20,),
+    "CFG-MSG": (8,),
+    "CFG-RATE": (6,),
+    "CFG-TP5": (32,),
+    "CFG-TP": (20,),
+    "CFG-CFG": (12, 13),
+}
+
 # Polls: message name -> struct code of its key payload (empty for a poll without payload). The poll answer
 # starts with the same key bytes, which is how we recognise it (e.g. CFG-TP5 for tpIdx 1 starts with 0x01).
 POLL_KEYS: Mapping[str, str] = {

@@ -271,3 +271,11 @@ def test_camera_timepulse_record_reports_what_was_applied() -> None:
     report, _ = _configure(rx, retries=0)
     rec = camera_timepulse_record(report, build_profile("m8t", ReceiverOptions()))
     assert rec["period_us"] == 0 and "not configured" in rec["note"] and "CFG-TP5 TIMEPULSE2 camera" in rec["note"]
+
+
+def test_truncated_poll_answer_is_an_error_not_a_false_zero() -> None:
+    rx = FakeUblox()
+    rx.tamper[(0x06, 0x31)] = lambda p: p[:20]  # CFG-TP5 answers cut short
+    report, _ = _configure(rx)
+    assert [e.message for e in report.errors] == ["CFG-TP5 TIMEPULSE 1 PPS", "CFG-TP5 TIMEPULSE2 camera"]
+    assert "payload is 20 bytes, expected 32" in report.errors[0].detail

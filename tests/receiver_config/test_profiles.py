@@ -202,3 +202,11 @@ def test_m8t_timepulse_matches_the_real_neo_m8t_dump() -> None:
     ours = next(e for e in build_profile("m8t", ReceiverOptions()).entries if e.label == "CFG-TP5 TIMEPULSE 1 PPS")
     assert ours.raw == real  # byte for byte
     assert {k: real_fields[k] for k in ours.fields} == dict(ours.fields)
+
+
+def test_decode_cfg_refuses_garbage_with_the_message_name() -> None:
+    with pytest.raises(ReceiverError, match="not a UBX frame"):
+        decode_cfg(b"\x00\x01\x02")
+    # pyubx2 would read a truncated answer as zeros (a false "applied 0"): the length is checked first.
+    with pytest.raises(ReceiverError, match="CFG-TP5: payload is 7 bytes, expected 32"):
+        decode_cfg(ubx_frame(0x06, 0x31, b"\x00" * 7))
