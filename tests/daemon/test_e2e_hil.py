@@ -25,6 +25,7 @@ from onboard.timepulse.marks import BOUNCE, MISSED_FLASH, PULSE_WITHOUT_FLASH, p
 from tests.daemon.helpers import status, wait_until
 
 hil_scenario = pytest.importorskip("hil_sim.scenario")
+from hil_sim.faults import FaultOptions
 from hil_sim.pty_server import ReceiverEmulator
 from hil_sim.receiver import ReceiverOptions
 from hil_sim.world import World
@@ -36,7 +37,7 @@ RECORD_SIM_S = 48.0  # simulated seconds recorded after configuration: ~24 camer
 pytestmark = [pytest.mark.timeout(180), pytest.mark.slow]
 
 
-def start_daemon(tmp_path: Path, port: str) -> tuple[subprocess.Popen[bytes], Path, Path]:
+def start_daemon(tmp_path: Path, port: str | Path) -> tuple[subprocess.Popen[bytes], Path, Path]:
     cfg = tmp_path / "recorder.toml"
     cfg.write_text(
         "[receiver]\ncamera_period_s = 2.0\ntrigger = \"extint1\"\nmeas_rate_ms = 500\n"
@@ -46,7 +47,7 @@ def start_daemon(tmp_path: Path, port: str) -> tuple[subprocess.Popen[bytes], Pa
     env = dict(os.environ, PYTHONPATH=str(PROJECT))
     env.pop("NOTIFY_SOCKET", None)
     proc = subprocess.Popen(
-        [sys.executable, "-m", "onboard", "run", "--config", str(cfg), "--port", port, "--baud", "115200",
+        [sys.executable, "-m", "onboard", "run", "--config", str(cfg), "--port", str(port), "--baud", "115200",
          "--data-dir", str(data_dir), "--status", str(status_path)],
         cwd=PROJECT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
     )
@@ -133,3 +134,47 @@ def test_daemon_against_emulator(tmp_path: Path, model: str) -> None:
     # nothing invented: no pairing outside the truth
     assert len(with_pulse) == len(truth)
     assert all(m.source == "tim-tm2" for m in marks)
+
+
+def test_port_disappears_and_returns_configuration_reapplied(tmp_path: Path) -> None:
+    """The emulator's pty vanishes for 8 simulated seconds (USB re-enumeration) and comes back under the same
+    stable link: the daemon keeps the flight open, reconnects, re-detects and re-applies the configuration."""
+    unplug_at_s, unplug_for_s = 30.0, 8.0
+    scenario = hil_scenario.Scenario.default(model="m8t", camera=hil_scenario.CameraPlan(valid_after_s=VALID_AFTER_S))
+    world = World(scenario)
+    link = tmp_path / "gps0"
+    emu = ReceiverEmulator(
+        "m8t",
+        ReceiverOptions(trigger_extint=True, time_valid_after_s=VALID_AFTER_S,
+                        faults=FaultOptions(unplug_windows_s=((unplug_at_s, unplug_for_s),))),
+        world, speed=SPEED, t_start=scenario.start, link=link,
+    )
+    emu.start()
+    proc, data_dir, status_path = start_daemon(tmp_path, link)
+    try:
+        wait_until(lambda: status(status_path).get("config_state") == "verified", timeout_s=60, what="first config")
+        wait_until(lambda: status(status_path).get("state") == "port_lost", timeout_s=60, what="port lost")
+        lost = status(status_path)
+        assert not lost["port_open"] and lost["port_error"]
+        wait_until(lambda: (s := status(status_path)).get("port_reconnects", 0) >= 1
+                   and s.get("config_state") == "verified", timeout_s=60, what="reconnect and re-configuration")
+        back_at = emu.sim_time()
+        wait_until(lambda: emu.sim_time().diff_s(back_at) > 10.0, timeout_s=30, what="recording after return")
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=30)
+        assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        emu.stop()
+    assert emu.reopen_count >= 1
+    flights = list(data_dir.glob("flight-*"))
+    assert len(flights) == 1
+    configs = [r for r in read_events(flights[0] / "events.jsonl").records if r.get("kind") == "config"]
+    assert len(configs) >= 2 and all(c["ok"] for c in configs)
+    epochs = [e for e in iter_journal(flights[0]) if isinstance(e, ObsEpoch)]
+    gap_start = scenario.start.add_s(unplug_at_s)
+    after = [e for e in epochs if e.time.diff_s(gap_start) > unplug_for_s]
+    before = [e for e in epochs if e.time.diff_s(gap_start) < 0]
+    assert len(before) >= 10 and len(after) >= 10  # recorded on both sides of the outage, in one flight
