@@ -362,6 +362,22 @@ def map_tick_to_gps(tick_ns: int, anchors: Sequence[TickAnchor], max_gap_ns: int
     return a.time.add_ns(round(offset))
 
 
+def pps_anchors(pps_ticks_ns: Iterable[int], coarse: TickAnchor, max_offset_ns: int = 400_000_000) -> list[TickAnchor]:
+    """Anchors from PPS edges seen on a GPIO: each tick belongs to the whole GPS second nearest its coarse time.
+
+    `coarse` relates the host clock to GPS time roughly (e.g. the host tick at which a navigation epoch's
+    bytes arrived, and that epoch's GPS time: tens of ms off). A tick whose coarse time is more than
+    `max_offset_ns` from a whole second is not a PPS edge (noise, or a pulse that is not 1 PPS) and is skipped.
+    """
+    out = []
+    for tick in pps_ticks_ns:
+        approx = coarse.time.total_ns + (tick - coarse.tick_ns)
+        second = round(Fraction(approx, 1_000_000_000)) * 1_000_000_000
+        if abs(approx - second) <= max_offset_ns:
+            out.append(TickAnchor(tick, GpsTime.from_total_ns(second)))
+    return out
+
+
 def gpio_mark(
     channel: int, rising: bool, tick_ns: int, count: int, anchors: Sequence[TickAnchor], acc_est_ns: int = 1_000
 ) -> CameraMark:

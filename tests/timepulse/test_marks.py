@@ -261,3 +261,17 @@ def test_pairing_recorder_long_flight_equals_batch_with_a_bounded_window() -> No
     # of a count jump cannot be told apart, so allow for a couple of swaps.
     n_bounce, n_missed = sum(BOUNCE in f for f in flags), sum(MISSED_FLASH in f for f in flags)
     assert n_bounce >= 11 and n_missed >= 8 and n_bounce + n_missed <= 23
+
+
+def test_pps_anchors_snap_ticks_to_whole_gps_seconds() -> None:
+    from onboard.timepulse.marks import pps_anchors
+
+    second = GpsTime(2345, 100_000 * 10**9)
+    # The nav epoch's bytes reached the host 80 ms after its GPS time: a coarse correspondence only.
+    coarse = TickAnchor(7_000_080_000_000, second)
+    ticks = [7_000_000_000_000 + k * 1_000_000_050 for k in range(1, 4)] + [7_003_500_000_000]  # last: not PPS
+    anchors = pps_anchors(ticks, coarse)
+    assert [a.time for a in anchors] == [second.add_s(k) for k in range(1, 4)]
+    assert [a.tick_ns for a in anchors] == ticks[:3]
+    # With these anchors a GPIO edge half-way between PPS 1 and 2 maps to 1.5 s (host clock 50 ppb fast).
+    assert map_tick_to_gps(7_000_000_000_000 + 1_500_000_075, anchors) == second.add_ns(1_500_000_000)
