@@ -68,6 +68,8 @@ def _run(args: argparse.Namespace) -> int:
 COMMANDS: tuple[str, ...] = (
     "onboard.__main__:add_run_parser",
     "onboard.convert:add_convert_parser",
+    "onboard.rtk_cli:add_rtk_parser",
+    "onboard.web.app:add_web_parser",
 )
 
 
