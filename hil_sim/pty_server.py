@@ -6,6 +6,8 @@ compares the client's output speed with the receiver's configured UART1 rate: wh
 in either direction is garbage (the receiver does not see the client's frames; the client receives bytes
 with the high bit set, which can never form a UBX sync, an NMEA '$' or an RTCM preamble). So after a CFG-PRT
 baud change the ACK arrives only once the client has switched to the new rate, like a real UART.
+A pty cannot tell when a byte was written, so input counts as sent at the client's rate seen now or at the
+previous loop step (≤ 20 ms earlier): a client that writes and switches its rate at once keeps its frame.
 
 Data written while the client is not reading fills the pty buffer (about 4 KiB on Linux); the rest is
 dropped and counted (`tx_overrun_bytes`). Open the port with a fresh input flush (pyserial does) to discard
@@ -150,6 +152,7 @@ class ReceiverEmulator:
         self.framer = StreamFramer()
         self.bytes_out = 0
         self.bytes_garbled_in = 0
+        self._baud_seen: int | None = None  # the client's rate at the previous loop step (≤ 20 ms ago)
         self.reopen_count = 0
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -226,9 +229,13 @@ class ReceiverEmulator:
                 self.port.open(self.core.baud_rate)
                 self.reopen_count += 1
                 log.info("fault: port back as %s at %.1f s", self.port.slave_path, elapsed_s)
+            baud_now = self.port.client_baud()
+            rates = {baud_now, self._baud_seen}
+            self._baud_seen = baud_now
             data = self.port.read()
             if data:
-                if self._mismatch():
+                # bytes written just before the client switched its rate were sent at the previous rate
+                if self.core.baud_rate not in rates and None not in rates:
                     self.bytes_garbled_in += len(data)  # wrong line rate: the UART sees only framing errors
                 else:
                     for frame in self.framer.feed(data):

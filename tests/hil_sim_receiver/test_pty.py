@@ -67,6 +67,7 @@ def test_factory_state_answers_mon_ver_at_9600_and_streams_nmea(model, standin_w
 def test_client_at_the_wrong_rate_gets_only_garbage(standin_world, emulator_factory, pty_client_factory) -> None:
     emu = emulator_factory("m8t", standin_world)
     client = pty_client_factory(emu.path, 115200)  # receiver still at its factory 9600
+    time.sleep(0.1)  # beyond the 20 ms in which input may still count as sent at the previous rate
     client.send(0x0A, 0x04)
     client.pump(1.0)
     assert client.frames == [] and len(client.raw) > 50  # bytes arrive, no frame can be formed
@@ -118,6 +119,22 @@ def test_configuration_sequence_with_baud_change_then_raw_epochs(model, standin_
     else:
         tows = [m.iTOW / 1e3 for m in msgs]
     assert all(abs((b - a) - 0.2) < 1e-6 for a, b in itertools.pairwise(tows))
+
+
+def test_frame_written_just_before_the_client_switches_rate_is_still_received(standin_world, emulator_factory,
+                                                                              pty_client_factory) -> None:
+    emu = emulator_factory("m8t", standin_world)
+    client = pty_client_factory(emu.path, 9600)
+    time.sleep(0.1)
+    cls, mid, pl = payload("CFG-PRT", PRT_115200)
+    client.send(cls, mid, pl)
+    client.set_baud(115200)  # at once, as a daemon reopening the port (a pty has no transmit delay)
+    deadline = time.monotonic() + 1.0
+    while emu.core.baud_rate != 115200 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert emu.core.baud_rate == 115200
+    prt, ack = client.request(0x06, 0x00, b"\x01", reply=(0x06, 0x00))
+    assert ack is not None and ack.msg_id == 1 and UBXReader.parse(prt.raw).baudRate == 115200
 
 
 def test_time_marks_arrive_over_the_pty(standin_world, emulator_factory, pty_client_factory) -> None:
