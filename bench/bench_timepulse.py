@@ -67,7 +67,7 @@ def bench_configure() -> None:
         from hil_sim.pty_server import ReceiverEmulator
         from hil_sim.receiver import ReceiverOptions as EmuOptions
         from tests.hil_sim_receiver.conftest import NAV, StandInWorld
-        from tests.receiver_config.test_emulator_pty import PtyLink
+        from tests.receiver_config._pty_link import PtyLink
     except ImportError as exc:
         print(f"configuration: skipped ({exc})")
         return

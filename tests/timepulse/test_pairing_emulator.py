@@ -21,7 +21,7 @@ rx_mod = pytest.importorskip("hil_sim.receiver")
 decode = pytest.importorskip("onboard.receiver.decode")
 try:
     from tests.hil_sim_receiver.conftest import NAV, StandInWorld
-    from tests.receiver_config.test_emulator_pty import PtyLink
+    from tests.receiver_config._pty_link import PtyLink
 except ImportError:  # pragma: no cover - depends on the other areas' fixtures
     pytest.skip("hil_sim stand-in world not available", allow_module_level=True)
 
