@@ -79,6 +79,23 @@ def residual_figures(residuals: list[dict[str, Any]], centres_enu: np.ndarray | 
     return figs
 
 
+def delay_comparison_figure(residuals: list[dict[str, Any]], velocity_enu_m_s: np.ndarray, delay_s: float) -> Figure:
+    """|e_i| per image with the estimated delay and with t_d = 0 (e_i + V_i·t_d), as Daakir et al. 2015 fig. 9."""
+    e = np.array([[r["e_m"], r["n_m"], r["u_m"]] for r in residuals]).reshape(-1, 3)
+    without = e + velocity_enu_m_s * delay_s
+    fig = Figure(figsize=(9, 3.2))
+    ax = fig.add_subplot()
+    idx = np.arange(e.shape[0])
+    ax.plot(idx, np.linalg.norm(without, axis=1) * 100, "o-", ms=3, color="#d62728", label="t_d = 0 (other parameters kept)")
+    ax.plot(idx, np.linalg.norm(e, axis=1) * 100, "o-", ms=3, color="#1f77b4",
+            label=f"t_d = {delay_s * 1000:.1f} ms (estimated)")
+    ax.set_xlabel("image (in time order)")
+    ax.set_ylabel("|e_i| (cm)")
+    ax.legend(fontsize=8)
+    ax.set_title("residual norm per image with and without the shutter delay")
+    return fig
+
+
 def trajectory_figure(traj: Trajectory, origin_ecef_m: np.ndarray, cams_enu: np.ndarray | None) -> Figure:
     """Trajectory (E/N about the origin) coloured by RTKLIB quality; camera positions on top."""
     enu = ecef_to_enu(traj.pos_ecef_m, origin_ecef_m)
@@ -144,6 +161,9 @@ def render_report(res: dict[str, Any], problem: AdjustmentProblem | None = None,
     parts.append("<h2>Residuals per image</h2>")
     parts += [_img(f, alt) for f, alt in zip(residual_figures(res["residuals"], cams_enu),
                                             ("residuals per image (E, N, U)", "horizontal residual map"))]
+    if problem is not None and len(res["residuals"]) == len(problem.images):
+        parts.append(_img(delay_comparison_figure(res["residuals"], problem.velocity_enu_m_s, res["delay_s"]),
+                          "residual norm with and without the delay"))
     if res["outliers"]:
         parts.append(_table(["outlier image", "χ²"], [(o["image"], f"{o['chi2']:.1f}") for o in res["outliers"]],
                             "outliers"))
