@@ -13,18 +13,20 @@ from __future__ import annotations
 import argparse
 import logging
 import time
+from collections.abc import Callable
+from functools import partial
 
 import numpy as np
 
-from ground.adjust.model import AdjustmentOptions, LeverArmSpec
+from ground.adjust.model import AdjustmentOptions, AdjustmentProblem, LeverArmSpec
 from ground.adjust.similarity import umeyama
-from ground.adjust.simulate import BlockOptions, simulate_block
+from ground.adjust.simulate import BlockOptions, SimulatedBlock, simulate_block
 from ground.adjust.solve import adjust, build_problem
 
 PHOTOS_PER_LINE = 42  # 150 m at ~4.5 m/s, one photo every 0.8 s
 
 
-def _block_for(n_images: int, seed: int) -> tuple[object, object]:
+def _block_for(n_images: int, seed: int) -> tuple[SimulatedBlock, AdjustmentProblem]:
     n_lines = max(2, round(n_images / PHOTOS_PER_LINE))
     opts = BlockOptions(
         n_lines=n_lines,
@@ -33,14 +35,16 @@ def _block_for(n_images: int, seed: int) -> tuple[object, object]:
         n_ground_points=9,
     )
     block = simulate_block(opts, np.random.default_rng(seed))
-    return block, build_problem(block.poses, block.events, block.trajectory, block.control, block.origin_ecef_m)
+    return block, build_problem(
+        block.poses, block.events, block.trajectory, block.control, block.origin_ecef_m
+    )
 
 
-def _best_of(fn: object, repeat: int) -> float:
+def _best_of(fn: Callable[[], object], repeat: int) -> float:
     best = np.inf
     for _ in range(repeat):
         t0 = time.perf_counter()
-        fn()  # type: ignore[operator]
+        fn()
         best = min(best, time.perf_counter() - t0)
     return best
 
@@ -56,18 +60,18 @@ def main() -> None:
     per_image = []
     for target in (100, 1_000, 10_000):
         block, problem = _block_for(target, seed=target)
-        n = len(problem.images)  # type: ignore[attr-defined]
-        result = adjust(problem, options)  # type: ignore[arg-type]
-        t_adj = _best_of(lambda: adjust(problem, options), args.repeat)  # type: ignore[arg-type]  # noqa: B023
-        t_ume = _best_of(
-            lambda: umeyama(problem.centre_rel, problem.antenna_enu_m), args.repeat  # type: ignore[attr-defined]  # noqa: B023
-        )
+        n = len(problem.images)
+        result = adjust(problem, options)
+        t_adj = _best_of(partial(adjust, problem, options), args.repeat)
+        t_ume = _best_of(partial(umeyama, problem.centre_rel, problem.antenna_enu_m), args.repeat)
         per_image.append(t_adj / n * 1e6)
-        d_lever = np.linalg.norm(result.lever_arm_m - block.truth_lever_arm_m) * 1e3  # type: ignore[attr-defined]
-        d_t = (result.delay_s - block.truth_delay_s) * 1e3  # type: ignore[attr-defined]
+        d_lever = np.linalg.norm(result.lever_arm_m - block.truth_lever_arm_m) * 1e3
+        d_t = (result.delay_s - block.truth_delay_s) * 1e3
         print(f"{n:>7} {t_adj:>9.3f} {t_ume:>10.5f} {t_adj / t_ume:>7.0f} {per_image[-1]:>14.1f} "
               f"{result.sigma0:>7.2f} {d_lever:>8.2f} {d_t:>7.3f} {result.checkpoint_rms_m['3d'] * 1e3:>10.1f}")  # fmt: skip
-    print(f"time per image, 10 000 vs 100 images: ×{per_image[-1] / per_image[0]:.2f} (≤ 1 means linear or better)")
+    print(
+        f"time per image, 10 000 vs 100 images: ×{per_image[-1] / per_image[0]:.2f} (≤ 1 means linear or better)"
+    )
 
 
 if __name__ == "__main__":

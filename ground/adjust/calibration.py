@@ -125,7 +125,9 @@ def _lever_arm(
     return d.apply(phase_centre), s1, d
 
 
-def calibrate_lever_arm(inp: CalibrationInput, options: CalibrationOptions | None = None) -> LeverArmCalibration:
+def calibrate_lever_arm(
+    inp: CalibrationInput, options: CalibrationOptions | None = None
+) -> LeverArmCalibration:
     """Lever arm O (camera frame) from one ground acquisition, with σ and per-target residuals.
 
     Raises CalibrationError with fewer than 3 common targets in either fit or collinear targets.

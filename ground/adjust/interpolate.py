@@ -129,7 +129,9 @@ def interpolate_antenna(
     pos = h00[:, None] * p0 + (h10[:, None] * hh) * v0 + h01[:, None] * p1 + (h11[:, None] * hh) * v1
     vel = (d00[:, None] * p0 + (d10[:, None] * hh) * v0 + d01[:, None] * p1 + (d11[:, None] * hh) * v1) / hh
     a00, a10, a01, a11 = 12 * s - 6, 6 * s - 4, -12 * s + 6, 6 * s - 2
-    acc = (a00[:, None] * p0 + (a10[:, None] * hh) * v0 + a01[:, None] * p1 + (a11[:, None] * hh) * v1) / hh**2
+    acc = (
+        a00[:, None] * p0 + (a10[:, None] * hh) * v0 + a01[:, None] * p1 + (a11[:, None] * hh) * v1
+    ) / hh**2
     var = (1 - s)[:, None] * var_enu[kc] + s[:, None] * var_enu[kc + 1]
     quality = np.maximum(q[kc], q[kc + 1]).astype(np.int8)
     pos[~valid] = np.nan

@@ -163,7 +163,11 @@ class AdjustmentProblem:
         g = np.asarray(antenna_enu_m, dtype=float).reshape(-1, 3)
         v = np.asarray(velocity_enu_m_s, dtype=float).reshape(-1, 3)
         s = np.broadcast_to(np.asarray(antenna_sigma_enu_m, dtype=float), (n, 3)).copy()
-        t = np.arange(n, dtype=float) if event_time_s is None else np.asarray(event_time_s, dtype=float).ravel()
+        t = (
+            np.arange(n, dtype=float)
+            if event_time_s is None
+            else np.asarray(event_time_s, dtype=float).ravel()
+        )
         q = np.ones(n, dtype=np.int8) if quality is None else np.asarray(quality, dtype=np.int8).ravel()
         for name, arr in (("centre_rel", c), ("r_cam_to_rel", r), ("antenna_enu_m", g),
                           ("velocity_enu_m_s", v), ("event_time_s", t), ("quality", q)):  # fmt: skip
@@ -274,7 +278,13 @@ class AdjustmentResult:
             "warnings": list(self.warnings),
             "outliers": [{"image": name, "chi2": float(c2)} for name, c2 in self.outliers],
             "residuals": [
-                {"image": name, "e_m": float(r[0]), "n_m": float(r[1]), "u_m": float(r[2]), "outlier": bool(o)}
+                {
+                    "image": name,
+                    "e_m": float(r[0]),
+                    "n_m": float(r[1]),
+                    "u_m": float(r[2]),
+                    "outlier": bool(o),
+                }
                 for name, r, o in zip(self.images, self.residuals_enu_m, self.outlier_mask, strict=True)
             ],
             "gcp_residuals": [

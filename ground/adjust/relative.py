@@ -51,7 +51,9 @@ class RelativePairs:
         return w.ravel(), jw.reshape(-1, je.shape[2])
 
 
-def consecutive_pairs(event_time_s: npt.ArrayLike, sigma_enu_m: npt.ArrayLike, max_pair_dt_s: float) -> RelativePairs:
+def consecutive_pairs(
+    event_time_s: npt.ArrayLike, sigma_enu_m: npt.ArrayLike, max_pair_dt_s: float
+) -> RelativePairs:
     """Pairs of time-consecutive images closer than `max_pair_dt_s`, with the banded covariance factor.
 
     `sigma_enu_m` (n,3) is the per-image σ (antenna ⊕ camera centre), assumed independent between images.

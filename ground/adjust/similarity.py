@@ -57,7 +57,9 @@ def umeyama(src: npt.ArrayLike, dst: npt.ArrayLike, with_scale: bool = True) -> 
     if a.shape[0] < 3:
         raise DegenerateGeometry(f"a similarity needs ≥ 3 points, got {a.shape[0]}")
     if collinearity_ratio(a) < 1e-6:
-        raise DegenerateGeometry("points are collinear or coincident: rotation about their line is undetermined")
+        raise DegenerateGeometry(
+            "points are collinear or coincident: rotation about their line is undetermined"
+        )
     ma, mb = a.mean(axis=0), b.mean(axis=0)
     da, db = a - ma, b - mb
     n = a.shape[0]

@@ -120,7 +120,7 @@ def simulate_block(options: BlockOptions, rng: np.random.Generator) -> Simulated
         photo_flags.append(np.full(arr.shape[0], photos))
 
     def hold(vel: tuple[float, float, float], duration_s: float, photos: bool) -> None:
-        n = max(int(round(duration_s / _DT_S)), 1)
+        n = max(round(duration_s / _DT_S), 1)
         segment(np.tile(np.asarray(vel, dtype=float), (n, 1)), photos)
 
     hold((0, 0, 0), 3.0, False)
@@ -137,7 +137,7 @@ def simulate_block(options: BlockOptions, rng: np.random.Generator) -> Simulated
         if k < o.n_lines - 1:
             r = o.line_spacing_m / 2
             dur = np.pi * r / o.turn_speed_m_s
-            n = int(round(dur / _DT_S))
+            n = round(dur / _DT_S)
             ang = np.linspace(0, np.pi, n)
             # turn towards +east: the direction sweeps from ±north through east to ∓north
             vel = o.turn_speed_m_s * np.column_stack([np.sin(ang), sign * np.cos(ang), np.zeros(n)])
@@ -207,12 +207,12 @@ def simulate_block(options: BlockOptions, rng: np.random.Generator) -> Simulated
     names = [f"IMG_{i:05d}.JPG" for i in range(t_exp.size)]
     poses = tuple(CameraPose(nm, rel_c[i], rel_r[i]) for i, nm in enumerate(names))
     events = tuple(
-        ImageEvent(nm, GpsTime.from_total_ns(t0_ns + int(round((t_exp[i] - o.delay_s) * 1e9))), o.event_kind)
+        ImageEvent(nm, GpsTime.from_total_ns(t0_ns + round((t_exp[i] - o.delay_s) * 1e9)), o.event_kind)
         for i, nm in enumerate(names)
     )
 
     # RTK-like trajectory at trajectory_rate_hz, ECEF
-    step = int(round(1.0 / (o.trajectory_rate_hz * _DT_S)))
+    step = round(1.0 / (o.trajectory_rate_hz * _DT_S))
     tk = t[::step]
     pk, vk = pos[::step], vel[::step]
     a = np.exp(-(tk[1] - tk[0]) / o.gnss_correlation_time_s)
@@ -221,9 +221,11 @@ def simulate_block(options: BlockOptions, rng: np.random.Generator) -> Simulated
     drive = rng.normal(0, 1, size=pk.shape) * np.asarray(o.gnss_correlated_sigma_m) * np.sqrt(1 - a * a)
     for k in range(1, tk.size):
         gm[k] = a * gm[k - 1] + drive[k]
-    noise = gm + rng.normal(0, 1, size=pk.shape) * np.asarray(o.gnss_white_sigma_m) + np.asarray(o.gnss_bias_m)
-    lat, lon, h = o.origin_llh_deg_m
-    origin = llh_to_ecef(np.radians(lat), np.radians(lon), h)
+    noise = (
+        gm + rng.normal(0, 1, size=pk.shape) * np.asarray(o.gnss_white_sigma_m) + np.asarray(o.gnss_bias_m)
+    )
+    lat, lon, height_m = o.origin_llh_deg_m
+    origin = llh_to_ecef(np.radians(lat), np.radians(lon), height_m)
     rot = enu_rotation(np.radians(lat), np.radians(lon))  # ecef → enu
     pos_ecef = origin + (pk + noise) @ rot
     vel_ecef = (vk + rng.normal(0, o.velocity_sigma_m_s, size=vk.shape)) @ rot

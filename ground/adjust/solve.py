@@ -69,7 +69,9 @@ def build_problem(
         else:
             matched.append((pose, e))
     posed = {p.image for p in poses}
-    skipped.extend((e.image, "event without a pose in the bundle adjustment") for e in events if e.image not in posed)
+    skipped.extend(
+        (e.image, "event without a pose in the bundle adjustment") for e in events if e.image not in posed
+    )
     if not matched:
         raise AdjustmentRefused("no image has both a pose and an event: check that image names match")
     times_ns = np.array([e.time.total_ns for _, e in matched], dtype=np.int64)
@@ -113,7 +115,13 @@ class _Model:
     """Residuals and analytic Jacobian over the full 11-vector; `active` selects the estimated columns."""
 
     def __init__(
-        self, options: AdjustmentOptions, r0: Arr, base: Arr, gcps: tuple[ControlPoint, ...], c_bar: Arr, g_bar: Arr
+        self,
+        options: AdjustmentOptions,
+        r0: Arr,
+        base: Arr,
+        gcps: tuple[ControlPoint, ...],
+        c_bar: Arr,
+        g_bar: Arr,
     ) -> None:
         self.opt = options
         # the model works on centred coordinates (relative − c̄, ENU − ḡ) so that the translation is the one of
@@ -379,7 +387,9 @@ def adjust(problem: AdjustmentProblem, options: AdjustmentOptions | None = None)
         if opt.relative_control:
             pairs = consecutive_pairs(problem.event_time_s[mask], sig_all[mask], opt.max_pair_dt_s)
             if pairs.n_pairs == 0:
-                raise AdjustmentRefused(f"relative control: no consecutive image pair closer than {opt.max_pair_dt_s} s")
+                raise AdjustmentRefused(
+                    f"relative control: no consecutive image pair closer than {opt.max_pair_dt_s} s"
+                )
         model.data = _Data(
             problem.centre_rel[mask], problem.r_cam_to_rel[mask], problem.antenna_enu_m[mask],
             problem.velocity_enu_m_s[mask], acc[mask], sig_all[mask], pairs,
@@ -442,7 +452,9 @@ def adjust(problem: AdjustmentProblem, options: AdjustmentOptions | None = None)
         cov = cov * inflation
     rot = model.rotation(p)
     sd_full = np.zeros(11)
-    sd_full[model.active] = np.sqrt(np.maximum(np.nan_to_num(np.diag(cov), nan=np.inf), 0)) if cov.size else 0.0
+    sd_full[model.active] = (
+        np.sqrt(np.maximum(np.nan_to_num(np.diag(cov), nan=np.inf), 0)) if cov.size else 0.0
+    )
     cov_full = np.zeros((11, 11))
     if cov.size:
         cov_full[np.ix_(model.active, model.active)] = cov
@@ -497,7 +509,9 @@ def adjust(problem: AdjustmentProblem, options: AdjustmentOptions | None = None)
     )
 
 
-def variance_inflation(white_res: Arr, t_s: Arr, n_params: int, max_dt_s: float = 3.0, cap: float = 25.0) -> float:
+def variance_inflation(
+    white_res: Arr, t_s: Arr, n_params: int, max_dt_s: float = 3.0, cap: float = 25.0
+) -> float:
     """Variance inflation for time-correlated GNSS errors, by batch means over flight segments, ≥ 1.
 
     RTK errors are correlated over tens of seconds, so a white-noise covariance understates the σ of every
@@ -527,7 +541,10 @@ def _centred(problem: AdjustmentProblem, c_bar: Arr, g_bar: Arr) -> AdjustmentPr
         for c in problem.control
     )  # fmt: skip
     return replace(
-        problem, centre_rel=problem.centre_rel - c_bar, antenna_enu_m=problem.antenna_enu_m - g_bar, control=control
+        problem,
+        centre_rel=problem.centre_rel - c_bar,
+        antenna_enu_m=problem.antenna_enu_m - g_bar,
+        control=control,
     )
 
 
@@ -565,9 +582,14 @@ def _check_points(
         sd = np.sqrt(np.maximum(np.diag(cov_k), 0))
         rows.append(
             CheckPointResidual(
-                c.name, float(d[k, 0]), float(d[k, 1]), float(d[k, 2]), float(np.linalg.norm(d[k])),
-                float(np.sqrt(np.trace(cov_k))), (float(sd[0]), float(sd[1]), float(sd[2])),
-            )  # fmt: skip
+                c.name,
+                float(d[k, 0]),
+                float(d[k, 1]),
+                float(d[k, 2]),
+                float(np.linalg.norm(d[k])),
+                float(np.sqrt(np.trace(cov_k))),
+                (float(sd[0]), float(sd[1]), float(sd[2])),
+            )
         )
     rms = {ax: float(np.sqrt(np.mean(d[:, i] ** 2))) for i, ax in enumerate("enu")}
     rms["3d"] = float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
@@ -616,19 +638,29 @@ def _warnings(
             if abs(corr[a, b]) > thr:
                 out.append(f"|ρ({names[a]}, {names[b]})| = {abs(corr[a, b]):.3f} > {thr}")
     if cond > 1e10:
-        out.append(f"not determinable from these data: {weakest} (condition {cond:.2e}); σ reported as infinite")
+        out.append(
+            f"not determinable from these data: {weakest} (condition {cond:.2e}); σ reported as infinite"
+        )
     elif cond > 1e6:
         out.append(f"normal equations nearly singular (condition {cond:.2e}); weakest combination: {weakest}")
     not_fixed = int(np.sum(problem.quality[inlier] != 1))
     if not_fixed:
-        out.append(f"{not_fixed} image(s) use a trajectory that is not RTK-fixed (q ≠ 1); consider relative control")
+        out.append(
+            f"{not_fixed} image(s) use a trajectory that is not RTK-fixed (q ≠ 1); consider relative control"
+        )
     if problem.skipped:
-        out.append(f"{len(problem.skipped)} image(s) skipped while building the problem (no event, gap, outside)")
+        out.append(
+            f"{len(problem.skipped)} image(s) skipped while building the problem (no event, gap, outside)"
+        )
     for k, name in enumerate(("O_x", "O_y", "O_z")):
         if name in idx and not sd_full[7 + k] < 0.05:
-            out.append(f"lever arm {name} is practically not determined (σ = {sd_full[7 + k]:.3g} m): fix it or give a prior")
+            out.append(
+                f"lever arm {name} is practically not determined (σ = {sd_full[7 + k]:.3g} m): fix it or give a prior"
+            )
     if "t_d" in idx and not sd_full[10] < 0.01:
-        out.append(f"shutter delay t_d is practically not determined (σ = {sd_full[10]:.3g} s): fix it or give a prior")
+        out.append(
+            f"shutter delay t_d is practically not determined (σ = {sd_full[10]:.3g} s): fix it or give a prior"
+        )
     if inflation > 2.0:
         out.append(
             f"residuals are correlated in time: covariance inflated ×{inflation:.1f} (float or unstable RTK?)"

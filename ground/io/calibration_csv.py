@@ -40,12 +40,18 @@ def read_calibration_csv(path: str | Path) -> CalibrationInput:
     groups: dict[str, dict[str, np.ndarray]] = {g: {} for g in GROUPS}
     phase: np.ndarray | None = None
     header_seen = False
-    rows = [(i + 1, line) for i, line in enumerate(text.splitlines()) if line.strip() and not line.lstrip().startswith("#")]
+    rows = [
+        (i + 1, line)
+        for i, line in enumerate(text.splitlines())
+        if line.strip() and not line.lstrip().startswith("#")
+    ]
     for lineno, row in ((n, next(csv.reader([line]))) for n, line in rows):
         cells = [c.strip() for c in row]
         if not header_seen:
             if tuple(c.lower() for c in cells[:5]) != HEADER:
-                raise FormatError(p, f"first row must be the header {','.join(HEADER)}; got {','.join(cells)}", lineno)
+                raise FormatError(
+                    p, f"first row must be the header {','.join(HEADER)}; got {','.join(cells)}", lineno
+                )
             header_seen = True
             continue
         if len(cells) < 5:
@@ -61,7 +67,9 @@ def read_calibration_csv(path: str | Path) -> CalibrationInput:
             raise FormatError(p, "coordinates must be finite", lineno)
         if target == PHASE_CENTRE or group == PHASE_CENTRE:
             if group not in ("box_frame", PHASE_CENTRE):
-                raise FormatError(p, f"the phase centre must be given in the box frame, not '{group}'", lineno)
+                raise FormatError(
+                    p, f"the phase centre must be given in the box frame, not '{group}'", lineno
+                )
             if phase is not None:
                 raise FormatError(p, "more than one phase_centre row", lineno)
             phase = xyz

@@ -39,11 +39,15 @@ def test_calibrated_lever_arm_flash_marks_no_gcp_checkpoints_within_2cm(
 
 
 @pytest.mark.parametrize("seed", SEEDS)
-def test_one_gcp_trigger_times_lever_arm_and_delay_free(block_factory: Any, problem_factory: Any, seed: int) -> None:
+def test_one_gcp_trigger_times_lever_arm_and_delay_free(
+    block_factory: Any, problem_factory: Any, seed: int
+) -> None:
     block = block_factory(seed, gcp_names=("P05",), event_kind="trigger", delay_s=0.064)
     problem = problem_factory(block)
     assert len(problem.gcps) == 1
-    result = adjust(problem, AdjustmentOptions(lever_arm=LeverArmSpec(mode="free"), camera_centre_sigma_m=0.0058))
+    result = adjust(
+        problem, AdjustmentOptions(lever_arm=LeverArmSpec(mode="free"), camera_centre_sigma_m=0.0058)
+    )
     d_lever = result.lever_arm_m - block.truth_lever_arm_m
     d_delay = result.delay_s - block.truth_delay_s
     # camera x, y are horizontal for a nadir camera, z vertical
@@ -60,14 +64,19 @@ def test_one_gcp_trigger_times_lever_arm_and_delay_free(block_factory: Any, prob
     assert np.all(result.lever_arm_sigma_m[:2] < 0.005) and result.delay_sigma_s < 0.0015
 
 
-def test_constant_heading_and_speed_names_the_along_track_pair(block_factory: Any, problem_factory: Any) -> None:
+def test_constant_heading_and_speed_names_the_along_track_pair(
+    block_factory: Any, problem_factory: Any
+) -> None:
     block = block_factory(0, gcp_names=("P05",), constant_speed_m_s=4.5, photos_in_climb_descent=False)
     result = adjust(problem_factory(block), AdjustmentOptions(camera_centre_sigma_m=0.0058))
     along = [w for w in result.warnings if w.startswith("along-track lever arm O_y and shutter delay t_d")]
     assert along, result.warnings
     names = result.parameter_names
     assert abs(result.correlations[names.index("O_y"), names.index("t_d")]) > 0.98
-    assert set(result.weakest_combination.replace("+", " ").replace("-", " ").split()) == {"0.71·O_y", "0.71·t_d"}
+    assert set(result.weakest_combination.replace("+", " ").replace("-", " ").split()) == {
+        "0.71·O_y",
+        "0.71·t_d",
+    }
 
 
 def test_speed_changes_separate_the_pair(block_factory: Any, problem_factory: Any) -> None:

@@ -33,7 +33,11 @@ PHASE_CENTRE_BOX = np.array([0.002, -0.001, 0.041])
 
 
 def _acquisition(
-    lever_truth: np.ndarray, box_rot: np.ndarray, noise_m: float, seed: int, box_shift_m: np.ndarray | None = None
+    lever_truth: np.ndarray,
+    box_rot: np.ndarray,
+    noise_m: float,
+    seed: int,
+    box_shift_m: np.ndarray | None = None,
 ) -> tuple[CalibrationInput, Similarity]:
     """Targets as one photogrammetric acquisition of the drone would give them (arbitrary frame and scale)."""
     rng = np.random.default_rng(seed)
@@ -41,7 +45,7 @@ def _acquisition(
     box_t = lever_truth - box_rot @ PHASE_CENTRE_BOX + (0 if box_shift_m is None else box_shift_m)
     box_in_cam = {k: box_rot @ np.array(v) + box_t for k, v in BOX_TARGETS.items()}
     cam_to_acq = Similarity(3.7, so3_exp(rng.normal(0, 1, 3)), rng.uniform(-10, 10, 3))
-    noise = lambda: rng.normal(0, noise_m, 3)  # noqa: E731
+    noise = lambda: rng.normal(0, noise_m, 3)
     return (
         CalibrationInput(
             camera_frame={k: np.array(v) + noise() for k, v in CAM_TARGETS.items()},
@@ -71,19 +75,25 @@ def test_noisy_calibration_errors_within_three_sigma_over_seeds() -> None:
     z = []
     for seed in range(8):
         inp, _ = _acquisition(LEVER, BOX_ROT, 0.0007, seed)
-        cal = calibrate_lever_arm(inp, CalibrationOptions(n_monte_carlo=400, seed=seed, phase_centre_sigma_m=0.0007))
+        cal = calibrate_lever_arm(
+            inp, CalibrationOptions(n_monte_carlo=400, seed=seed, phase_centre_sigma_m=0.0007)
+        )
         err = cal.lever_arm_m - LEVER
         assert np.all(np.abs(err) <= 3 * cal.sigma_m), (err, cal.sigma_m)
         assert np.all(cal.sigma_m < 0.005)
         z.append(err / cal.sigma_m)
-        assert set(cal.camera_residuals_m) == set(CAM_TARGETS) and set(cal.box_residuals_m) == set(BOX_TARGETS)
+        assert set(cal.camera_residuals_m) == set(CAM_TARGETS) and set(cal.box_residuals_m) == set(
+            BOX_TARGETS
+        )
     # σ is neither wildly optimistic nor pessimistic: the normalised errors have an RMS of order 1
     assert 0.3 < float(np.sqrt(np.mean(np.square(z)))) < 2.0
 
 
 def test_a_bad_target_shows_in_its_residual() -> None:
     inp, _ = _acquisition(LEVER, BOX_ROT, 0.0003, 1)
-    inp.camera_acq["C3"] = inp.camera_acq["C3"] + np.array([0.02, 0.0, 0.0])  # a mis-measured target (acq units)
+    inp.camera_acq["C3"] = inp.camera_acq["C3"] + np.array(
+        [0.02, 0.0, 0.0]
+    )  # a mis-measured target (acq units)
     cal = calibrate_lever_arm(inp, CalibrationOptions(n_monte_carlo=50))
     worst = max(cal.camera_residuals_m, key=lambda k: np.linalg.norm(cal.camera_residuals_m[k]))
     assert worst == "C3"
@@ -149,12 +159,22 @@ def test_csv_round_trip(tmp_path: Path) -> None:
         (lambda s: s.replace("C1,camera_acq", "C1,camera_aq"), "unknown group 'camera_aq'"),
         (lambda s: s.replace("C2,camera_frame,", "C2,camera_frame,abc"), "coordinates must be numbers"),
         (lambda s: s.replace("B1,box_acq", "B2,box_acq"), "'B2' appears twice in group box_acq"),
-        (lambda s: "\n".join(ln for ln in s.splitlines() if not ln.startswith("phase_centre")), "no phase_centre"),
-        (lambda s: s.replace("phase_centre,box_frame", "phase_centre,camera_frame"), "must be given in the box frame"),
+        (
+            lambda s: "\n".join(ln for ln in s.splitlines() if not ln.startswith("phase_centre")),
+            "no phase_centre",
+        ),
+        (
+            lambda s: s.replace("phase_centre,box_frame", "phase_centre,camera_frame"),
+            "must be given in the box frame",
+        ),
         (lambda s: s + "B9,box_frame,1,2\n", "expected 5 fields"),
         (lambda s: s + "B9,box_frame,1,2,nan\n", "finite"),
-        (lambda s: "\n".join(ln for ln in s.splitlines() if ",box_frame," not in ln or ln.startswith("phase")),
-         "no target in group box_frame"),
+        (
+            lambda s: "\n".join(
+                ln for ln in s.splitlines() if ",box_frame," not in ln or ln.startswith("phase")
+            ),
+            "no target in group box_frame",
+        ),
         (lambda s: "# only a comment\n", "empty file"),
     ],
 )

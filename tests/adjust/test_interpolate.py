@@ -22,7 +22,9 @@ def _cubic(t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return p, v
 
 
-def _trajectory(t_s: np.ndarray, with_velocity: bool = True, sd_enu: tuple = (0.01, 0.01, 0.02)) -> Trajectory:
+def _trajectory(
+    t_s: np.ndarray, with_velocity: bool = True, sd_enu: tuple = (0.01, 0.01, 0.02)
+) -> Trajectory:
     p, v = _cubic(t_s)
     sd = np.sqrt((np.asarray(sd_enu) ** 2) @ (ROT**2))
     return Trajectory(

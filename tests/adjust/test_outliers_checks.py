@@ -29,7 +29,9 @@ def test_gross_errors_are_flagged_by_image_and_do_not_bias(block_factory: Any, p
     problem = problem_factory(block)
     bad = [17, 120, 260]
     ant = problem.antenna_enu_m.copy()
-    ant[bad] += np.array([[0.35, 0.0, 0.0], [0.0, -0.25, 0.1], [0.0, 0.0, 0.6]])  # e.g. a wrong fix for one epoch
+    ant[bad] += np.array(
+        [[0.35, 0.0, 0.0], [0.0, -0.25, 0.1], [0.0, 0.0, 0.6]]
+    )  # e.g. a wrong fix for one epoch
     result = adjust(replace(problem, antenna_enu_m=ant), _prior_options(block))
     flagged = {name for name, _ in result.outliers}
     assert {problem.images[i] for i in bad} <= flagged

@@ -26,7 +26,9 @@ from ground.adjust.solve import adjust
 MODES = ("free", "fixed", "prior")
 
 
-def _spec_options(block: SimulatedBlock, sim: str, lever: str, delay: str, relative: bool) -> AdjustmentOptions:
+def _spec_options(
+    block: SimulatedBlock, sim: str, lever: str, delay: str, relative: bool
+) -> AdjustmentOptions:
     s = block.truth_similarity
     # priors sit slightly off the truth with a loose σ, so the data, not the prior, must bring the answer
     sim_spec = SimilaritySpec(
@@ -103,7 +105,9 @@ def test_free_lever_arm_without_gcp_is_refused(block_factory: Any, problem_facto
         adjust(problem_factory(block), AdjustmentOptions(lever_arm=LeverArmSpec(mode="free")))
 
 
-def test_relative_control_without_gcp_is_refused(block_factory: Any, problem_factory: Any, quiet: dict) -> None:
+def test_relative_control_without_gcp_is_refused(
+    block_factory: Any, problem_factory: Any, quiet: dict
+) -> None:
     block = block_factory(4, **quiet)
     opts = AdjustmentOptions(
         lever_arm=LeverArmSpec(mode="fixed", value_m=tuple(block.truth_lever_arm_m)), relative_control=True
@@ -119,7 +123,9 @@ def test_relative_control_cancels_a_gnss_bias(block_factory: Any, problem_factor
     problem = problem_factory(block)
     lever = LeverArmSpec(mode="prior", value_m=tuple(block.truth_lever_arm_m), sigma_m=(0.005,) * 3)
     absolute = adjust(problem, AdjustmentOptions(lever_arm=lever, camera_centre_sigma_m=0.001))
-    relative = adjust(problem, AdjustmentOptions(lever_arm=lever, relative_control=True, camera_centre_sigma_m=0.001))
+    relative = adjust(
+        problem, AdjustmentOptions(lever_arm=lever, relative_control=True, camera_centre_sigma_m=0.001)
+    )
     assert absolute.checkpoint_rms_m["3d"] > 0.15  # GNSS outweighs two GCPs: the bias goes to the ground
     assert relative.checkpoint_rms_m["3d"] < 0.01
     assert relative.delay_s == pytest.approx(block.truth_delay_s, abs=0.001)

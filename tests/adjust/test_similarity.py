@@ -77,7 +77,9 @@ def test_so3_exp_log_and_left_jacobian() -> None:
         assert np.allclose(so3_log(so3_exp(w)), w, atol=1e-10)
         y = rng.normal(size=3)
         jl = so3_left_jacobian(w)
-        analytic = np.cross(np.eye(3), so3_exp(w) @ y).T @ jl  # rows e_i × a, transposed: −[a]×; so −[R y]× · J_l
+        analytic = (
+            np.cross(np.eye(3), so3_exp(w) @ y).T @ jl
+        )  # rows e_i × a, transposed: −[a]×; so −[R y]× · J_l
         numeric = np.column_stack(
             [(so3_exp(w + 1e-6 * e) @ y - so3_exp(w - 1e-6 * e) @ y) / 2e-6 for e in np.eye(3)]
         )
