@@ -414,3 +414,18 @@ def test_baseline_is_configurable(baseline_m: float) -> None:
     assert d == pytest.approx(baseline_m, abs=1e-6)
     rov, bas = world.observe("rover", world.start), world.observe("base", world.start)
     assert len(np.intersect1d(rov.sv_id, bas.sv_id)) >= 8
+
+
+def test_epoch_arrays_have_the_obsepoch_layout_the_encoders_expect() -> None:
+    world = make_world()
+    ep = world.observe("rover", nominal(world, 1.0))
+    n = len(ep)
+    assert ep.gnss_id.dtype == np.int8 and ep.sv_id.dtype == np.int16 and ep.lli.dtype == np.uint8
+    assert ep.half_cyc_sub.dtype == np.uint8
+    for arr in (ep.gnss_id, ep.pr_m, ep.cp_cyc, ep.dop_hz, ep.cn0_dbhz, ep.lock_ms, ep.lli, ep.half_cyc_sub,
+                ep.pr_std_m, ep.cp_std_cyc):
+        assert arr.shape == (n,)
+    assert np.all(np.diff(ep.sv_id) > 0) and np.all(np.isfinite(ep.cp_cyc))
+    assert np.all((ep.pr_m > 1.9e7) & (ep.pr_m < 2.7e7 + 3e5))  # ranges ± 1 ms of clock
+    assert np.all(ep.pr_std_m > 0.5) and np.all(ep.cp_std_cyc > 0.01)
+    assert ep.leap_s == 15 and not ep.clock_reset
