@@ -6,8 +6,9 @@ GPS time). The 2–3 s camera period cannot be aligned to the top of a second, s
 never assumed: with no trigger measurement every image says so (`pulse_reason`).
 
 Each pairing carries flags:
-- ``missed_flash``: the TIM-TM2 rising-edge `count` jumped by more than one (edges lost: a missed flash, or
-  a bounce inside one navigation epoch; `lost_edges` says how many, charged to the next flash);
+- ``missed_flash``: the TIM-TM2 rising-edge `count` jumped by more than one (`lost_edges` says how many,
+  charged to the next flash). With a measured trigger it means a flash was lost (the previous image has a
+  pulse without flash, or the trigger line's count jumped too); otherwise it is reported as ``bounce``;
 - ``bounce``: a second flash edge followed within `bounce_window_ns` (dropped, the first edge kept), or
   edges were lost (count jump) while every measured pulse has its flash: the extra edge was a bounce, and
   this flash time may be the bounce's (TIM-TM2 reports only the last falling edge of an epoch);
@@ -223,21 +224,34 @@ def pair_marks(marks: Iterable[CameraMark], options: PairingOptions = PairingOpt
 
     out.sort(key=when)
     if options.trigger_measured:
-        out = _lost_edges_to_bounces(out)
+        out = _lost_edges_to_bounces(out, _lost_pulse_times(all_marks, options))
     return [dataclasses.replace(p, index=i) for i, p in enumerate(out)]
 
 
-def _lost_edges_to_bounces(pairs: list[ImagePairing]) -> list[ImagePairing]:
-    """With measured pulses a missed flash shows as a pulse without flash; lost edges without one are bounces.
+def _lost_pulse_times(all_marks: list[CameraMark], options: PairingOptions) -> list[int]:
+    """GPS times (ns) of trigger rising edges reported after a jump of the trigger line's own TIM-TM2 count."""
+    rising = sorted((m for m in all_marks if m.source == "tim-tm2" and m.channel == options.trigger_channel
+                     and m.edge == "rising" and m.valid and m.time is not None),
+                    key=lambda m: m.time)  # type: ignore[arg-type, return-value]
+    return [b.time.total_ns for a, b in itertools.pairwise(rising)  # type: ignore[union-attr]
+            if (b.count - a.count) % COUNT_MODULO > 1]
 
-    Such a flash time may be the bounce's edge (TIM-TM2 reports the last falling edge of the epoch), which the
-    BOUNCE flag tells the adjustment.
+
+def _lost_edges_to_bounces(pairs: list[ImagePairing], lost_pulse_ns: list[int]) -> list[ImagePairing]:
+    """Tell a missed flash from a bounce when the trigger is measured.
+
+    A flash-line count jump is a missed flash when the image before it shows a pulse without flash, or when
+    the trigger line lost pulses in the same gap (its own count jumped: the whole image's reports were lost,
+    e.g. a port outage). Otherwise every pulse has its flash and the extra edge was a bounce; that flash time
+    may be the bounce's edge (TIM-TM2 reports the last falling edge of the epoch), which BOUNCE tells.
     """
     fixed: list[ImagePairing] = []
     for i, p in enumerate(pairs):
         if MISSED_FLASH in p.flags and p.pulse_time is not None:
             prev = pairs[i - 1] if i > 0 else None
-            if prev is None or PULSE_WITHOUT_FLASH not in prev.flags:
+            prev_ns = _when_ns(prev) if prev is not None else -1
+            pulses_lost = any(prev_ns < t <= p.pulse_time.total_ns for t in lost_pulse_ns)
+            if not pulses_lost and (prev is None or PULSE_WITHOUT_FLASH not in prev.flags):
                 flags = tuple(f for f in p.flags if f != MISSED_FLASH)
                 p = dataclasses.replace(p, flags=flags if BOUNCE in flags else (*flags, BOUNCE))
         fixed.append(p)

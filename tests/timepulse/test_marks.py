@@ -275,3 +275,14 @@ def test_pps_anchors_snap_ticks_to_whole_gps_seconds() -> None:
     assert [a.tick_ns for a in anchors] == ticks[:3]
     # With these anchors a GPIO edge half-way between PPS 1 and 2 maps to 1.5 s (host clock 50 ppb fast).
     assert map_tick_to_gps(7_000_000_000_000 + 1_500_000_075, anchors) == second.add_ns(1_500_000_000)
+
+
+def test_whole_image_lost_is_a_missed_flash_not_a_bounce() -> None:
+    """Image 2's reports were all lost (port outage): both lines' counts jump, so it is a missed flash."""
+    marks: list[CameraMark] = []
+    for k in (0, 1, 3):
+        marks.append(pulse(k, k + 1))  # trigger count: rising edges on channel 1 (2 is lost)
+        marks += [flash(k, 6e7, 11 + k), _contact_open(k, 6e7, 11 + k)]
+    pairs = pair_marks(marks)
+    assert [p.flags for p in pairs] == [(), (), (MISSED_FLASH,)]
+    assert pairs[2].lost_edges == 1
