@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
@@ -21,24 +23,26 @@ def llh_to_ecef(lat_rad: float, lon_rad: float, h_m: float) -> Vec:
 
 def ecef_to_llh(xyz_m: npt.ArrayLike) -> Vec:
     """ECEF position (m) → array [lat_rad, lon_rad, h_m] (iterative, converges to < 1e-4 mm)."""
-    x, y, z = np.asarray(xyz_m, dtype=float)
+    # plain floats and math: this runs several times per epoch in the RTK engine
+    x, y, z = (float(v) for v in np.asarray(xyz_m, dtype=float))
     r2 = x * x + y * y
     zk, v = 0.0, WGS84_A_M
     znew = z
     for _ in range(20):
         zk = znew
-        sinp = zk / np.sqrt(r2 + zk * zk) if r2 + zk * zk > 0 else 0.0
-        v = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * sinp * sinp)
+        rho2 = r2 + zk * zk
+        sinp = zk / math.sqrt(rho2) if rho2 > 0 else 0.0
+        v = WGS84_A_M / math.sqrt(1.0 - WGS84_E2 * sinp * sinp)
         znew = z + v * WGS84_E2 * sinp
         if abs(znew - zk) < 1e-4:
             break
     if r2 > 1e-12:
-        lat = np.arctan(znew / np.sqrt(r2))
-        lon = np.arctan2(y, x)
+        lat = math.atan(znew / math.sqrt(r2))
+        lon = math.atan2(y, x)
     else:
-        lat = np.pi / 2 if z > 0 else -np.pi / 2
+        lat = math.pi / 2 if z > 0 else -math.pi / 2
         lon = 0.0
-    h = np.sqrt(r2 + znew * znew) - v
+    h = math.sqrt(r2 + znew * znew) - v
     return np.array([lat, lon, h])
 
 

@@ -57,7 +57,7 @@ def _atmosphere_m(pos: Arr, az: Arr, el: Arr, tow_s: float, iono: tuple | None) 
 
 def pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: Arr | None = None,
            iono: tuple | None = None, x0_ecef_m: Arr | None = None, max_iter: int = 10,
-           outlier_m: float = 60.0, max_gdop: float = 30.0) -> SppSolution:
+           outlier_m: float = 60.0, max_gdop: float = 30.0, clock0_m: float = 0.0) -> SppSolution:
     """Position and clock (m) from pseudoranges `pr_m` (n,) with satellite states `sats` (aligned).
 
     `tow_s` receiver time (s of week) for the ionosphere model, `iono` (alpha, beta) Klobuchar coefficients.
@@ -68,47 +68,61 @@ def pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: A
     base_ok = sats.ok & np.isfinite(pr_m)
     with np.errstate(invalid="ignore", divide="ignore"):  # slots without a satellite give NaN, never used
         return _pntpos(pr_m, sats, tow_s, elmask_rad, dop_hz, iono, x0_ecef_m, max_iter, outlier_m, max_gdop,
-                       n, base_ok)
+                       n, base_ok, clock0_m)
 
 
 def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: Arr | None,
             iono: tuple | None, x0_ecef_m: Arr | None, max_iter: int, outlier_m: float, max_gdop: float,
-            n: int, base_ok: npt.NDArray[np.bool_]) -> SppSolution:
-    x = np.zeros(4) if x0_ecef_m is None else np.r_[x0_ecef_m, 0.0]
-    excluded = np.zeros(n, bool)
-    az = np.zeros(n)
-    el = np.zeros(n)
-    for _attempt in range(n):
-        use = base_ok & ~excluded
+            n: int, base_ok: npt.NDArray[np.bool_], clock0_m: float = 0.0) -> SppSolution:
+    # work on the satellites with data only; results are scattered back to the caller's n slots
+    idx = np.flatnonzero(base_ok)
+    m = idx.size
+    pr = pr_m[idx]
+    spos = sats.pos_m[idx]
+    sclk = CLIGHT_M_S * sats.clock_s[idx]
+    x = np.zeros(4) if x0_ecef_m is None else np.r_[x0_ecef_m, clock0_m]
+    excluded = np.zeros(m, bool)
+    az = np.zeros(m)
+    el = np.full(m, np.pi / 2)
+    corr = np.zeros(m)
+    corr_at: Arr | None = None  # position where az/el/atmosphere were last evaluated
+
+    def full(a: Arr, fill: float) -> Arr:
+        out = np.full(n, fill, dtype=a.dtype)
+        out[idx] = a
+        return out
+
+    def geometry(xx: Arr) -> tuple[Arr, Arr]:
+        nonlocal az, el, corr, corr_at
+        r, e = geometric_range(spos, xx[:3])
+        # the atmosphere and elevations change negligibly within 50 m: evaluate them once there
+        if np.linalg.norm(xx[:3]) > 1e6 and (corr_at is None or np.linalg.norm(xx[:3] - corr_at) > 50.0):
+            az, el = sat_az_el(xx[:3], e)
+            corr = _atmosphere_m(xx[:3], az, el, tow_s, iono)
+            corr_at = xx[:3].copy()
+        return r, e
+
+    for _attempt in range(m):
+        use = ~excluded
         converged = False
-        for it in range(max_iter):
-            r, e = geometric_range(sats.pos_m, x[:3])
-            if np.linalg.norm(x[:3]) > 1e6:
-                az, el = sat_az_el(x[:3], e)
-                corr = _atmosphere_m(x[:3], az, el, tow_s, iono)
-                mask = use & (el >= elmask_rad)
-            else:
-                az, el = np.zeros(n), np.full(n, np.pi / 2)
-                corr = np.zeros(n)
-                mask = use.copy()
+        for _it in range(max_iter):
+            r, e = geometry(x)
+            mask = use & (el >= elmask_rad) if corr_at is not None else use
             if mask.sum() < 4:
-                return SppSolution(x[:3], x[3], np.full(3, np.nan), np.nan, mask, az, el, False, np.inf, np.inf,
-                                   f"only {int(mask.sum())} usable satellites")
-            res = pr_m - (r + x[3] - CLIGHT_M_S * sats.clock_s + corr)
-            h = np.c_[-e, np.ones(n)][mask]
-            sig = ERR_CODE_BASE_M / np.sin(np.maximum(el[mask], np.radians(5.0))) if it > 0 else np.ones(mask.sum())
-            w = 1.0 / sig
+                return SppSolution(x[:3], x[3], np.full(3, np.nan), np.nan, full(mask, False), full(az, 0.0),
+                                   full(el, 0.0), False, np.inf, np.inf, f"only {int(mask.sum())} usable satellites")
+            res = pr - (r + x[3] - sclk + corr)
+            h = np.c_[-e, np.ones(m)][mask]
+            w = np.sin(np.maximum(el[mask], np.radians(5.0))) / ERR_CODE_BASE_M
             dx, *_ = np.linalg.lstsq(h * w[:, None], res[mask] * w, rcond=None)
             x = x + dx
-            if np.linalg.norm(dx) < 1e-4:
+            if np.linalg.norm(dx) < 1e-4 and corr_at is not None:
                 converged = True
                 break
-        r, e = geometric_range(sats.pos_m, x[:3])
-        az, el = sat_az_el(x[:3], e)
-        corr = _atmosphere_m(x[:3], az, el, tow_s, iono)
+        r, e = geometry(x)
         mask = use & (el >= elmask_rad)
-        res = pr_m - (r + x[3] - CLIGHT_M_S * sats.clock_s + corr)
-        h = np.c_[-e, np.ones(n)][mask]
+        res = pr - (r + x[3] - sclk + corr)
+        h = np.c_[-e, np.ones(m)][mask]
         try:
             gdop = float(np.sqrt(np.trace(np.linalg.inv(h.T @ h))))
         except np.linalg.LinAlgError:
@@ -116,17 +130,20 @@ def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: 
         rms = float(np.sqrt(np.mean(res[mask] ** 2))) if mask.any() else np.inf
         dof = int(mask.sum()) - 4
         if converged and (rms <= outlier_m / 3.0 or dof < 2):
-            vel, drift = doppler_velocity(dop_hz, sats, e, x[:3], mask)
+            e_full = np.zeros((n, 3))
+            e_full[idx] = e
+            mask_full = full(mask, False)
+            vel, drift = doppler_velocity(dop_hz, sats, e_full, x[:3], mask_full)
             ok = gdop <= max_gdop and rms <= outlier_m
-            return SppSolution(x[:3].copy(), float(x[3]), vel, drift, mask, az, el, ok, gdop, rms,
-                               "" if ok else f"gdop {gdop:.1f} / rms {rms:.1f} m too large")
+            return SppSolution(x[:3].copy(), float(x[3]), vel, drift, mask_full, full(az, 0.0), full(el, 0.0), ok,
+                               gdop, rms, "" if ok else f"gdop {gdop:.1f} / rms {rms:.1f} m too large")
         if dof < 2:
             break
         # RAIM-like: exclude the worst residual and try again
         worst = np.flatnonzero(mask)[np.argmax(np.abs(res[mask]) * np.sin(el[mask]))]
         excluded[worst] = True
-    return SppSolution(x[:3], float(x[3]), np.full(3, np.nan), np.nan, np.zeros(n, bool), az, el, False, np.inf,
-                       np.inf, "no consistent solution")
+    return SppSolution(x[:3], float(x[3]), np.full(3, np.nan), np.nan, np.zeros(n, bool), full(az, 0.0),
+                       full(el, 0.0), False, np.inf, np.inf, "no consistent solution")
 
 
 def doppler_velocity(dop_hz: Arr | None, sats: SatState, e: Arr, pos: Arr,

@@ -93,6 +93,7 @@ class RtkState:
     slips: int = 0
     base_cache: tuple[GpsTime, _Receiver] | None = None
     last_ratio: float = 0.0
+    clock_bias_m: float = 0.0
 
 
 def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkState:
@@ -415,7 +416,12 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             return None
         ratio = res.ratio
         best_ratio = max(best_ratio, ratio)
-        if ratio >= o.ratio_threshold and res.success_rate >= o.min_success_rate:
+        # a fix resting on the bare minimum of double differences (no held set to lean on) must be
+        # nearly certain: a stricter success rate and twice the ratio
+        strict = idx.size - 1 <= o.min_amb_dd and not st.held_prns.any()
+        need_ratio = o.ratio_threshold * (2.0 if strict else 1.0)
+        need_sr = 1.0 - (1.0 - o.min_success_rate) * (0.1 if strict else 1.0)
+        if ratio >= need_ratio and res.success_rate >= need_sr:
             ints = res.fixed[:, 0]
             try:
                 gain = np.linalg.solve(qa, qba.T).T
@@ -466,7 +472,9 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     nan3 = np.full(3, np.nan)
     spp = pntpos(rov.pr_m, rov.sats, rover.time.tow_s, o.elmask_rad, rov.dop_hz, nav.iono,
                  x0_ecef_m=st.x[:3] if st.initialized else None, outlier_m=o.spp_outlier_m,
-                 max_gdop=o.spp_max_gdop)
+                 max_gdop=o.spp_max_gdop, clock0_m=st.clock_bias_m)
+    if spp.ok:
+        st.clock_bias_m = spp.clock_bias_m
     if not spp.ok:
         log.debug("%s: no single-point solution (%s)", rover.time, spp.message)
         return _solution(rover.time, st.x[:3] if st.initialized else np.zeros(3), nan3, Q_NONE, 0,
@@ -579,8 +587,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     if o.ar_mode != "off":
         amb_var = st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)]
         cand = use_phase & (el >= np.radians(o.ar_elmask_deg)) & ~half & (st.lock > o.min_lock_epochs) & (amb_var > 0)
-        min_dd = o.min_amb_dd if st.held_prns.any() or st.init_pos_ecef_m is not None else o.min_amb_dd + 1
-        fix = _resamb_lambda(st, st.x, st.p, cand, el, min_dd)
+        fix = _resamb_lambda(st, st.x, st.p, cand, el, o.min_amb_dd)
         if fix is not None:
             # validate: float-fix consistency and post-fit residuals of the fixed solution
             dpos = fix.pos - st.x[:3]
