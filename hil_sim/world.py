@@ -100,6 +100,11 @@ LEAP_S_2010 = 15
 _P_ORBIT, _P_SATCLK, _P_IONO, _P_TROPO, _P_GRAD, _P_MP, _P_CLOCK, _P_TRACK, _P_EPOCH = range(1, 10)
 
 
+class OutsideSimulatedSpan(ValueError):
+    """A time outside [start − MARGIN_S, start + duration_s + MARGIN_S] was asked for: the scenario has ended
+    (or not begun). The emulator should stop or be built with a longer `Scenario.duration_s`."""
+
+
 def _rng(*key: int) -> np.random.Generator:
     return np.random.default_rng([k & 0xFFFFFFFF for k in key])
 
@@ -125,7 +130,7 @@ class _Grid:
     def locate(self, t: GpsTime) -> tuple[int, float]:
         x = (t.total_ns - self.t0_ns) / self.dt_ns
         if x < 0 or x > self.n - 1:
-            raise ValueError(f"time {t} is outside the simulated span; extend Scenario.duration_s")
+            raise OutsideSimulatedSpan(f"time {t} is outside the simulated span; extend Scenario.duration_s")
         i = min(int(x), self.n - 2)
         return i, x - i
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hil_sim.scenario import ErrorModel, FlightPlan, ReceiverModel, Scenario
-from hil_sim.world import World
+from hil_sim.world import OutsideSimulatedSpan, World
 from onboard.errors import InputError
 from onboard.gnsstime import GpsTime
 from onboard.rtk import lnav
@@ -352,7 +352,7 @@ def test_missing_navigation_file_is_a_clear_error(tmp_path) -> None:  # type: ig
 def test_scenario_time_without_ephemerides_and_bad_queries_are_rejected(clean_world: World) -> None:
     with pytest.raises(InputError, match="no healthy GPS ephemeris"):
         World(Scenario.default(nav_path=shared_file(NAV), start=GpsTime(1600, 0)))
-    with pytest.raises(ValueError, match="outside the simulated span"):
+    with pytest.raises(OutsideSimulatedSpan, match="outside the simulated span"):
         clean_world.observe("rover", clean_world.start.add_s(-3600))
     with pytest.raises(ValueError, match="unknown receiver"):
         clean_world.observe("plane", clean_world.start)
