@@ -387,6 +387,10 @@ async def _apply_entry(
                 if result.ack == "none":
                     result.detail = "no ACK across the baud change; confirmed by poll-back at the new rate"
                 return result, entry.baud_change
+            if result.ack == "ack":  # the ACK came at the new rate: the receiver is there, only the poll failed
+                result.status = "unverified"
+                result.detail = f"ACKed at {entry.baud_change} baud, but the poll-back was not answered"
+                return result, entry.baud_change
             if current_baud is not None:
                 # Nothing at the new rate: is the receiver still at the old one (it NAKed or ignored us there)?
                 await link.reopen(current_baud)

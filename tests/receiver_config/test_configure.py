@@ -279,3 +279,13 @@ def test_truncated_poll_answer_is_an_error_not_a_false_zero() -> None:
     report, _ = _configure(rx)
     assert [e.message for e in report.errors] == ["CFG-TP5 TIMEPULSE 1 PPS", "CFG-TP5 TIMEPULSE2 camera"]
     assert "payload is 20 bytes, expected 32" in report.errors[0].detail
+
+
+def test_baud_change_acked_but_poll_unanswered_stays_at_the_new_rate() -> None:
+    rx = FakeUblox(baud=9600)
+    rx.answer_polls = False
+    report, link = _configure(rx, link_baud=9600, retries=0)
+    prt = report.result("CFG-PRT port 1")
+    assert (prt.ack, prt.status) == ("ack", "unverified")
+    assert link.baud == 115200 and report.baud == 115200
+    assert report.result("CFG-RATE 200 ms").ack == "ack"  # the rest went through at the new rate
