@@ -21,7 +21,7 @@ from scipy.signal import lfilter
 from ground.adjust.similarity import Similarity, so3_exp
 from ground.adjust.types import CameraPose, ControlPoint, ImageEvent, Trajectory
 from onboard.gnsstime import GpsTime
-from onboard.rtk.geodesy import enu_rotation, llh_to_ecef
+from onboard.rtk.geodesy import ecef_to_llh, enu_rotation, llh_to_ecef
 
 Arr = npt.NDArray[np.float64]
 _DT_S = 0.01  # integration step of the flight dynamics
@@ -63,6 +63,25 @@ class BlockOptions:
     origin_llh_deg_m: tuple[float, float, float] = (48.5, -3.5, 80.0)
     gps_week: int = 2400
     start_tow_s: float = 302400.0
+
+
+@dataclass(frozen=True)
+class FlightTruth:
+    """A flown path, whatever produced it: antenna truth at the RTK epochs, camera truth at the exposures.
+
+    Times in seconds after `start`; positions/velocities in ENU about `origin_ecef_m`; `r_cam_to_enu` (n,3,3)
+    camera (x right, y down, z forward) → ENU; `centres_enu_m` = antenna − R·`lever_arm_m` at each exposure.
+    """
+
+    start: GpsTime
+    traj_t_s: Arr
+    traj_pos_enu_m: Arr
+    traj_vel_enu_m_s: Arr
+    exposure_s: Arr
+    centres_enu_m: Arr
+    r_cam_to_enu: Arr
+    lever_arm_m: Arr
+    origin_ecef_m: Arr
 
 
 @dataclass(frozen=True)
@@ -192,8 +211,35 @@ def simulate_block(options: BlockOptions, rng: np.random.Generator) -> Simulated
     lever = np.asarray(o.lever_arm_m, dtype=float)
     ant_exp, _ = path_at(t_exp)
     r_c2e = np.array([attitude(tx) for tx in t_exp])
-    centres = ant_exp - np.einsum("nij,j->ni", r_c2e, lever)
+    centres = ant_exp - r_c2e @ lever
 
+    step = round(1.0 / (o.trajectory_rate_hz * _DT_S))
+    lat, lon, height_m = o.origin_llh_deg_m
+    truth = FlightTruth(
+        start=GpsTime.from_week_tow_s(o.gps_week, o.start_tow_s),
+        traj_t_s=np.asarray(t[::step], dtype=np.float64),
+        traj_pos_enu_m=pos[::step],
+        traj_vel_enu_m_s=vel[::step],
+        exposure_s=t_exp,
+        centres_enu_m=centres,
+        r_cam_to_enu=r_c2e,
+        lever_arm_m=lever,
+        origin_ecef_m=llh_to_ecef(np.radians(lat), np.radians(lon), height_m),
+    )
+    return observe_flight(truth, o, rng)
+
+
+def observe_flight(truth: FlightTruth, options: BlockOptions, rng: np.random.Generator) -> SimulatedBlock:
+    """What the adjustment would see of a flight: relative frame, camera noise, events, RTK trajectory, GCPs.
+
+    Uses the observation fields of `options` (delay, event kind, noise, ground points); the flight itself
+    (path, attitude, exposures, lever arm) comes from `truth`, e.g. from hil_sim's flight model in the tests.
+    """
+    o = options
+    t_exp = truth.exposure_s
+    centres = truth.centres_enu_m
+    r_c2e = truth.r_cam_to_enu
+    lever = truth.lever_arm_m
     # bundle adjustment relative frame: ENU = T + μ R rel
     sim = Similarity(float(np.exp(rng.uniform(np.log(0.2), np.log(5.0)))), _random_rotation(rng),
                      rng.uniform(-500, 500, size=3))  # fmt: skip
@@ -203,7 +249,7 @@ def simulate_block(options: BlockOptions, rng: np.random.Generator) -> Simulated
     ang_noise = rng.normal(0, np.radians(o.camera_angle_noise_deg), size=(t_exp.size, 3))
     rel_r = np.array([sim.rotation.T @ r @ so3_exp(w) for r, w in zip(r_c2e, ang_noise, strict=True)])
 
-    t0_ns = GpsTime.from_week_tow_s(o.gps_week, o.start_tow_s).total_ns
+    t0_ns = truth.start.total_ns
     names = [f"IMG_{i:05d}.JPG" for i in range(t_exp.size)]
     poses = tuple(CameraPose(nm, rel_c[i], rel_r[i]) for i, nm in enumerate(names))
     events = tuple(
@@ -212,9 +258,8 @@ def simulate_block(options: BlockOptions, rng: np.random.Generator) -> Simulated
     )
 
     # RTK-like trajectory at trajectory_rate_hz, ECEF
-    step = round(1.0 / (o.trajectory_rate_hz * _DT_S))
-    tk = t[::step]
-    pk, vk = pos[::step], vel[::step]
+    tk = truth.traj_t_s
+    pk, vk = truth.traj_pos_enu_m, truth.traj_vel_enu_m_s
     a = np.exp(-(tk[1] - tk[0]) / o.gnss_correlation_time_s)
     gm = np.zeros_like(pk)
     gm[0] = rng.normal(0, o.gnss_correlated_sigma_m)
@@ -224,9 +269,9 @@ def simulate_block(options: BlockOptions, rng: np.random.Generator) -> Simulated
     noise = (
         gm + rng.normal(0, 1, size=pk.shape) * np.asarray(o.gnss_white_sigma_m) + np.asarray(o.gnss_bias_m)
     )
-    lat, lon, height_m = o.origin_llh_deg_m
-    origin = llh_to_ecef(np.radians(lat), np.radians(lon), height_m)
-    rot = enu_rotation(np.radians(lat), np.radians(lon))  # ecef → enu
+    origin = truth.origin_ecef_m
+    lat, lon, _ = ecef_to_llh(origin)
+    rot = enu_rotation(lat, lon)  # ecef → enu
     pos_ecef = origin + (pk + noise) @ rot
     vel_ecef = (vk + rng.normal(0, o.velocity_sigma_m_s, size=vk.shape)) @ rot
     sd_enu = np.sqrt(np.asarray(o.gnss_white_sigma_m) ** 2 + np.asarray(o.gnss_correlated_sigma_m) ** 2)
@@ -240,11 +285,11 @@ def simulate_block(options: BlockOptions, rng: np.random.Generator) -> Simulated
     )
 
     # ground points on a rolling terrain inside the block
-    east_max = (o.n_lines - 1) * o.line_spacing_m
+    lo, hi = np.percentile(centres[:, :2], [5, 95], axis=0)  # the block's footprint, trimmed
     control = []
     truth_ground: dict[str, Arr] = {}
     n_side = int(np.ceil(np.sqrt(o.n_ground_points)))
-    gx, gy = np.meshgrid(np.linspace(0, east_max, n_side), np.linspace(0.1, 0.9, n_side) * o.line_length_m)
+    gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], n_side), np.linspace(lo[1], hi[1], n_side))
     for j in range(o.n_ground_points):
         name = f"P{j:02d}"
         p_true = np.array([gx.ravel()[j], gy.ravel()[j], 2.0 * np.sin(gx.ravel()[j] / 30.0)])
