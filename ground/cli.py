@@ -48,6 +48,7 @@ class AdjustRequest:
     crs: str = "EPSG:4979"
     relative_control: bool = False
     events_kind: str = "trigger"
+    datum_tolerance_m: float = crsmod.MAX_DATUM_ERROR_M
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -136,7 +137,8 @@ def run_adjust(req: AdjustRequest, out_dir: Path) -> dict[str, Any]:
     oset = read_orientations(req.orientations)
     events, matching = _read_events(req, [p.image for p in oset.poses])
     origin = np.asarray(traj.pos_ecef_m[0], dtype=float)
-    crsmod.ecef_to_crs(origin, req.crs)  # a missing geoid grid fails here, before the work
+    tol = req.datum_tolerance_m
+    crsmod.ecef_to_crs(origin, req.crs, max_datum_error_m=tol)  # missing geoid grid / datum mix: fail now
     control = []
     if req.gcp is not None:
         suffix = req.gcp.suffix.lower()
@@ -147,7 +149,7 @@ def run_adjust(req: AdjustRequest, out_dir: Path) -> dict[str, Any]:
             if req.gcp_rel is None:
                 raise InputError(f"{req.gcp} has ground coordinates only: give --gcp-rel name,x_rel,y_rel,z_rel")
             pts = merge_ground_and_relative(ground, read_relative_csv(req.gcp_rel))
-        control = to_control_points(pts, origin)
+        control = to_control_points(pts, origin, max_datum_error_m=tol)
     problem = build_problem(oset.poses, events, traj, control, origin_ecef_m=origin)
     options = AdjustmentOptions(lever_arm=lever, delay=delay, relative_control=req.relative_control)
     result = adjust(problem, options)
@@ -156,7 +158,7 @@ def run_adjust(req: AdjustRequest, out_dir: Path) -> dict[str, Any]:
     centres_enu = result.corrected_positions_enu_m(problem.centre_rel)
     r_enu = np.einsum("ij,njk->nik", result.rotation, problem.r_cam_to_rel)
     sigma = np.sqrt(problem.antenna_sigma_enu_m**2 + options.camera_centre_sigma_m**2)
-    cams = cameras_to_crs(problem.images, centres_enu, r_enu, origin, req.crs, sigma)
+    cams = cameras_to_crs(problem.images, centres_enu, r_enu, origin, req.crs, sigma, max_datum_error_m=tol)
     exports = write_all(out_dir / "exports", cams, centres_enu, r_enu)
     results = result.to_dict()
     results["inputs"] = {
@@ -214,6 +216,7 @@ def adjust_job(settings: Any, params: dict[str, Any], files: dict[str, str | Non
         delay_sigma_s=_opt_float(params.get("delay_sigma")),
         estimate=tuple(params.get("estimate", ())),
         crs=str(params.get("crs", "EPSG:4979")),
+        datum_tolerance_m=float(params.get("datum_tolerance_m", crsmod.MAX_DATUM_ERROR_M)),
     )
     res = run_adjust(req, out_dir)
     return (f"adjusted {res['n_images']} images: lever arm {np.round(res['lever_arm_m'], 4).tolist()} m, "
@@ -298,6 +301,9 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--estimate", default="", help="comma list of lever-arm,delay to leave free")
     a.add_argument("--relative-control", action="store_true", help="differenced aerial control (needs a GCP)")
     a.add_argument("--crs", default="EPSG:4979", help="export CRS (EPSG:n or EPSG:h+v; default EPSG:4979)")
+    a.add_argument("--datum-tolerance-m", type=float, default=crsmod.MAX_DATUM_ERROR_M,
+                   help="largest accepted error of a datum change (PROJ null shifts such as WGS 84 → RGF93 state "
+                   "1 m and are refused by default)")
     a.add_argument("-o", "--out", required=True, type=Path, help="output folder")
     s = sub.add_parser("serve", help="run the ground API (FastAPI + uvicorn)")
     s.add_argument("--host", default="127.0.0.1")
@@ -324,6 +330,7 @@ def main(argv: list[str] | None = None) -> int:
             lever_arm_m=args.lever_arm, lever_arm_sigma_m=args.lever_arm_sigma, delay_s=args.delay,
             delay_sigma_s=args.delay_sigma, estimate=tuple(e for e in args.estimate.split(",") if e),
             crs=args.crs, relative_control=args.relative_control, events_kind=args.events_kind,
+            datum_tolerance_m=args.datum_tolerance_m,
         )
         try:
             res = run_adjust(req, args.out)

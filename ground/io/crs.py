@@ -25,6 +25,9 @@ log = logging.getLogger(__name__)
 Vec = npt.NDArray[np.float64]
 
 WGS84_ECEF = "EPSG:4978"
+#: largest accepted error (m) of a datum change inside a transformation; PROJ ships null (0 m shift, "1 m
+#: accuracy") transformations such as WGS 84 → RGF93 while the frames differ by ~0.8 m today in Europe
+MAX_DATUM_ERROR_M = 0.05
 
 
 def parse_crs(text: str) -> CRS:
@@ -50,7 +53,33 @@ def _transformer(src: str, dst: str) -> Transformer:
         raise CrsError(f"no exact transformation {src} → {dst}: {exc}") from exc
 
 
-def _run(src: str, dst: str, xyz: Vec) -> Vec:
+def _datum_name(c: CRS) -> str:
+    h = c.sub_crs_list[0] if c.is_compound and c.sub_crs_list else c
+    g = h.geodetic_crs
+    return g.datum.name if g is not None and g.datum is not None else h.name
+
+
+def check_datum_change(src: str, dst: str, max_datum_error_m: float = MAX_DATUM_ERROR_M) -> None:
+    """Refuse a transformation that changes datum with an unknown or worse-than-tolerance accuracy.
+
+    Same datum (conversions, projections): accepted. Different datums: accepted only when PROJ states an
+    accuracy ≤ `max_datum_error_m`; otherwise `CrsError` (e.g. WGS 84 → RGF93/ETRS89 is a null shift of
+    stated 1 m accuracy, WGS 84 → ITRF2014 an identity of unknown accuracy).
+    """
+    d_src, d_dst = _datum_name(parse_crs(src)), _datum_name(parse_crs(dst))
+    if d_src == d_dst:
+        return
+    acc = float(_transformer(src, dst).accuracy)
+    if acc < 0 or acc > max_datum_error_m:
+        stated = "unknown" if acc < 0 else f"{acc:g} m"
+        raise CrsError(
+            f"{src} → {dst} changes datum ({d_src} → {d_dst}) with {stated} accuracy (> {max_datum_error_m} m): "
+            "PROJ would apply a null or approximate shift. Give the data in one datum, or raise the datum "
+            "tolerance (--datum-tolerance-m) if that error is acceptable"
+        )
+
+
+def _run(src: str, dst: str, xyz: Vec, max_datum_error_m: float = MAX_DATUM_ERROR_M) -> Vec:
     pts = np.atleast_2d(np.asarray(xyz, dtype=float))
     if pts.shape[1] != 3:
         raise ValueError(f"points must be (n, 3), got {pts.shape}")
@@ -64,35 +93,40 @@ def _run(src: str, dst: str, xyz: Vec) -> Vec:
             hint = (" — a vertical datum needs its geoid grid (e.g. RAF20 for NGF-IGN69); install it with "
                     "projsync or export ellipsoidal heights")
         raise CrsError(f"transformation {src} → {dst} failed: {exc}{hint}") from exc
+    # after proj_trans, so PROJ has chosen the operation and knows its accuracy
+    check_datum_change(src, dst, max_datum_error_m)
     out = np.column_stack([x, y, z]).astype(float)
     if not np.all(np.isfinite(out)):
         raise CrsError(f"transformation {src} → {dst} returned non-finite coordinates")
     return out
 
 
-def ecef_to_crs(points_ecef_m: npt.ArrayLike, crs: str, source_crs: str = WGS84_ECEF) -> Vec:
+def ecef_to_crs(points_ecef_m: npt.ArrayLike, crs: str, source_crs: str = WGS84_ECEF,
+                max_datum_error_m: float = MAX_DATUM_ERROR_M) -> Vec:
     """ECEF points (n, 3) in `source_crs` → (n, 3) in `crs` (x = easting/longitude first, heights as the CRS says).
 
     Geographic CRSs return (lon_deg, lat_deg, h_m). A 2-D CRS keeps the ellipsoidal height as third value.
+    A datum change less accurate than `max_datum_error_m` is refused (`check_datum_change`).
     """
-    return _run(source_crs, crs, np.asarray(points_ecef_m, dtype=float))
+    return _run(source_crs, crs, np.asarray(points_ecef_m, dtype=float), max_datum_error_m)
 
 
-def crs_to_ecef(points: npt.ArrayLike, crs: str, target_crs: str = WGS84_ECEF) -> Vec:
+def crs_to_ecef(points: npt.ArrayLike, crs: str, target_crs: str = WGS84_ECEF,
+                max_datum_error_m: float = MAX_DATUM_ERROR_M) -> Vec:
     """Points (n, 3) in `crs` (x/longitude first) → ECEF metres of `target_crs`."""
-    return _run(crs, target_crs, np.asarray(points, dtype=float))
+    return _run(crs, target_crs, np.asarray(points, dtype=float), max_datum_error_m)
 
 
 def enu_to_crs(points_enu_m: npt.ArrayLike, origin_ecef_m: npt.ArrayLike, crs: str,
-               source_crs: str = WGS84_ECEF) -> Vec:
+               source_crs: str = WGS84_ECEF, max_datum_error_m: float = MAX_DATUM_ERROR_M) -> Vec:
     """Local ENU points (n, 3) about `origin_ecef_m` → `crs`."""
-    return ecef_to_crs(enu_to_ecef(np.atleast_2d(points_enu_m), origin_ecef_m), crs, source_crs)
+    return ecef_to_crs(enu_to_ecef(np.atleast_2d(points_enu_m), origin_ecef_m), crs, source_crs, max_datum_error_m)
 
 
 def crs_to_enu(points: npt.ArrayLike, crs: str, origin_ecef_m: npt.ArrayLike,
-               target_crs: str = WGS84_ECEF) -> Vec:
+               target_crs: str = WGS84_ECEF, max_datum_error_m: float = MAX_DATUM_ERROR_M) -> Vec:
     """Points (n, 3) in `crs` → local ENU metres about `origin_ecef_m`."""
-    return ecef_to_enu(crs_to_ecef(points, crs, target_crs), origin_ecef_m)
+    return ecef_to_enu(crs_to_ecef(points, crs, target_crs, max_datum_error_m), origin_ecef_m)
 
 
 def lonlat_deg_to_ecef(lon_deg: float, lat_deg: float, h_m: float) -> Vec:
@@ -106,7 +140,8 @@ def ecef_to_lonlat_deg(xyz_m: npt.ArrayLike) -> Vec:
     return np.array([np.degrees(lon), np.degrees(lat), h])
 
 
-def enu_to_grid_rotation(origin_ecef_m: npt.ArrayLike, crs: str, source_crs: str = WGS84_ECEF) -> Vec:
+def enu_to_grid_rotation(origin_ecef_m: npt.ArrayLike, crs: str, source_crs: str = WGS84_ECEF,
+                         max_datum_error_m: float = MAX_DATUM_ERROR_M) -> Vec:
     """3×3 rotation turning local ENU vectors into the axes of a projected CRS (grid east, grid north, up).
 
     Computed from the projection itself (grid directions of 1 m steps east and north at the origin), so it
@@ -116,7 +151,8 @@ def enu_to_grid_rotation(origin_ecef_m: npt.ArrayLike, crs: str, source_crs: str
     if not parse_crs(crs).is_projected and not _horizontal_is_projected(crs):
         return np.eye(3)
     origin = np.asarray(origin_ecef_m, dtype=float)
-    pts = enu_to_crs(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), origin, crs, source_crs)
+    pts = enu_to_crs(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), origin, crs, source_crs,
+                     max_datum_error_m)
     e = pts[1, :2] - pts[0, :2]
     n = pts[2, :2] - pts[0, :2]
     # Angle of true east in grid axes; average with north's for a conformal projection (they agree).

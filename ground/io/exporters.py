@@ -40,21 +40,23 @@ class ExportedCameras:
 
 
 def cameras_to_crs(images: list[str] | tuple[str, ...], centres_enu_m: npt.ArrayLike, r_cam_to_enu: npt.ArrayLike,
-                   origin_ecef_m: npt.ArrayLike, crs: str, sigma_enu_m: npt.ArrayLike | None = None) -> ExportedCameras:
+                   origin_ecef_m: npt.ArrayLike, crs: str, sigma_enu_m: npt.ArrayLike | None = None,
+                   max_datum_error_m: float = crsmod.MAX_DATUM_ERROR_M) -> ExportedCameras:
     """Project adjusted cameras (ENU about `origin_ecef_m`) into `crs`, rotating attitudes into its axes."""
     c = np.atleast_2d(np.asarray(centres_enu_m, dtype=float))
     r = np.asarray(r_cam_to_enu, dtype=float).reshape(-1, 3, 3)
     origin = np.asarray(origin_ecef_m, dtype=float)
     lat0, lon0, _ = ecef_to_llh(origin)
     r_enu0 = enu_rotation(lat0, lon0)  # ECEF → ENU at the origin
-    xyz = crsmod.enu_to_crs(c, origin, crs)
+    xyz = crsmod.enu_to_crs(c, origin, crs, max_datum_error_m=max_datum_error_m)
     geographic = crsmod.is_geographic(crs)
     ecef = enu_to_ecef(c, origin)
     out_r = np.empty_like(r)
     for i in range(c.shape[0]):
         lat, lon, _ = ecef_to_llh(ecef[i])
         r_local = enu_rotation(lat, lon) @ r_enu0.T @ r[i]  # camera → ENU at the camera
-        grid = np.eye(3) if geographic else crsmod.enu_to_grid_rotation(ecef[i], crs)
+        grid = np.eye(3) if geographic else crsmod.enu_to_grid_rotation(ecef[i], crs,
+                                                                        max_datum_error_m=max_datum_error_m)
         out_r[i] = grid @ r_local
     s = np.full((c.shape[0], 3), np.nan) if sigma_enu_m is None else np.asarray(sigma_enu_m, dtype=float)
     return ExportedCameras(tuple(images), xyz, out_r, np.hypot(s[:, 0], s[:, 1]), s[:, 2], crs, geographic)

@@ -172,14 +172,14 @@ def merge_ground_and_relative(ground: list[GroundPoint], rel: dict[str, tuple[Ve
     return out
 
 
-def to_control_points(points: list[GroundPoint], origin_ecef_m: npt.ArrayLike,
-                      default_sigma_m: float = 0.01) -> list[ControlPoint]:
+def to_control_points(points: list[GroundPoint], origin_ecef_m: npt.ArrayLike, default_sigma_m: float = 0.01,
+                      max_datum_error_m: float = crsmod.MAX_DATUM_ERROR_M) -> list[ControlPoint]:
     """Ground coordinates → ENU about the origin (via pyproj), as `ControlPoint`s for the adjustment."""
     out = []
     for gp in points:
         if gp.rel is None:
             raise ValueError(f"point {gp.name} has no relative-frame coordinates")
-        enu = crsmod.crs_to_enu(gp.ground[None, :], gp.crs, origin_ecef_m)[0]
+        enu = crsmod.crs_to_enu(gp.ground[None, :], gp.crs, origin_ecef_m, max_datum_error_m=max_datum_error_m)[0]
         sigma = gp.sigma_m if gp.sigma_m is not None else np.full(3, default_sigma_m)
         out.append(ControlPoint(name=gp.name, role=gp.role, rel=np.asarray(gp.rel, float), ground_enu_m=enu,
                                 sigma_m=np.asarray(sigma, float)))

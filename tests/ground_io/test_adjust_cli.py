@@ -85,9 +85,12 @@ def test_adjust_fixed_values_are_kept(tmp_path: Path) -> None:
 
 
 def test_adjust_failures_exit_with_clear_messages(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """Missing geoid grid (2), lever arm free without GCP (3, refused), corrupt events file (2)."""
+    """Datum mix (2), missing geoid grid (2), lever arm free without GCP (3, refused), corrupt events (2)."""
     write_synthetic_flight(tmp_path, n_lines=1)
-    assert main(_args(tmp_path, "--lever-arm", "0.05,-0.12,-0.08", "--crs", "EPSG:2154+5720")) == 2
+    assert main(_args(tmp_path, "--lever-arm", "0.05,-0.12,-0.08", "--crs", "EPSG:2154")) == 2
+    assert "changes datum" in capsys.readouterr().err  # WGS 84 → RGF93 is a 1 m null shift in PROJ
+    assert main(_args(tmp_path, "--lever-arm", "0.05,-0.12,-0.08", "--crs", "EPSG:2154+5720",
+                      "--datum-tolerance-m", "2")) == 2
     assert "geoid grid" in capsys.readouterr().err
     args = [a for a in _args(tmp_path) if a not in ("--gcp", str(tmp_path / "gcp.csv"))]
     assert main(args) == 3

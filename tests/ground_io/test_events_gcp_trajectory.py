@@ -155,7 +155,10 @@ def test_odm_gcp_lists_real_files() -> None:
     lonlat = read_odm_gcp_list(shared_file("orientation/odm/gcp_list_proj4_lonlat.txt"))
     assert len(lonlat) == 2
     # the feet CRS is honoured by pyproj: the point lands in Michigan (lon ≈ −85 to −86°, lat ≈ 44–46°)
-    lon, lat, _ = crsmod.ecef_to_lonlat_deg(crsmod.crs_to_ecef(feet[0].ground[None, :], feet[0].crs)[0])
+    with pytest.raises(CrsError, match="NAD83|North American"):  # NAD83 → WGS 84 is a 4 m shift: refused
+        crsmod.crs_to_ecef(feet[0].ground[None, :], feet[0].crs)
+    ecef = crsmod.crs_to_ecef(feet[0].ground[None, :], feet[0].crs, max_datum_error_m=5.0)[0]
+    lon, lat, _ = crsmod.ecef_to_lonlat_deg(ecef)
     assert -90 < lon < -82 and 40 < lat < 48
     # lon/lat PROJ-string file: ground stays lon, lat, h
     e = crsmod.crs_to_ecef(lonlat[0].ground[None, :], lonlat[0].crs)[0]
@@ -173,8 +176,22 @@ def test_micmac_gcp_real_file_merge_with_relative(tmp_path: Path) -> None:
 
 def test_missing_geoid_grid_is_an_error() -> None:
     """EPSG:2154+5720 (Lambert-93 + NGF-IGN69) needs the RAF20 grid, not installed: error, never ellipsoidal."""
-    with pytest.raises(CrsError, match="geoid grid"):
-        crsmod.ecef_to_crs(crsmod.lonlat_deg_to_ecef(-2.0, 48.0, 80.0), "EPSG:2154+5720")
+    p = crsmod.lonlat_deg_to_ecef(-2.0, 48.0, 80.0)
+    for tolerance_m in (0.05, 2.0):  # the grid is checked first, whatever the datum tolerance
+        with pytest.raises(CrsError, match="geoid grid"):
+            crsmod.ecef_to_crs(p, "EPSG:2154+5720", max_datum_error_m=tolerance_m)
+
+
+def test_datum_mixing_is_refused() -> None:
+    """WGS 84 → ETRS89/RGF93 (null shift, 1 m) and → ITRF2014 (identity, unknown accuracy) are refused by
+    default; the same datum (UTM on WGS 84) is a plain conversion; a stated tolerance lets a 1 m shift through."""
+    p = crsmod.lonlat_deg_to_ecef(-2.0, 48.0, 80.0)
+    for crs in ("EPSG:4936", "EPSG:7789", "EPSG:2154", "EPSG:25830"):
+        with pytest.raises(CrsError, match="changes datum"):
+            crsmod.ecef_to_crs(p, crs)
+    crsmod.check_datum_change("EPSG:4978", "EPSG:32630")
+    e = crsmod.ecef_to_crs(p, "EPSG:25830", max_datum_error_m=1.0)
+    assert e.shape == (1, 3)
 
 
 def test_ecef_to_utm_and_back_mm(tmp_path: Path) -> None:
