@@ -1,6 +1,7 @@
 """`python -m hil_sim receiver …`: a u-blox receiver on a pseudo-terminal until SIGTERM/SIGINT.
 
 The first stdout line is the pty slave path (flushed), so a parent process can read it and open the port.
+`python -m hil_sim radio …` prints "<base-side pty> <drone-side pty>" and forwards between them.
 """
 
 from __future__ import annotations
@@ -62,10 +63,53 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--unplug", type=_window, action="append", default=[], metavar="AT_S:DURATION_S",
                    help="port disappears at simulated AT_S for DURATION_S (repeatable)")
     r.add_argument("-v", "--verbose", action="store_true")
+    a = sub.add_parser("radio", help="base→drone radio link: two ptys with dropouts and an air byte budget")
+    a.add_argument("--speed", type=float, default=1.0)
+    a.add_argument("--seed", type=int, default=1)
+    a.add_argument("--air-baud", type=int, default=19200)
+    a.add_argument("--mean-interval", type=float, default=120.0, help="mean s between dropouts (simulated)")
+    a.add_argument("--gap-min", type=float, default=5.0)
+    a.add_argument("--gap-max", type=float, default=20.0)
+    a.add_argument("-v", "--verbose", action="store_true")
     from hil_sim.mission import add_parser as add_flight_parser
 
     add_flight_parser(sub)
     return p
+
+
+def _wait_for_signal() -> threading.Event:
+    done = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        done.set()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    return done
+
+
+def run_radio(args: argparse.Namespace) -> int:
+    """Print '<tx_path> <rx_path>' (base side, drone side) and forward until a signal."""
+    from hil_sim.radio import RadioLink, RadioOptions
+
+    try:
+        opts = RadioOptions(air_baud=args.air_baud, mean_interval_s=args.mean_interval, gap_min_s=args.gap_min,
+                            gap_max_s=args.gap_max, seed=args.seed)
+    except ValueError as exc:
+        print(f"hil_sim radio: {exc}", file=sys.stderr)
+        return 2
+    link = RadioLink(opts, speed=args.speed)
+    done = _wait_for_signal()
+    tx, rx = link.start()
+    print(tx, rx, flush=True)
+    try:
+        done.wait()
+    finally:
+        link.stop()
+    ch = link.channel
+    log.info("radio stopped: %d B in, %d B out, %d lost in dropouts, %d over budget", ch.bytes_in, ch.bytes_out,
+             ch.bytes_lost_dropout, ch.bytes_lost_budget)
+    return 0
 
 
 def run_receiver(args: argparse.Namespace) -> int:
@@ -101,13 +145,7 @@ def run_receiver(args: argparse.Namespace) -> int:
                             unplug_windows_s=tuple(args.unplug)))
     emu = ReceiverEmulator(args.model, options, world, speed=args.speed, link=args.link,
                            t_start=scenario.start, initial_baud=args.baud)
-    done = threading.Event()
-
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        done.set()
-
-    signal.signal(signal.SIGTERM, on_signal)
-    signal.signal(signal.SIGINT, on_signal)
+    done = _wait_for_signal()
     path = emu.start()
     print(path, flush=True)
     if args.link:
@@ -132,6 +170,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     if args.command == "receiver":
         return run_receiver(args)
+    if args.command == "radio":
+        return run_radio(args)
     if args.command == "flight":
         logging.getLogger().setLevel(logging.WARNING)
         return int(args.func(args))

@@ -320,6 +320,7 @@ class ReceiverCore:
         end = getattr(world, "end", None)
         self.t_end: GpsTime | None = end if isinstance(end, GpsTime) else None
         self._ended_logged = False
+        self._period_warned = False
         self._handlers: dict[tuple[int, int], Callable[[bytes], list[bytes]]] = {
             (0x06, 0x00): self._cfg_prt, (0x06, 0x01): self._cfg_msg, (0x06, 0x08): self._cfg_rate,
             (0x06, 0x31): self._cfg_tp5, (0x06, 0x07): self._cfg_tp, (0x06, 0x09): self._cfg_cfg,
@@ -716,6 +717,21 @@ class ReceiverCore:
         period_s = 1.0 / period if tp["flags"] & TP5_IS_FREQ and period else period * 1e-6
         return period_s * length / 2**32
 
+    def _check_camera_period(self, t: GpsTime) -> None:
+        """Warn once when the configured camera TIMEPULSE period differs from the world's camera plan (the
+        world's pulse times are used either way: the emulator does not re-time the camera)."""
+        plan_period_s = getattr(getattr(getattr(self.world, "scenario", None), "camera", None), "period_s", None)
+        if self._period_warned or plan_period_s is None:
+            return
+        tp = self.config.tp5[self.options.camera_tp_idx]
+        locked = self.time_valid(t) and tp["flags"] & TP5_LOCKED_OTHER_SET
+        value = tp["freqPeriodLock"] if locked else tp["freqPeriod"]
+        period_s = (1.0 / value if value else 0.0) if tp["flags"] & TP5_IS_FREQ else value * 1e-6
+        if abs(period_s - float(plan_period_s)) > 1e-6:
+            log.warning("camera TIMEPULSE%d period %.3f s differs from the world's camera period %.3f s",
+                        self.options.camera_tp_idx + 1, period_s, plan_period_s)
+            self._period_warned = True
+
     def _process_camera(self, t: GpsTime) -> None:
         events = self.world.camera_events(self._events_until, t) if t > self._events_until else []
         self._events_until = t
@@ -724,6 +740,7 @@ class ReceiverCore:
             if not self._camera_pulse_enabled(pulse_t):
                 self.stats.pulses_suppressed += 1
                 continue
+            self._check_camera_period(pulse_t)
             if self.options.trigger_extint:
                 self._pending_edges.append((pulse_t, 1, True))
                 self._pending_edges.append((pulse_t.add_s(self._pulse_length_s(pulse_t)), 1, False))

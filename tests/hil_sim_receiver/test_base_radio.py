@@ -104,3 +104,34 @@ def test_radio_link_forwards_between_ptys_and_goes_silent_in_a_dropout() -> None
     ch = link.channel
     assert ch.bytes_lost_dropout > 0 and 0 < len(got) < sent
     assert len(got) == ch.bytes_out and set(got) == {ord("R")}
+
+
+def test_radio_cli_prints_both_ptys_forwards_and_stops_on_sigterm() -> None:
+    import select
+    import signal
+    import subprocess
+    import sys
+
+    from tests.conftest import PROJECT_ROOT
+
+    proc = subprocess.Popen([sys.executable, "-m", "hil_sim", "radio", "--mean-interval", "1e9"], cwd=PROJECT_ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        assert select.select([proc.stdout], [], [], 20.0)[0]
+        tx, rx = proc.stdout.readline().split()
+        ftx = os.open(tx, os.O_RDWR | os.O_NOCTTY)
+        frx = os.open(rx, os.O_RDWR | os.O_NOCTTY)
+        tty.setraw(ftx)
+        tty.setraw(frx)
+        os.write(ftx, b"\xd3\x00\x13RTCM")
+        assert select.select([frx], [], [], 5.0)[0]
+        assert os.read(frx, 100) == b"\xd3\x00\x13RTCM"
+        os.close(ftx)
+        os.close(frx)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
