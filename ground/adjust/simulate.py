@@ -82,6 +82,8 @@ class FlightTruth:
     r_cam_to_enu: Arr
     lever_arm_m: Arr
     origin_ecef_m: Arr
+    #: event (trigger pulse or flash mark) times, s after `start`; None: exposure − options.delay_s
+    event_s: Arr | None = None
 
 
 @dataclass(frozen=True)
@@ -252,8 +254,10 @@ def observe_flight(truth: FlightTruth, options: BlockOptions, rng: np.random.Gen
     t0_ns = truth.start.total_ns
     names = [f"IMG_{i:05d}.JPG" for i in range(t_exp.size)]
     poses = tuple(CameraPose(nm, rel_c[i], rel_r[i]) for i, nm in enumerate(names))
+    t_event = t_exp - o.delay_s if truth.event_s is None else truth.event_s
+    delay_s = o.delay_s if truth.event_s is None else float(np.mean(t_exp - truth.event_s))
     events = tuple(
-        ImageEvent(nm, GpsTime.from_total_ns(t0_ns + round((t_exp[i] - o.delay_s) * 1e9)), o.event_kind)
+        ImageEvent(nm, GpsTime.from_total_ns(t0_ns + round(t_event[i] * 1e9)), o.event_kind)
         for i, nm in enumerate(names)
     )
 
@@ -299,6 +303,4 @@ def observe_flight(truth: FlightTruth, options: BlockOptions, rng: np.random.Gen
         ground = p_true + rng.normal(0, o.ground_sigma_m, size=3)
         sig = np.full(3, np.hypot(o.ground_sigma_m, o.rel_point_noise_m))
         control.append(ControlPoint(name, "gcp" if name in o.gcp_names else "check", rel, ground, sig))
-    return SimulatedBlock(
-        poses, events, traj, tuple(control), origin, sim, lever, o.delay_s, centres, truth_ground
-    )
+    return SimulatedBlock(poses, events, traj, tuple(control), origin, sim, lever, delay_s, centres, truth_ground)

@@ -1,6 +1,11 @@
 """Acceptance figures on simulated realistic blocks (several seeds each).
 
-Block (ground.adjust.simulate defaults): 8 survey lines of 150 m at 50 m, a different speed per line in
+Flights come from hil_sim's flight model and camera chain (conftest.make_hil_block: 6 lines of 200 m at 50 m,
+4–5 m/s in a different order per seed, random line azimuth, accelerations, half-circle turns, ±2.8° wobble,
+TimePulse every second → shutter 64 ms ± 0.2 ms → flash; photos on the lines and in climb and descent), observed
+by ground.adjust.simulate.observe_flight; the fixed-heading case and a second family use our own generator.
+
+Our generator (ground.adjust.simulate defaults): 8 survey lines of 150 m at 50 m, a different speed per line in
 4–5 m/s, semicircular turns, ±3° attitude wobble, photos every 0.8 s on the lines and during climb and descent;
 the bundle adjustment's frame is a random similarity with ~1 cm (3D) centre noise and 0.01° angle noise;
 RTK-like trajectory noise at 5 Hz (white 5/5/9 mm + Gauss-Markov 3/3/5 mm, τ 30 s); GCP/check σ 3 mm + 3 mm.
@@ -19,13 +24,20 @@ from ground.adjust.solve import adjust
 SEEDS = (0, 1, 2, 3, 4, 5)
 
 
-@pytest.mark.parametrize("seed", SEEDS)
+def _block(source: str, seed: int, hil_block_factory: Any, block_factory: Any, **kw: Any) -> Any:
+    return hil_block_factory(seed, **kw) if source == "hil_sim" else block_factory(seed, **kw)
+
+
+CASES = [("hil_sim", s) for s in SEEDS] + [("own", s) for s in SEEDS[:3]]
+
+
+@pytest.mark.parametrize(("source", "seed"), CASES)
 def test_calibrated_lever_arm_flash_marks_no_gcp_checkpoints_within_2cm(
-    block_factory: Any, problem_factory: Any, seed: int
+    block_factory: Any, hil_block_factory: Any, problem_factory: Any, source: str, seed: int
 ) -> None:
-    block = block_factory(seed + 1000, event_kind="flash", delay_s=0.0004)
+    block = _block(source, seed + 1000, hil_block_factory, block_factory, event_kind="flash", delay_s=0.0)
     problem = problem_factory(block)
-    assert not problem.gcps and len(problem.checks) == 12
+    assert not problem.gcps and len(problem.checks) == 12 and len(problem.images) > 250
     # the ground calibration is off the truth by N(0, 5 mm) per axis and says so
     lever = block.truth_lever_arm_m + np.random.default_rng(seed + 2000).normal(0, 0.005, 3)
     options = AdjustmentOptions(
@@ -38,11 +50,19 @@ def test_calibrated_lever_arm_flash_marks_no_gcp_checkpoints_within_2cm(
     assert len(result.checkpoints) == 12
 
 
-@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize(("source", "seed"), CASES)
 def test_one_gcp_trigger_times_lever_arm_and_delay_free(
-    block_factory: Any, problem_factory: Any, seed: int
+    block_factory: Any, hil_block_factory: Any, problem_factory: Any, source: str, seed: int
 ) -> None:
-    block = block_factory(seed, gcp_names=("P05",), event_kind="trigger", delay_s=0.064)
+    block = _block(
+        source,
+        seed,
+        hil_block_factory,
+        block_factory,
+        gcp_names=("P04",),
+        event_kind="trigger",
+        delay_s=0.064,
+    )
     problem = problem_factory(block)
     assert len(problem.gcps) == 1
     result = adjust(
@@ -65,9 +85,10 @@ def test_one_gcp_trigger_times_lever_arm_and_delay_free(
 
 
 def test_constant_heading_and_speed_names_the_along_track_pair(
-    block_factory: Any, problem_factory: Any
+    hil_block_factory: Any, problem_factory: Any
 ) -> None:
-    block = block_factory(0, gcp_names=("P05",), constant_speed_m_s=4.5, photos_in_climb_descent=False)
+    """hil_sim flight, every line at 4.5 m/s, heading along the track, photos on the lines only."""
+    block = hil_block_factory(0, gcp_names=("P04",), line_speeds_m_s=(4.5,), photo_phases=("line",))
     result = adjust(problem_factory(block), AdjustmentOptions(camera_centre_sigma_m=0.0058))
     along = [w for w in result.warnings if w.startswith("along-track lever arm O_y and shutter delay t_d")]
     assert along, result.warnings
