@@ -223,3 +223,34 @@ def test_corrupt_files_are_refused(tmp_path: Path) -> None:
     gz.write_text("x")
     with pytest.raises(FormatError, match="unknown orientation format"):
         read_orientations(gz)
+
+
+def test_opensfm_several_reconstructions_takes_the_largest(tmp_path: Path) -> None:
+    """Disconnected blocks have separate frames: the largest reconstruction is used, never a mix."""
+    import json
+
+    recs = json.loads(shared_file(OPENSFM).read_text())
+    small = {"shots": {k: v for k, v in list(recs[0]["shots"].items())[:1]}, "cameras": recs[0]["cameras"]}
+    (tmp_path / "r.json").write_text(json.dumps([small, recs[0]]))
+    s = read_opensfm(tmp_path / "r.json")
+    assert len(s.poses) == 4
+
+
+def test_metashape_unaligned_camera_and_chunk_transform(tmp_path: Path) -> None:
+    """A camera without a transform (not aligned) is listed, not guessed; a chunk-level transform is used when
+    the file has no component (older Metashape/PhotoScan exports)."""
+    text = shared_file("orientation/metashape/cameras_excerpt_geograypher.xml").read_text()
+    extra = '<camera id="1" sensor_id="0" component_id="0" label="unaligned.JPG"><orientation>1</orientation></camera>'
+    text = text.replace("</group>", extra + "</group>")
+    start, end = text.index("<components"), text.index("</components>") + len("</components>")
+    comp = text[start:end]
+    transform = comp[comp.index("<transform>"):comp.index("</transform>") + len("</transform>")]
+    chunk_level = text[:start] + transform + text[end:]
+    for variant in (text, chunk_level):
+        f = tmp_path / "cams.xml"
+        f.write_text(variant)
+        s = read_metashape_cameras(f)
+        assert len(s.poses) == 1
+        assert s.extras["unaligned"] == ["unaligned.JPG"]
+        lon, lat, _ = crsmod.ecef_to_lonlat_deg(s.extras["chunk_to_ecef"].apply(s.poses[0].centre_rel))
+        assert lon == pytest.approx(-120.4179859, abs=2e-7) and lat == pytest.approx(39.4119173, abs=2e-7)
