@@ -23,27 +23,25 @@ import os
 import shutil
 import signal
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from onboard.errors import ConfigRejected, DiskFull, LinkLost, ReceiverError
+from onboard.errors import ConfigRejected, DiskFull, InputError, LinkLost, ReceiverError
 from onboard.hw.ports import ByteStream, Clock, SystemClock
-from onboard.logger.events import EventLog
+from onboard.logger.events import EventLog, read_events
 from onboard.logger.files import FileLayer, OsFileLayer
 from onboard.logger.journal import EVENTS_NAME, Journal, JournalOptions, flight_name, read_manifest
 from onboard.receiver.framing import Frame, StreamFramer
-from onboard.rtk.types import CameraMark
 from onboard.sdnotify import SdNotifier, WatchdogGate
 from onboard.settings import Settings, receiver_options
 from onboard.status import SatelliteStatus, StatusSnapshot, write_status
 from onboard.timepulse.marks import (
     EVENT_FORMAT_VERSION,
     PairingOptions,
-    mark_record,
-    pair_marks,
-    pairing_record,
+    PairingRecorder,
+    parse_records,
     timepulse_record,
 )
 
@@ -54,8 +52,6 @@ EXIT_IO_ERROR = 1
 EXIT_DISK_FULL = 3
 READ_CHUNK_BYTES = 4096
 TIM_TM2 = (0x0D, 0x03)
-# A pairing is final once a mark this much later arrived (TIM-TM2 reports an edge within one navigation epoch).
-PAIRING_SETTLE_NS = 5_000_000_000
 
 
 def disk_free_bytes(path: Path) -> int:
@@ -92,48 +88,6 @@ def choose_flight_dir(data_dir: Path, wall_ns: int) -> Path:
     return candidate
 
 
-class OnlinePairer:
-    """Pulse/flash pairing while recording (pure): `add` the marks of each TIM-TM2 report, get the event records.
-
-    Every mark is returned at once as a `mark` record. Pairings come from `onboard.timepulse.marks.pair_marks`
-    over the marks so far and are emitted (as `pairing` records) once final: when the newest mark is more than
-    `settle_ns` later than the pairing, so no later report can change it. `finish` emits the rest.
-    """
-
-    def __init__(self, options: PairingOptions, settle_ns: int) -> None:
-        self.options = options
-        self.settle_ns = settle_ns
-        self.marks: list[CameraMark] = []
-        self.emitted = 0
-        self.last_ns: int | None = None
-
-    def add(self, marks: Sequence[CameraMark]) -> list[dict[str, Any]]:
-        """Records for these new marks, plus any pairing that became final."""
-        out = [mark_record(m) for m in marks]
-        for m in marks:
-            if m.valid and m.time is not None:
-                self.marks.append(m)
-                self.last_ns = m.time.total_ns if self.last_ns is None else max(self.last_ns, m.time.total_ns)
-        if marks and self.last_ns is not None:
-            out += self._pairings(self.last_ns - self.settle_ns)
-        return out
-
-    def finish(self) -> list[dict[str, Any]]:
-        """Every pairing not emitted yet (end of recording)."""
-        return self._pairings(None)
-
-    def _pairings(self, horizon_ns: int | None) -> list[dict[str, Any]]:
-        pairs = pair_marks(self.marks, self.options)
-        out = []
-        for p in pairs[self.emitted :]:
-            t = p.pulse_time if p.pulse_time is not None else p.flash_time
-            if horizon_ns is not None and (t is None or t.total_ns > horizon_ns):
-                break
-            out.append(pairing_record(p))
-            self.emitted += 1
-        return out
-
-
 class Recorder:
     """The recorder: owns the journal, event log, port thread, decoder hook-up and status."""
 
@@ -165,7 +119,22 @@ class Recorder:
         self._gate = WatchdogGate(int(settings.watchdog_writer_stall_s * 1e9))
         self._decode_stats: Any = None
         self._decode: Callable[..., Any] | None = None
-        self._pairer = OnlinePairer(self._pairing_options(), settle_ns=PAIRING_SETTLE_NS)
+        self._pairer = PairingRecorder(self._pairing_options())
+
+    def _resume_pairing(self, events_path: Path) -> None:
+        """After a crash, seed the pairer with the marks already logged so pairing indices continue."""
+        found = read_events(events_path)
+        if not found.records:
+            return
+        try:
+            marks, pairings, _ = parse_records(found.records)
+        except InputError as exc:
+            log.warning("event log %s not resumable (%s): pairing starts afresh", events_path, exc)
+            return
+        # Replaying the logged marks rebuilds the pairer's state, so image indices continue; the records it
+        # returns now are already in the log (a pairing cut off by a power loss is recomputable from the marks).
+        self._pairer.add(marks)
+        log.info("resumed pairing: %d marks, %d pairings already logged", len(marks), len(pairings))
 
     def _pairing_options(self) -> PairingOptions:
         opts = receiver_options(self.settings)
@@ -212,6 +181,7 @@ class Recorder:
         )
         self.journal = Journal(flight_dir, self.clock, options, self.deps.files)
         self.events = EventLog(flight_dir / EVENTS_NAME, self.clock, s.journal_sync_interval_s, self.deps.files)
+        self._resume_pairing(flight_dir / EVENTS_NAME)
         self.status.flight = flight_dir.name
         self.status.flight_dir = str(flight_dir)
         self._setup_decoder()
@@ -254,7 +224,7 @@ class Recorder:
         reason = self.stop_reason or "stopped"
         try:
             if self.events is not None:
-                for rec in self._pairer.finish():
+                for rec in self._pairer.flush():
                     self.events.append(rec)
                 self.status.events = self.events.records
                 self.events.close()

@@ -63,7 +63,7 @@ def test_power_cuts_lose_nothing_older_than_a_second(tmp_path: Path) -> None:
                     seq += 1
                     if seq % MARK_EVERY == 0:
                         mark_count += 1
-                        data += tim_tm2(mark_count, tow_ms=100_000 + mark_count)
+                        data += tim_tm2(mark_count, tow_ms=100_000 + 1300 * mark_count)
                         marks.append((mark_count, time.monotonic()))
                     os.write(master, data)
                     time.sleep(FRAME_PERIOD_S)
@@ -116,6 +116,9 @@ def test_power_cuts_lose_nothing_older_than_a_second(tmp_path: Path) -> None:
     assert must_marks - set(mark_counts) == set(), "time marks lost"
     event_counts = [r["count"] for r in events.records if r.get("kind") == "mark"]
     assert must_marks - set(event_counts) == set(), "time-mark events lost"
+    # pairing continues across restarts: image indices never repeat or go back
+    indices = [r["index"] for r in events.records if r.get("kind") == "pairing"]
+    assert indices == sorted(set(indices)) and len(indices) >= len(must_marks) - 1
     assert len(decoded) >= len(mark_counts)  # the decoder also read through every torn tail
     assert len(must_frames) > 500 and len(must_marks) >= 4
 
