@@ -228,6 +228,144 @@ def convert_rinex(flight: Path, out: Path) -> StageResult:
     return StageResult("RINEX conversion", ok, summary, {"files": len(files)}, {"rinex": str(rinex)})
 
 
+def _segment(flight: Path) -> Path:
+    segments = sorted(flight.glob("*.ubx"))
+    if len(segments) == 1:
+        return segments[0]
+    joined = flight.parent / f"{flight.name}.ubx"  # several segments: the same bytes, concatenated in order
+    with open(joined, "wb") as dst:
+        for seg in segments:
+            dst.write(seg.read_bytes())
+    return joined
+
+
+def process_rtk(rover: Path, base: Path, out: Path, ctx: dict[str, Any]) -> StageResult:
+    """Stage 4: post-processed fix-and-hold RTK of the rover journal against the base journal, vs truth."""
+    import numpy as np
+
+    from onboard.formats.pos import read_pos
+
+    world = ctx["world"]
+    pos_path = out / "rover.pos"
+    base_pos = ",".join(f"{v:.4f}" for v in world.base_ecef_m)
+    # the take-off point is surveyed (Daakir 2015: ambiguities computed from a known start position)
+    init_pos = ",".join(f"{v:.4f}" for v in world.truth(ctx["start"])["antenna_ecef_m"])
+    proc = subprocess.run(
+        [sys.executable, "-m", "onboard", "rtk", "--rover", str(_segment(rover)), "--base", str(_segment(base)),
+         f"--base-pos={base_pos}", f"--init-pos={init_pos}", "--static-start", "--velocity", "--no-progress", "-o", str(pos_path)],
+        cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=900)
+    if proc.returncode != 0 or not pos_path.exists():
+        return StageResult("RTK", False, f"onboard rtk failed: {proc.stderr.strip()[-400:]}")
+    track = read_pos(pos_path)
+    q = np.asarray(track.q)
+    times = list(track.time)
+    truth = np.array([world.truth(t)["antenna_ecef_m"] for t in times])
+    err = np.linalg.norm(np.asarray(track.pos_ecef_m) - truth, axis=1)
+    fixed = q == 1
+    n = len(q)
+    wrong = int(np.sum(fixed & (err > 0.10)))
+    rms = float(np.sqrt(np.mean(err[fixed] ** 2))) if fixed.any() else float("nan")
+    first_fix = next((times[i].diff_s(times[0]) for i in range(n) if fixed[i]), None)
+    figures = {"epochs": n, "fix_ratio": float(fixed.mean()) if n else 0.0, "fixed_3d_rms_m": rms,
+               "wrong_fixes": wrong, "first_fix_s": first_fix}
+    ok = n > 0 and wrong == 0
+    summary = (f"{n} epochs, {100 * figures['fix_ratio']:.1f} % fixed, fixed-epoch 3D RMS vs truth "
+               f"{100 * rms:.1f} cm, {wrong} wrong fixes (> 10 cm), first fix after "
+               f"{'never' if first_fix is None else f'{first_fix:.0f} s'}")
+    return StageResult("RTK", ok, summary, figures, {"trajectory": str(pos_path)})
+
+
+def simulate_block(rover: Path, out: Path, ctx: dict[str, Any], seed: int) -> dict[str, Path]:
+    """The photogrammetric block a bundle adjustment would return for the photos of this flight.
+
+    Camera centres and rotations at each flash (exposure) in an arbitrary relative frame (random similarity of
+    the local ENU frame) with 1 cm / 0.01° noise, written as COLMAP images.txt; one GCP and check points on the
+    ground (CSV name,role,x_rel,y_rel,z_rel,X,Y,Z with ECEF ground coordinates); the camera's capture times
+    (whole seconds, like EXIF) so the ground app matches photos to the event log.
+    """
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from onboard.logger.events import read_events
+    from onboard.rtk.geodesy import enu_to_ecef
+    from onboard.timepulse.marks import parse_records
+
+    world = ctx["world"]
+    rng = np.random.default_rng(seed + 1000)
+    scale = float(rng.uniform(0.3, 3.0))
+    rot = Rotation.random(random_state=int(rng.integers(1 << 31))).as_matrix()
+    shift = rng.normal(0.0, 50.0, 3)
+    origin = world.truth(ctx["start"])["enu_origin_ecef_m"]
+
+    def to_rel(enu: np.ndarray) -> np.ndarray:
+        return scale * (rot @ enu) + shift
+
+    _m, pairings, _o = parse_records(read_events(rover / "events.jsonl").records)
+    flashes = [p for p in pairings if p.flash_time is not None]
+    lines, captures = [], ["image,capture_time"]
+    for k, p in enumerate(flashes, start=1):
+        name = f"IMG_{k:04d}.JPG"
+        tr = world.truth(p.flash_time)
+        c_rel = to_rel(tr["camera_enu_m"] + rng.normal(0.0, 0.01, 3))
+        wobble = Rotation.from_rotvec(rng.normal(0.0, np.radians(0.01), 3)).as_matrix()
+        r_cam_to_rel = rot @ wobble @ tr["r_cam_to_enu"]
+        r_rel_to_cam = r_cam_to_rel.T
+        qx, qy, qz, qw = Rotation.from_matrix(r_rel_to_cam).as_quat()
+        tx, ty, tz = -r_rel_to_cam @ c_rel
+        lines.append(f"{k} {qw:.12f} {qx:.12f} {qy:.12f} {qz:.12f} {tx:.6f} {ty:.6f} {tz:.6f} 1 {name}\n")
+        utc = p.flash_time.to_utc()
+        captures.append(f"{name},{utc.replace(microsecond=0).isoformat()}")
+    images = out / "block" / "images.txt"
+    images.parent.mkdir(parents=True, exist_ok=True)
+    images.write_text("# simulated bundle adjustment (hil_sim): IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME\n"
+                      + "".join(lines))
+    capture = out / "block" / "capture_times.csv"
+    capture.write_text("\n".join(captures) + "\n")
+    gcp_rows = ["name,role,x_rel,y_rel,z_rel,X,Y,Z"]
+    flight_s = ctx["end"].diff_s(ctx["start"])
+    for j in range(7):
+        # ground points under the survey lines (the drone's ground track), a few metres of relief
+        above = world.truth(ctx["start"].add_s(float(rng.uniform(0.3, 0.9)) * flight_s))["antenna_enu_m"]
+        enu = np.array([above[0] + rng.uniform(-10, 10), above[1] + rng.uniform(-10, 10), rng.uniform(-1.0, 3.0)])
+        rel = to_rel(enu + rng.normal(0.0, 0.01, 3))
+        ecef = enu_to_ecef(enu, origin)
+        gcp_rows.append(f"P{j + 1},{'gcp' if j == 0 else 'check'},{rel[0]:.5f},{rel[1]:.5f},{rel[2]:.5f},"
+                        f"{ecef[0]:.4f},{ecef[1]:.4f},{ecef[2]:.4f}")
+    gcp = out / "block" / "gcp.csv"
+    gcp.write_text("\n".join(gcp_rows) + "\n")
+    return {"images": images, "capture_times": capture, "gcp": gcp}
+
+
+def adjust_block(rover: Path, out: Path, ctx: dict[str, Any], trajectory: Path, seed: int) -> StageResult:
+    """Stage 5: the final adjustment with the real `ground adjust` command: lever-arm prior, flash marks, 1 GCP."""
+    import numpy as np
+
+    world = ctx["world"]
+    block = simulate_block(rover, out, ctx, seed)
+    lever = np.asarray(world.scenario.flight.lever_arm_cam_m) + np.random.default_rng(seed).normal(0, 0.003, 3)
+    adj = out / "adjustment"
+    cmd = [sys.executable, "-m", "ground", "adjust", "--trajectory", str(trajectory),
+           "--events", str(rover / "events.jsonl"), "--capture-times", str(block["capture_times"]),
+           "--orientations", str(block["images"]), "--gcp", str(block["gcp"]),
+           "--lever-arm", ",".join(f"{v:.4f}" for v in lever), "--lever-arm-sigma", "0.005",
+           "--estimate", "delay", "--crs", "EPSG:4979", "-o", str(adj)]
+    proc = subprocess.run(cmd, cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=900)
+    results = adj / "results.json"
+    if proc.returncode != 0 or not results.exists():
+        return StageResult("final adjustment", False, f"ground adjust failed: {(proc.stderr or proc.stdout).strip()[-400:]}")
+    res = json.loads(results.read_text())
+    rms = res.get("checkpoint_rms_m", {})
+    figures = {"checkpoint_rms_m": rms, "lever_arm_m": res.get("lever_arm_m"), "delay_s": res.get("delay_s"),
+               "sigma0": res.get("sigma0"), "warnings": res.get("warnings"), "outliers": res.get("outliers")}
+    rms3d = rms.get("3d")
+    ok = rms3d is not None and rms3d <= 0.03
+    summary = (f"check-point 3D RMS {100 * rms3d:.1f} cm over {len(res.get('checkpoints', []))} points, "
+               f"lever arm {[round(v, 3) for v in res.get('lever_arm_m', [])]} m, "
+               f"delay {1000 * (res.get('delay_s') or 0):.2f} ms" if rms3d is not None else "no check points")
+    return StageResult("final adjustment", ok, summary, figures,
+                       {"results": str(results), "report": str(adj / "report.html")})
+
+
 def write_summary(out: Path, stages: list[StageResult]) -> Path:
     """Write `summary.json` and return its path."""
     path = out / "summary.json"
@@ -257,9 +395,15 @@ def main(args: argparse.Namespace) -> int:
     t_wall = time.monotonic()
     stages, ctx = record_flight(args, out)
     rover = next((Path(s.outputs["flight"]) for s in stages if s.name == "record rover" and "flight" in s.outputs), None)
+    base = next((Path(s.outputs["flight"]) for s in stages if s.name == "record base" and "flight" in s.outputs), None)
     if rover is not None:
         stages.append(check_pairing(rover, ctx))
         stages.append(convert_rinex(rover, out))
+    if rover is not None and base is not None:
+        rtk = process_rtk(rover, base, out, ctx)
+        stages.append(rtk)
+        if "trajectory" in rtk.outputs:
+            stages.append(adjust_block(rover, out, ctx, Path(rtk.outputs["trajectory"]), args.seed))
     summary = write_summary(out, stages)
     print(f"directgeo simulated flight ({args.model}, {args.speed:g}× real time, "
           f"{ctx['end'].diff_s(ctx['start']):.0f} s simulated in {time.monotonic() - t_wall:.0f} s)")

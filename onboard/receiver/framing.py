@@ -46,7 +46,7 @@ class Frame:
         return self.raw
 
 
-def ubx_checksum(body: bytes) -> bytes:
+def ubx_checksum(body: bytes | bytearray) -> bytes:
     """The 8-bit Fletcher checksum (CK_A, CK_B) of class, id, length and payload."""
     a = b = 0
     for byte in body:
@@ -71,7 +71,7 @@ for _i in range(256):
     _CRC24Q_TABLE.append(_c & 0xFFFFFF)
 
 
-def crc24q(data: bytes) -> int:
+def crc24q(data: bytes | bytearray) -> int:
     """CRC-24Q (RTCM3, Qualcomm polynomial 0x1864CFB) of `data`."""
     crc = 0
     for byte in data:
