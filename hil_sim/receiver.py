@@ -219,6 +219,8 @@ class TimeMarkChannel:
         self.new_rising = False
         self.new_falling = False
         self.edges_since_report = 0
+        self.edges_lost = 0
+        """Edges overwritten by a later edge of the same polarity before a report (lost marks)."""
 
     def edge(self, t: GpsTime, rising: bool) -> None:
         """Register an edge at GPS time `t` (a later edge of the same polarity overwrites the earlier one)."""
@@ -235,6 +237,7 @@ class TimeMarkChannel:
             return None
         rep = enc.TimeMarkReport(self.channel, self.count, self.rising, self.falling, self.new_rising,
                                  self.new_falling, time_valid, acc_est_ns)
+        self.edges_lost += self.edges_since_report - int(self.new_rising) - int(self.new_falling)
         self.new_rising = self.new_falling = False
         self.edges_since_report = 0
         return rep
@@ -614,6 +617,7 @@ class ReceiverCore:
                 rep = self.marks[ch].report(valid, self.options.acc_est_ns)
                 if rep is not None and due(TIM_TM2) and self._send(out, enc.tim_tm2(rep)):
                     self.stats.marks_out += 1
+            self.stats.edges_lost = self.marks[0].edges_lost + self.marks[1].edges_lost
             if due(TIM_TP):
                 step = self.config.rate["measRate"] * 1_000_000
                 next_pulse = GpsTime.from_total_ns((t.total_ns // NS_PER_S + 1) * NS_PER_S)

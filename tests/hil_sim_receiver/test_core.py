@@ -222,6 +222,7 @@ def test_one_tim_tm2_per_flash_with_count_and_edge_bits(standin_world) -> None:
     out = run(core, 10.0)
     marks = tm2(out, 0)
     assert [m.count for m in marks] == [1, 2, 3, 4] and core.stats.pulses_suppressed == 1
+    assert core.stats.edges_lost == 0
     for m, f in zip(marks, flashes, strict=True):
         assert m.newFallingEdge == 1 and m.newRisingEdge == 1 and m.time == 1 and m.timeBase == 1
         got = GpsTime.from_ms_subms(m.wnF, m.towMsF, m.towSubMsF)
@@ -242,6 +243,7 @@ def test_bounce_and_two_flashes_in_one_epoch_lose_marks_with_a_count_jump(standi
     core = flash_core(standin_world)
     marks = tm2(run(core, 8.0), 0)
     assert [m.count for m in marks] == [1, 3, 5]  # jumps of 2: the only sign of the lost marks
+    assert core.stats.edges_lost == 4  # bounce: 1 rising + 1 falling overwritten; two photos: the same
     bounced = GpsTime.from_ms_subms(marks[1].wnF, marks[1].towMsF, marks[1].towSubMsF)
     assert abs(bounced.diff_s(t0.add_s(4.1648))) < 1e-7  # the bounce's edge, not the flash, is reported
     last = GpsTime.from_ms_subms(marks[2].wnF, marks[2].towMsF, marks[2].towSubMsF)
