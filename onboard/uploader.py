@@ -175,7 +175,19 @@ class Uploader:
                 report.files[e.name] = "complete"
                 continue
             self._upload_file(report, d / e.name, e)
+        self._verify(report, entries)
         return report
+
+    def _verify(self, report: UploadReport, entries: list[FileEntry]) -> None:
+        """Ask the server for the flight once more: every file complete with our size and SHA-256."""
+        r = self._request(report, "GET", f"/flights/{report.flight_id}")
+        if r.status_code != 200:
+            raise UploadError(f"cannot verify flight {report.flight_id}: HTTP {r.status_code}")
+        held = {f["name"]: f for f in r.json()["files"]}
+        for e in entries:
+            f = held.get(e.name)
+            if f is None or f["status"] != "complete" or f["size"] != e.size or f["sha256"] != e.sha256:
+                raise UploadError(f"server does not hold {e.name} complete and verified: {f}")
 
     def _offset(self, report: UploadReport, url: str) -> int:
         r = self._request(report, "HEAD", url)

@@ -220,6 +220,9 @@ def test_trajectory_xyz_and_llh_agree(tmp_path: Path) -> None:
     np.testing.assert_allclose(ecef_to_enu(llh.pos_ecef_m, ORIGIN_ECEF), ecef_to_enu(xyz.pos_ecef_m, ORIGIN_ECEF),
                                atol=2e-3)
     np.testing.assert_allclose(llh.vel_ecef_m_s, xyz.vel_ecef_m_s, atol=2e-3)
+    write_pos(tmp_path / "novel.pos", sols)  # no velocity columns: the adjustment differences positions
+    novel = read_trajectory(str(tmp_path / "novel.pos"))
+    assert novel.vel_ecef_m_s is None and len(novel.t_ns) == len(xyz.t_ns)
     (tmp_path / "one.pos").write_text("\n".join((tmp_path / "SOL.pos").read_text().splitlines()[:2]) + "\n")
     with pytest.raises(FormatError, match="at least 2"):
         read_trajectory(str(tmp_path / "one.pos"))
