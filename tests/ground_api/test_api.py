@@ -293,3 +293,37 @@ def test_base_data_triggers_rtk_reprocessing(live: LiveServer, tmp_path: Path) -
     with live.client() as c:
         bad = _wait_job(c, rep2.flight_id)
         assert bad["kind"] == "rtk" and bad["status"] == "failed" and bad["message"]
+
+
+def test_unfinished_jobs_survive_a_restart_and_flight_names_are_unique(api_settings: ApiSettings,
+                                                                       tmp_path: Path) -> None:
+    """A job left queued when the server stopped runs at the next start; a second manifest under an existing
+    flight name with other files is refused (409) rather than mixed in."""
+    from ground.store import Job, Store
+    from tests.ground_io.flightgen import write_synthetic_flight
+
+    folder = tmp_path / "flight-restart"
+    write_synthetic_flight(folder, n_lines=2)
+    srv = start_server(api_settings)
+    try:
+        rep = Uploader(srv.url, TOKEN, UploaderOptions(chunk_bytes=60_000), sleep=lambda s: None).upload_flight(folder)
+        with srv.client() as c:
+            assert c.get(f"/flights/{rep.flight_id}").json()["jobs"] == []  # no roles: nothing automatic
+            other = {"name": folder.name, "files": [{"name": "x.ubx", "size": 1, "sha256": "0" * 64}]}
+            assert c.post("/flights", json=other).status_code == 409
+    finally:
+        srv.stop()
+    store = Store(api_settings.db_url)
+    with store.session() as s:
+        s.add(Job(flight_id=rep.flight_id, kind="adjust", status="queued", message="", params={
+            "trajectory": "SOL.pos", "events": "events.csv", "orientations": "poses.csv", "gcp": "gcp.csv"}))
+        s.commit()
+    store.close()
+    srv = start_server(api_settings)
+    try:
+        with srv.client() as c:
+            job = _wait_job(c, rep.flight_id)
+            assert job["status"] == "done", job["message"]
+            assert c.get(f"/flights/{rep.flight_id}/results").json()["n_images"] > 30
+    finally:
+        srv.stop()
