@@ -1,0 +1,97 @@
+"""Check a recorded flight: segments against the manifest (size, SHA-256), index coverage, torn tails.
+
+Pure reading: never modifies the flight. Used by `python -m onboard check FLIGHT_DIR` and by the ground before
+import; a torn tail from a power cut is reported, not an error (every reader stops cleanly at it).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from onboard.logger.events import read_events
+from onboard.logger.journal import EVENTS_NAME, INDEX_RECORD, list_segments, read_index, read_manifest
+from onboard.receiver.framing import StreamFramer
+
+
+@dataclass
+class SegmentCheck:
+    """One segment: `bytes` on disk, `listed` in the manifest, `hash_ok` (None if unlisted), frames found,
+    `torn_tail_bytes` bytes after the last complete frame, `index_records` and whether they cover the file."""
+
+    name: str
+    bytes: int
+    listed: bool
+    hash_ok: bool | None
+    frames: int
+    torn_tail_bytes: int
+    index_records: int
+    index_torn_bytes: int
+    index_ok: bool
+
+
+@dataclass
+class FlightCheck:
+    """The whole flight; `problems` are real faults (hash mismatch, unlisted segment, index beyond data)."""
+
+    flight: str
+    closed: bool
+    segments: list[SegmentCheck] = field(default_factory=list)
+    events: int = 0
+    events_skipped_lines: int = 0
+    problems: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """True when nothing but torn tails was found."""
+        return not self.problems
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-able dict."""
+        return {
+            "flight": self.flight, "closed": self.closed, "ok": self.ok, "problems": self.problems,
+            "events": self.events, "events_skipped_lines": self.events_skipped_lines,
+            "segments": [vars(s) for s in self.segments],
+        }
+
+
+def check_flight(flight_dir: Path) -> FlightCheck:
+    """Check every segment of `flight_dir` (see the module docstring)."""
+    flight_dir = Path(flight_dir)
+    manifest = read_manifest(flight_dir)
+    result = FlightCheck(flight_dir.name, bool(manifest and manifest.closed))
+    if manifest is None:
+        result.problems.append("manifest.json missing or unreadable")
+    listed = {s.name: s for s in manifest.segments} if manifest else {}
+    for path in list_segments(flight_dir):
+        data = path.read_bytes()
+        framer = StreamFramer()
+        frames = len(framer.feed(data))
+        entry = listed.get(path.name)
+        hash_ok = None if entry is None else (entry.bytes == len(data)
+                                              and entry.sha256 == hashlib.sha256(data).hexdigest())
+        idx_path = path.with_suffix(".idx")
+        records = read_index(idx_path)
+        idx_size = idx_path.stat().st_size if idx_path.exists() else 0
+        index_ok = all(r.offset < len(data) for r in records) and all(
+            a.offset < b.offset and a.monotonic_ns <= b.monotonic_ns for a, b in itertools.pairwise(records)
+        )
+        seg = SegmentCheck(path.name, len(data), entry is not None, hash_ok, frames, framer.pending,
+                           len(records), idx_size % INDEX_RECORD.size, index_ok)
+        result.segments.append(seg)
+        if entry is None and manifest is not None and manifest.closed:
+            result.problems.append(f"{path.name}: not listed in the closed manifest")
+        if hash_ok is False:
+            result.problems.append(f"{path.name}: size or SHA-256 differs from the manifest")
+        if not index_ok:
+            result.problems.append(f"{path.name}: index points beyond the data or goes backwards")
+    for name in listed:
+        if not (flight_dir / name).exists():
+            result.problems.append(f"{name}: listed in the manifest but missing")
+    found = read_events(flight_dir / EVENTS_NAME)
+    result.events = len(found.records)
+    result.events_skipped_lines = found.skipped_lines
+    return result
