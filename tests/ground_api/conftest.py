@@ -6,7 +6,7 @@ import socket
 import threading
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import httpx
@@ -70,4 +70,4 @@ def live(api_settings: ApiSettings) -> Iterator[LiveServer]:
         srv.stop()
 
 
-__all__ = ["TOKEN", "LiveServer", "replace", "start_server"]
+__all__ = ["TOKEN", "LiveServer", "start_server"]
