@@ -9,13 +9,19 @@ Modelling choices (each switchable where the documents leave the real behaviour 
 - Factory state: UART1 at 9600 baud 8N1, NMEA GGA/GLL/GSA/GSV/RMC/VTG at 1 per epoch, UBX raw off,
   measRate 1000 ms, CFG-TP5 as the real NEO-M8T dump `rtkbase_U-Blox_NEO-M8T_rtkbase.txt` (TIMEPULSE flags
   0xF7: lockedOtherSet with pulseLenRatio 0, so no pulse before valid time; TIMEPULSE2 flags 0xFE, inactive).
-  The LEA-6T uses the same values with flags limited to u-blox 6's 8 bits.
+  The LEA-6T uses the same values with flags limited to u-blox 6's 8 bits and the version byte 0 (reserved
+  there); its MON-VER is swVersion "7.03 (45969)", hwVersion "00040007" without extension strings.
+- Navigation solution: NAV-SOL (both) and NAV-PVT (M8T only) = the World's antenna truth + `nav_noise_m`
+  white noise, no fix before valid time; TIM-TP (next whole-second pulse) once time is valid.
+- AID-EPH polls are answered on both models (deprecated on M8, kept for the daemon's backup path).
 - Every CFG input is answered at once (well within the 1 s of the spec); the ACK of a CFG-PRT baud change
   goes out at the new rate (`baud_rate` changes before the ACK is written).
 - NAK: unknown messages and ids, wrong lengths, incomplete CFG-PRT (UART mode without 8N1 bits, unsupported
   baud), RXM-RAWX on u-blox 6 (or ACK-and-ignore), RXM-RAW on M8 (no such message), CFG-TP on M8, CFG-TP5
-  on LEA-6T (option), rates below the model's minimum (or ACK with a clamped rate applied), bad tpIdx,
-  pulse length ≥ period.
+  on LEA-6T (option), NAV-PVT and RXM-SFRBX on LEA-6T, rates below the model's minimum (200 ms LEA-6T,
+  100 ms M8T; or ACK with the minimum applied), bad tpIdx, pulse length ≥ period. navRate is forced to 1
+  on the LEA-6T (ACKed; the poll shows 1). CFG-CFG clear/save/load act on ports, message rates and
+  navigation/timepulse sections (no power cycle is modelled, so saved settings only matter for load).
 - Output is limited by the configured baud's byte budget in simulated time (baud/10 B/s, a TX buffer of
   `tx_buffer_bytes`): a message that does not fit is dropped whole (a raw epoch is lost, as on real ports).
 - TIM-TM2: per EXTINT channel, only the last rising and last falling edge between two navigation epochs are
