@@ -28,8 +28,10 @@ Mode = Literal["free", "fixed", "prior"]
 Loss = Literal["linear", "soft_l1", "huber", "cauchy", "arctan"]
 
 #: Names of the 11 parameters, in the order of every covariance/correlation matrix we return.
-#: T_* translation (ENU m), rot_* small rotation about the E/N/U axes (rad, applied on the left of R),
-#: scale (unitless), O_* lever arm (camera frame m), t_d delay (s).
+#: T_* translation (ENU m) of the block centroid (the model works on centred coordinates so that translation
+#: and rotation do not correlate; `AdjustmentResult.translation_m` is the plain T of S(x) = T + μ·R·x, with its
+#: σ propagated), rot_* small rotation about the E/N/U axes (rad, applied on the left of R), scale (unitless),
+#: O_* lever arm (camera frame m), t_d delay (s).
 PARAMETER_NAMES: tuple[str, ...] = (
     "T_e", "T_n", "T_u", "rot_e", "rot_n", "rot_u", "scale", "O_x", "O_y", "O_z", "t_d",
 )  # fmt: skip

@@ -303,4 +303,6 @@ def observe_flight(truth: FlightTruth, options: BlockOptions, rng: np.random.Gen
         ground = p_true + rng.normal(0, o.ground_sigma_m, size=3)
         sig = np.full(3, np.hypot(o.ground_sigma_m, o.rel_point_noise_m))
         control.append(ControlPoint(name, "gcp" if name in o.gcp_names else "check", rel, ground, sig))
-    return SimulatedBlock(poses, events, traj, tuple(control), origin, sim, lever, delay_s, centres, truth_ground)
+    return SimulatedBlock(
+        poses, events, traj, tuple(control), origin, sim, lever, delay_s, centres, truth_ground
+    )

@@ -325,7 +325,8 @@ def _covariance(jac: Arr, res: Arr, names: tuple[str, ...]) -> tuple[float, Arr,
     smin = sv[-1] if sv[-1] > 0 else np.finfo(float).tiny
     cond = float(sv[0] / smin)
     singular = sv < sv[0] * 1e-10
-    inv_sv2 = np.where(singular, 0.0, 1.0 / np.maximum(sv, np.finfo(float).tiny) ** 2)
+    inv_sv2 = np.zeros_like(sv)
+    inv_sv2[~singular] = 1.0 / sv[~singular] ** 2
     cov_n = (vt.T * inv_sv2) @ vt
     cov = cov_n / np.outer(norms, norms) * ((sigma0**2) if np.isfinite(sigma0) else 1.0)
     if np.any(singular):
@@ -527,7 +528,7 @@ def variance_inflation(
     breaks = np.flatnonzero(np.diff(t_s[order]) > max_dt_s) + 1
     segments = [seg for seg in np.split(np.arange(n), breaks) if seg.size >= 3]
     dof = 3 * len(segments) - n_params
-    if dof < 3:
+    if len(segments) < 3 or dof < 6:  # too few segment means to tell correlated from white errors
         return 1.0
     total = sum(float(seg.size * np.sum(r[seg].mean(axis=0) ** 2)) for seg in segments)
     return float(np.clip(total / dof, 1.0, cap))

@@ -180,3 +180,25 @@ def test_float_trajectory_is_warned(block_factory: Any, problem_factory: Any) ->
     q[:40] = 2
     result = adjust(replace(problem, quality=q), _prior_options(block))
     assert any("not RTK-fixed" in w for w in result.warnings)
+
+
+def test_single_strip_with_a_similarity_prior_is_solved() -> None:
+    """A single strip cannot fix the roll about its line; a similarity prior (the 'vertical prior') can."""
+    from ground.adjust.model import SimilaritySpec
+
+    n = 30
+    centres = np.column_stack([np.arange(n) * 4.0, np.zeros(n), np.full(n, 50.0)])
+    lever = np.array([0.0, -0.1, -0.1])
+    r_cam = np.tile(np.diag([1.0, -1.0, -1.0]), (n, 1, 1))
+    ant = centres + r_cam @ lever
+    problem = AdjustmentProblem.from_arrays(
+        [f"I{i}" for i in range(n)], centres, r_cam, ant, np.zeros((n, 3)), 0.01
+    )
+    opts = AdjustmentOptions(
+        similarity=SimilaritySpec(
+            mode="prior", rotation_sigma_rad=0.001, translation_sigma_m=0.5, scale_sigma=1e-3
+        ),
+        lever_arm=LeverArmSpec("fixed", tuple(lever)),
+    )
+    result = adjust(problem, opts)
+    assert np.allclose(result.rotation, np.eye(3), atol=1e-4) and result.scale == pytest.approx(1.0, abs=1e-4)

@@ -73,3 +73,18 @@ def test_analytic_jacobian_matches_finite_differences(block_factory: Any, quiet:
             xm[k] -= h
             num[:, k] = (model.residuals_and_jacobian(xp)[0] - model.residuals_and_jacobian(xm)[0]) / (2 * h)
         assert np.allclose(jac, num, rtol=1e-5, atol=1e-4 * np.abs(num).max())
+
+
+def test_variance_inflation_sees_time_correlated_residuals() -> None:
+    from ground.adjust.solve import variance_inflation
+
+    rng = np.random.default_rng(2)
+    t = np.concatenate(
+        [np.arange(0, 40.0), np.arange(60.0, 100.0), np.arange(120.0, 160.0), np.arange(180, 220.0)]
+    )
+    white = rng.normal(size=(t.size, 3))
+    assert variance_inflation(white, t, n_params=0) < 2.0
+    # a per-segment offset of 0.5σ (e.g. RTK multipath over a line) inflates: the segment means are 40× too big
+    offsets = np.repeat(rng.normal(0, 0.5, (4, 3)), 40, axis=0)
+    assert variance_inflation(white + offsets, t, n_params=0) > 4.0
+    assert variance_inflation(white[:5], t[:5], n_params=0) == 1.0  # too little to say: no inflation
