@@ -35,7 +35,13 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
 
 
 def _run(args: argparse.Namespace) -> int:
-    from onboard.daemon import EXIT_DISK_FULL, RecorderDeps, run_recorder, serial_port_opener
+    from onboard.daemon import (
+        EXIT_DISK_FULL,
+        RecorderDeps,
+        gpio_edge_sources,
+        run_recorder,
+        serial_port_opener,
+    )
     from onboard.logger.files import FileLayer, OsFileLayer, SyncLogFileLayer
     from onboard.sdnotify import SdNotifier
     from onboard.settings import load_settings
@@ -55,7 +61,8 @@ def _run(args: argparse.Namespace) -> int:
     # Test hook: a file layer that logs every fsync'd length, so a power-cut test can cut files back to it.
     sync_log = os.environ.get("ONBOARD_TEST_SYNC_LOG")
     files: FileLayer = SyncLogFileLayer(Path(sync_log)) if sync_log else OsFileLayer()
-    deps = RecorderDeps(open_port=serial_port_opener(settings), files=files, notifier=SdNotifier())
+    deps = RecorderDeps(open_port=serial_port_opener(settings), files=files, notifier=SdNotifier(),
+                        edge_sources=gpio_edge_sources(settings))
     code = run_recorder(settings, deps)
     if code == EXIT_DISK_FULL:
         print("recorder stopped: free disk space below journal.disk_floor_mb (see the status snapshot)",

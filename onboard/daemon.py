@@ -23,25 +23,32 @@ import os
 import shutil
 import signal
 import threading
-from collections.abc import Callable
+from collections import deque
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from onboard.errors import ConfigRejected, DiskFull, InputError, LinkLost, ReceiverError
-from onboard.hw.ports import ByteStream, Clock, SystemClock
+from onboard.gnsstime import GpsTime
+from onboard.hw.ports import ByteStream, Clock, Edge, EdgeSource, SystemClock
 from onboard.logger.events import EventLog, read_events
 from onboard.logger.files import FileLayer, OsFileLayer
 from onboard.logger.journal import EVENTS_NAME, Journal, JournalOptions, flight_name, read_manifest
 from onboard.receiver.framing import Frame, StreamFramer
+from onboard.rtk.types import CameraMark
 from onboard.sdnotify import SdNotifier, WatchdogGate
 from onboard.settings import Settings, receiver_options
 from onboard.status import SatelliteStatus, StatusSnapshot, write_status
 from onboard.timepulse.marks import (
     EVENT_FORMAT_VERSION,
+    TRIGGER_CHANNEL,
     PairingOptions,
     PairingRecorder,
+    TickAnchor,
+    gpio_mark,
     parse_records,
+    pps_anchors,
     timepulse_record,
 )
 
@@ -68,6 +75,9 @@ class RecorderDeps:
     files: FileLayer = field(default_factory=OsFileLayer)
     disk_free: Callable[[Path], int] = disk_free_bytes
     notifier: SdNotifier = field(default_factory=lambda: SdNotifier({}))
+    # Edge sources named by `Edge.line`: "trigger" (camera trigger pulses) and "pps" (receiver 1 PPS), used
+    # when receiver.trigger = "gpio". Built by the composition root from gpiozero pins.
+    edge_sources: Callable[[], Sequence[EdgeSource]] | None = None
 
 
 def choose_flight_dir(data_dir: Path, wall_ns: int) -> Path:
@@ -86,6 +96,53 @@ def choose_flight_dir(data_dir: Path, wall_ns: int) -> Path:
         candidate = data_dir / f"{name}-{n:02d}"
         n += 1
     return candidate
+
+
+class GpioTiming:
+    """GPIO trigger edges → GPS-timed `CameraMark`s (pure): PPS edges on another GPIO anchor the host clock.
+
+    `set_coarse(tick, time)` relates the host clock to GPS time roughly (the host tick at which an epoch's
+    bytes arrived, and its time tag); PPS ticks then snap to whole GPS seconds (`pps_anchors`). A trigger
+    edge waits until a PPS edge after it arrived, so it is interpolated between two anchors, or until
+    `wait_ns` passed (then extrapolated; without anchors it gets no time and `valid` False).
+    `acc_est_ns` is what we vouch for: interrupt latency and chrony-free host clock over one second.
+    """
+
+    def __init__(self, wait_ns: int = 2_500_000_000, acc_est_ns: int = 20_000, max_pps: int = 16) -> None:
+        self.wait_ns = wait_ns
+        self.acc_est_ns = acc_est_ns
+        self.coarse: TickAnchor | None = None
+        self.pps: deque[int] = deque(maxlen=max_pps)
+        self.pending: list[Edge] = []
+        self.count = 0
+
+    def set_coarse(self, tick_ns: int, time: GpsTime) -> None:
+        """Latest coarse host-tick ↔ GPS-time correspondence."""
+        self.coarse = TickAnchor(tick_ns, time)
+
+    def add(self, edge: Edge, now_ns: int) -> list[tuple[CameraMark, int]]:
+        """Take one edge; returns trigger marks (with their host ticks) that can be timed now."""
+        if edge.line == "pps":
+            if edge.rising:
+                self.pps.append(edge.monotonic_ns)
+        elif edge.line == "trigger":
+            self.pending.append(edge)
+        return self.release(now_ns)
+
+    def release(self, now_ns: int) -> list[tuple[CameraMark, int]]:
+        """Trigger marks whose time can be fixed now (a PPS after them, or waited long enough)."""
+        anchors = pps_anchors(self.pps, self.coarse) if self.coarse is not None else []
+        latest_pps = self.pps[-1] if self.pps else None
+        out, keep = [], []
+        for e in self.pending:
+            if (latest_pps is not None and latest_pps > e.monotonic_ns) or now_ns - e.monotonic_ns >= self.wait_ns:
+                self.count += 1
+                mark = gpio_mark(TRIGGER_CHANNEL, e.rising, e.monotonic_ns, self.count, anchors, self.acc_est_ns)
+                out.append((mark, e.monotonic_ns))
+            else:
+                keep.append(e)
+        self.pending = keep
+        return out
 
 
 class Recorder:
@@ -120,6 +177,8 @@ class Recorder:
         self._decode_stats: Any = None
         self._decode: Callable[..., Any] | None = None
         self._pairer = PairingRecorder(self._pairing_options())
+        self._gpio = GpioTiming()
+        self._last_rx_mono_ns = 0
 
     def _resume_pairing(self, events_path: Path) -> None:
         """After a crash, seed the pairer with the marks already logged so pairing indices continue."""
@@ -139,8 +198,8 @@ class Recorder:
     def _pairing_options(self) -> PairingOptions:
         opts = receiver_options(self.settings)
         return PairingOptions(
-            # GPIO trigger edges are not wired into the recorder yet: only TIM-TM2 channel 1 counts as measured.
-            trigger_measured=opts.trigger == "extint1",
+            trigger_measured=opts.trigger == "extint1"
+            or (opts.trigger == "gpio" and self.deps.edge_sources is not None),
             trigger_edge="rising" if opts.pulse_rising else "falling",
             max_delay_ns=min(1_000_000_000, round(opts.camera_period_s * 1e9) // 2),
         )
@@ -192,6 +251,7 @@ class Recorder:
                 pass
         thread = threading.Thread(target=self._reader_thread, name="recorder-reader", daemon=True)
         thread.start()
+        edge_threads = self._start_edge_threads()
         self.status.state = "recording"
         self._write_status()
         self.deps.notifier.notify(READY=1, STATUS=f"recording {flight_dir.name}")
@@ -200,6 +260,8 @@ class Recorder:
         await self._stopped.wait()
         self._stop_thread.set()
         await asyncio.to_thread(thread.join)
+        for t in edge_threads:
+            await asyncio.to_thread(t.join)
         for task in [*tasks, self._config_task]:
             if task is not None:
                 task.cancel()
@@ -283,7 +345,7 @@ class Recorder:
                 mono, wall = self.clock.monotonic_ns(), self.clock.wall_ns()
                 if not self._journal_op(functools.partial(self.journal.append, data, mono, wall)):
                     return
-                self._post(self._on_bytes, data)
+                self._post(self._on_bytes, data, mono)
             if not self._journal_op(self.journal.maybe_sync):
                 return
             request = self._reopen_request
@@ -328,6 +390,35 @@ class Recorder:
                 loop.call_soon_threadsafe(fn, *args)
             except RuntimeError:  # loop closing at shutdown
                 pass
+
+    # -- GPIO trigger / PPS edges ----------------------------------------------------------------------
+    def _start_edge_threads(self) -> list[threading.Thread]:
+        if self.deps.edge_sources is None or receiver_options(self.settings).trigger != "gpio":
+            return []
+        threads = []
+        for source in self.deps.edge_sources():
+            t = threading.Thread(target=self._edge_thread, args=(source,), name="recorder-edges", daemon=True)
+            t.start()
+            threads.append(t)
+        return threads
+
+    def _edge_thread(self, source: EdgeSource) -> None:
+        try:
+            while not self._stop_thread.is_set():
+                edge = source.get(0.2)
+                if edge is not None:
+                    self._post(self._on_edge, edge)
+        finally:
+            source.close()
+
+    def _on_edge(self, edge: Edge) -> None:
+        for mark, tick in self._gpio.add(edge, self.clock.monotonic_ns()):
+            self._on_gpio_mark(mark, tick)
+
+    def _on_gpio_mark(self, mark: CameraMark, tick_ns: int) -> None:
+        self.status.time_marks += 1
+        for rec in self._pairer.add([mark], tick_ns):
+            self._append_event(rec)
 
     # -- loop side: port state --------------------------------------------------------------------------
     def _set_state(self, state: str, message: str) -> None:
@@ -463,7 +554,8 @@ class Recorder:
         self._decode = decode_frame
         self._decode_stats = DecodeStats()
 
-    def _on_bytes(self, data: bytes) -> None:
+    def _on_bytes(self, data: bytes, rx_monotonic_ns: int) -> None:
+        self._last_rx_mono_ns = rx_monotonic_ns
         st = self.status
         st.bytes_recorded += len(data)
         # No try/except here on purpose: this runs as a loop callback, so even an unexpected parser bug is
@@ -499,6 +591,8 @@ class Recorder:
 
         st = self.status
         if isinstance(item, ObsEpoch):
+            # The epoch's bytes arrived (serial latency: tens of ms) at this host tick: a coarse clock anchor.
+            self._gpio.set_coarse(self._last_rx_mono_ns, item.time)
             st.epochs += 1
             st.last_epoch_gpst = str(item.time)
             st.last_epoch_week = item.time.week
@@ -559,6 +653,8 @@ class Recorder:
                     return
                 except OSError as exc:
                     log.warning("cannot read free space: %s", exc)
+            for mark, tick in self._gpio.release(now):
+                self._on_gpio_mark(mark, tick)
             if self.events is not None:
                 try:
                     self.events.maybe_sync()
@@ -621,6 +717,28 @@ def serial_port_opener(settings: Settings) -> Callable[[], ByteStream]:
         return SerialByteStream(settings.port_device, settings.port_baud, settings.port_read_timeout_s)
 
     return open_port
+
+
+def gpio_edge_sources(settings: Settings) -> Callable[[], Sequence[EdgeSource]] | None:
+    """The production GPIO edge sources (trigger and PPS lines) when receiver.trigger = "gpio", else None."""
+    if receiver_options(settings).trigger != "gpio":
+        return None
+
+    def open_sources() -> Sequence[EdgeSource]:
+        from onboard.hw.gpio_edges import GpioEdgeSource, lgpio_factory
+
+        if settings.gpio_pin_factory == "mock":
+            from gpiozero.pins.mock import MockFactory
+
+            factory = MockFactory()
+        else:
+            factory = lgpio_factory()
+        return [
+            GpioEdgeSource(settings.gpio_trigger_pin, factory, line="trigger"),
+            GpioEdgeSource(settings.gpio_pps_pin, factory, line="pps"),
+        ]
+
+    return open_sources
 
 
 def run_recorder(settings: Settings, deps: RecorderDeps | None = None) -> int:

@@ -46,6 +46,7 @@ class Settings:
     status_interval_s: float = 1.0
     watchdog_writer_stall_s: float = 10.0
     gpio_trigger_pin: int = -1
+    gpio_pps_pin: int = -1
     gpio_pin_factory: str = "lgpio"
 
 
@@ -69,6 +70,7 @@ KEYS: Mapping[str, str] = MappingProxyType(
         "status.interval_s": "status_interval_s",
         "watchdog.writer_stall_s": "watchdog_writer_stall_s",
         "gpio.trigger_pin": "gpio_trigger_pin",
+        "gpio.pps_pin": "gpio_pps_pin",
         "gpio.pin_factory": "gpio_pin_factory",
     }
 )
@@ -217,9 +219,11 @@ def validate(s: Settings) -> None:
     if s.disk_floor_mb < 0 or s.journal_segment_max_mb < 0 or s.journal_segment_max_s < 0:
         raise ConfigFileError("journal sizes and disk floor must be ≥ 0")
     try:
-        receiver_options(s)
+        opts = receiver_options(s)
     except (TypeError, ValueError) as exc:
         raise ConfigFileError(f"receiver: {exc}") from exc
+    if opts.trigger == "gpio" and (s.gpio_trigger_pin < 0 or s.gpio_pps_pin < 0):
+        raise ConfigFileError("receiver.trigger = \"gpio\" needs gpio.trigger_pin and gpio.pps_pin (BCM numbers)")
 
 
 def receiver_options(s: Settings) -> Any:

@@ -87,3 +87,11 @@ def test_unknown_env_variable_and_missing_file(tmp_path: Path) -> None:
         load_settings(tmp_path / "absent.toml", environ={})
     # test hooks are not settings
     assert load_settings(None, environ={"ONBOARD_TEST_SYNC_LOG": "/tmp/x"}).port_baud == 115200
+
+
+def test_gpio_trigger_needs_both_pins() -> None:
+    with pytest.raises(ConfigFileError, match="gpio.trigger_pin and gpio.pps_pin"):
+        load_settings(None, environ={"ONBOARD_RECEIVER_TRIGGER": "gpio", "ONBOARD_GPIO_TRIGGER_PIN": "23"})
+    s = load_settings(None, environ={"ONBOARD_RECEIVER_TRIGGER": "gpio", "ONBOARD_GPIO_TRIGGER_PIN": "23",
+                                     "ONBOARD_GPIO_PPS_PIN": "24"})
+    assert s.gpio_trigger_pin == 23 and s.gpio_pps_pin == 24

@@ -1,0 +1,102 @@
+"""Trigger pulses measured on a GPIO (receiver.trigger = "gpio"), timed through PPS edges on another GPIO."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from types import MappingProxyType
+
+import numpy as np
+import pytest
+
+from onboard.daemon import GpioTiming, RecorderDeps
+from onboard.gnsstime import GpsTime
+from onboard.hw.fake import FakeByteStream
+from onboard.hw.ports import Edge
+from onboard.logger.events import read_events
+from onboard.rtk.types import ObsEpoch
+from tests.daemon.helpers import RunningRecorder, make_settings, status, wait_until
+
+T0 = GpsTime.from_week_tow_s(2300, 1000.0)
+S = 1_000_000_000
+
+
+def test_trigger_interpolated_between_pps_anchors() -> None:
+    g = GpioTiming(wait_ns=2 * S)
+    g.set_coarse(10 * S, T0)  # host tick 10 s ↔ GPS tow 1000 s (coarse: ms off)
+    assert g.add(Edge("pps", True, 10 * S + 30_000_000), 10 * S) == []  # PPS at GPS 1000 s (host clock +30 ms)
+    assert g.add(Edge("trigger", True, 10 * S + 530_000_000), 10 * S) == []  # waits for the next PPS
+    out = g.add(Edge("pps", True, 11 * S + 30_000_100), 11 * S)  # host clock runs 100 ns/s fast
+    assert len(out) == 1
+    mark, tick = out[0]
+    assert tick == 10 * S + 530_000_000 and mark.channel == 1 and mark.edge == "rising" and mark.valid
+    assert mark.source == "gpio" and mark.count == 1
+    want = T0.add_ns(round(500_000_000 * S / (S + 100)))
+    assert abs(mark.time.diff_ns(want)) <= 1  # type: ignore[union-attr]
+
+
+def test_trigger_without_pps_gets_no_time_after_waiting() -> None:
+    g = GpioTiming(wait_ns=2 * S)
+    assert g.add(Edge("trigger", True, 5 * S), 5 * S) == []
+    assert g.release(6 * S) == []
+    [(mark, _)] = g.release(7 * S)
+    assert not mark.valid and mark.time is None  # no anchor: better no time than a wrong one
+
+
+def _epoch_frame(t: GpsTime) -> bytes:
+    from hil_sim.ubx_encode import rxm_raw
+
+    n = 5
+    epoch = ObsEpoch(
+        time=t, gnss_id=np.zeros(n, np.int8), sv_id=np.arange(1, n + 1, dtype=np.int16),
+        pr_m=np.full(n, 2.2e7), cp_cyc=np.full(n, 1.1e8), dop_hz=np.zeros(n), cn0_dbhz=np.full(n, 42.0),
+        lock_ms=np.full(n, np.nan), lli=np.zeros(n, np.uint8),
+    )
+    return rxm_raw(epoch)
+
+
+@pytest.mark.timeout(60)
+def test_recorder_times_gpio_trigger_pulses(tmp_path: Path) -> None:
+    """In-process recorder with gpiozero MockFactory pins: a raw epoch gives the coarse anchor, PPS edges the
+    fine ones, and the trigger pulse lands in events.jsonl as a GPS-timed mark paired with nothing yet."""
+    pytest.importorskip("hil_sim.ubx_encode")
+    from gpiozero.pins.mock import MockFactory
+
+    from onboard.hw.gpio_edges import GpioEdgeSource
+
+    factory = MockFactory()
+    stream = FakeByteStream()
+    sources = [GpioEdgeSource(23, factory, line="trigger"), GpioEdgeSource(24, factory, line="pps")]
+    settings = make_settings(
+        tmp_path, receiver_configure=False, gpio_trigger_pin=23, gpio_pps_pin=24,
+        receiver_options=MappingProxyType({"trigger": "gpio"}),
+    )
+    run = RunningRecorder(settings, RecorderDeps(open_port=lambda: stream, edge_sources=lambda: sources))
+    try:
+        wait_until(lambda: status(settings.status_path).get("port_open"), what="port open")
+        pps, trig = factory.pin(24), factory.pin(23)
+        t_epoch = T0.add_s(-0.05)  # the epoch tag 50 ms before the coming PPS second
+        stream.feed(_epoch_frame(t_epoch))
+        wait_until(lambda: status(settings.status_path).get("epochs") == 1, what="epoch decoded")
+        pps.drive_high()
+        pps.drive_low()
+        time.sleep(0.3)
+        trig.drive_high()
+        trig.drive_low()
+        time.sleep(0.7)
+        pps.drive_high()
+        pps.drive_low()
+        wait_until(lambda: status(settings.status_path).get("time_marks", 0) >= 2, what="trigger marks")
+        assert run.stop() == 0
+    finally:
+        factory.reset()
+    flight = next(settings.data_dir.glob("flight-*"))
+    records = read_events(flight / "events.jsonl").records
+    marks = [r for r in records if r["kind"] == "mark" and r["source"] == "gpio"]
+    rising = [m for m in marks if m["edge"] == "rising"]
+    assert len(rising) == 1 and rising[0]["valid"] and rising[0]["channel"] == 1
+    # ~0.3 s after the PPS at the whole second T0 (sleep jitter allowed; exactness is the pure test above)
+    offset_s = GpsTime(rising[0]["week"], rising[0]["tow_ns"]).diff_s(T0)
+    assert 0.25 < offset_s < 0.6
+    pairings = [r for r in records if r["kind"] == "pairing"]
+    assert pairings and pairings[0]["pulse_source"] == "gpio" and "pulse_without_flash" in pairings[0]["flags"]
