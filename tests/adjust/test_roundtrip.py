@@ -130,3 +130,30 @@ def test_relative_control_cancels_a_gnss_bias(block_factory: Any, problem_factor
     assert relative.checkpoint_rms_m["3d"] < 0.01
     assert relative.delay_s == pytest.approx(block.truth_delay_s, abs=0.001)
     assert relative.relative_control and relative.to_dict()["relative_control"] is True
+
+
+def test_relative_control_cancels_a_bias_that_jumps_between_lines(
+    block_factory: Any, problem_factory: Any, quiet: dict
+) -> None:
+    """Float RTK re-converging after each turn: a different 10–30 cm offset per line. Differences never span a
+    turn (dt > max_pair_dt_s), so each line's offset cancels; absolute control spreads them into the result."""
+    from dataclasses import replace
+
+    block = block_factory(6, gcp_names=("P00", "P08"), **quiet)
+    problem = problem_factory(block)
+    order = np.argsort(problem.event_time_s)
+    seg = np.zeros(len(order), dtype=int)
+    seg[order[1:]] = np.cumsum(np.diff(problem.event_time_s[order]) > 5.0)
+    rng = np.random.default_rng(0)
+    offsets = rng.uniform(0.1, 0.3, (seg.max() + 1, 3)) * rng.choice([-1, 1], (seg.max() + 1, 3))
+    biased = replace(problem, antenna_enu_m=problem.antenna_enu_m + offsets[seg])
+    lever = LeverArmSpec(mode="prior", value_m=tuple(block.truth_lever_arm_m), sigma_m=(0.005,) * 3)
+    opts = AdjustmentOptions(lever_arm=lever, camera_centre_sigma_m=0.001, max_pair_dt_s=8.0)
+    with pytest.raises(AdjustmentRefused, match="outliers"):  # absolute control sees inconsistent lines
+        adjust(biased, opts)
+    absolute = adjust(biased, replace(opts, max_outlier_fraction=1.0))
+    relative = adjust(biased, replace(opts, relative_control=True))
+    assert absolute.checkpoint_rms_m["3d"] > 0.05
+    assert len(relative.outliers) < 0.06 * len(problem.images)  # only the χ²₃ 95 % tail of good images
+    assert relative.checkpoint_rms_m["3d"] < 0.01
+    assert relative.delay_s == pytest.approx(block.truth_delay_s, abs=0.002)
