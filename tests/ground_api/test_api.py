@@ -192,7 +192,7 @@ def test_interrupted_upload_resumes_to_byte_identical_files(api_settings: ApiSet
         fdir = api_settings.flights_dir / rep.flight_id
         for p in folder.iterdir():
             assert (fdir / p.name).read_bytes() == p.read_bytes(), p.name
-        assert not list(fdir.glob("*.part"))
+        assert not list((fdir / ".partial").iterdir())
         # a third run finds everything complete and sends nothing
         again = Uploader(srv.url, TOKEN, opts, sleep=lambda s: None).upload_flight(folder)
         assert again.bytes_sent == 0 and again.flight_id == rep.flight_id

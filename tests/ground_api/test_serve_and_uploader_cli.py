@@ -125,3 +125,78 @@ def test_empty_file_completes_at_creation(live: LiveServer) -> None:
         assert r.status_code == 201
         assert r.json()["files"][0]["status"] == "complete" and r.json()["status"] == "complete"
         assert c.get(f"/flights/{r.json()['id']}/files/events.jsonl/content").content == b""
+
+
+_LIMITED_SERVER = """
+import resource, signal, sys
+from pathlib import Path
+import uvicorn
+from ground.api.app import create_app
+from ground.api.settings import ApiSettings
+limit = int(sys.argv[3])
+if limit:
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit then fails with EFBIG
+    resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+settings = ApiSettings(data_dir=Path(sys.argv[1]), token=sys.argv[4], max_chunk_bytes=100_000)
+uvicorn.run(create_app(settings), host="127.0.0.1", port=int(sys.argv[2]), log_level="warning")
+"""
+
+
+def _start_limited(data: Path, limit: int) -> tuple[subprocess.Popen[str], str]:
+    port = _free_port()
+    proc = subprocess.Popen([sys.executable, "-c", _LIMITED_SERVER, str(data), str(port), str(limit), TOKEN],
+                            cwd=ROOT, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True)
+    url = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            if httpx.get(f"{url}/health", timeout=1).status_code == 200:
+                return proc, url
+        except httpx.TransportError:
+            pass
+        assert time.monotonic() < deadline and proc.poll() is None, "server did not start"
+        time.sleep(0.1)
+
+
+def test_full_disk_rejects_the_chunk_and_keeps_what_was_stored(tmp_path: Path) -> None:
+    """The server process may not write files past 350 kB (RLIMIT_FSIZE, like a full disk): the chunk that does
+    not fit gets 507, the partial file is cut back to the last whole chunk, and after a restart with space the
+    upload resumes from there to a byte-identical file."""
+    data = tmp_path / "data"
+    blob = os.urandom(500_000)
+    headers = {"Authorization": f"Bearer {TOKEN}"}
+    proc, url = _start_limited(data, 350_000)
+    try:
+        with httpx.Client(base_url=url, headers=headers, timeout=30) as c:
+            body = {"name": "full", "files": [{"name": "a.ubx", "size": len(blob),
+                                               "sha256": hashlib.sha256(blob).hexdigest()}]}
+            fid = c.post("/flights", json=body).json()["id"]
+            codes = []
+            for off in range(0, len(blob), 100_000):
+                chunk = blob[off:off + 100_000]
+                r = c.put(f"/flights/{fid}/files/a.ubx", params={"offset": off}, content=chunk,
+                          headers={"X-Chunk-SHA256": hashlib.sha256(chunk).hexdigest()})
+                codes.append(r.status_code)
+                if r.status_code != 200:
+                    break
+            assert codes == [200, 200, 200, 507]
+            assert c.head(f"/flights/{fid}/files/a.ubx").headers["Upload-Offset"] == "300000"
+        assert (data / "flights" / fid / ".partial" / "a.ubx").stat().st_size == 300_000
+    finally:
+        proc.terminate()
+        proc.wait(timeout=20)
+    proc, url = _start_limited(data, 0)
+    try:
+        with httpx.Client(base_url=url, headers=headers, timeout=30) as c:
+            off = int(c.head(f"/flights/{fid}/files/a.ubx").headers["Upload-Offset"])
+            while off < len(blob):
+                chunk = blob[off:off + 100_000]
+                r = c.put(f"/flights/{fid}/files/a.ubx", params={"offset": off}, content=chunk,
+                          headers={"X-Chunk-SHA256": hashlib.sha256(chunk).hexdigest()})
+                assert r.status_code == 200
+                off = r.json()["received"]
+            assert r.json()["status"] == "complete"
+        assert (data / "flights" / fid / "a.ubx").read_bytes() == blob
+    finally:
+        proc.terminate()
+        proc.wait(timeout=20)

@@ -42,6 +42,15 @@ _locks: dict[tuple[str, str], threading.Lock] = {}
 _locks_guard = threading.Lock()
 
 
+#: partial uploads live here, apart from the final names (a manifest name can never start with a dot)
+PARTIAL_DIR = ".partial"
+
+
+def partial_path(path: Path) -> Path:
+    """Where the bytes of a file being uploaded accumulate until its SHA-256 is verified."""
+    return path.parent / PARTIAL_DIR / path.name
+
+
 def _file_lock(flight_id: str, name: str) -> threading.Lock:
     with _locks_guard:
         return _locks.setdefault((flight_id, name), threading.Lock())
@@ -206,7 +215,7 @@ async def _read_body_capped(request: Request, limit: int) -> bytes:
 
 
 @router.put("/{flight_id}/files/{name:path}", response_model=FileOut,
-            responses={400: {}, 404: {}, 409: {}, 413: {}, 422: {}},
+            responses={400: {}, 404: {}, 409: {}, 413: {}, 422: {}, 507: {}},
             openapi_extra={"requestBody": {"content": {"application/octet-stream": {"schema": {
                 "type": "string", "format": "binary"}}}, "required": True}})
 async def put_chunk(
@@ -242,7 +251,7 @@ def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str
         flight, f = _lookup_file(s, flight_id, name)
         if f.status == "complete":
             raise HTTPException(status_code=409, detail=f"{name} is already complete")
-        part = path.with_name(path.name + ".part")
+        part = partial_path(path)
         on_disk = part.stat().st_size if part.exists() else 0
         if on_disk != f.received:  # a crash between write and commit: the disk is the truth
             log.warning("%s/%s: received %d in DB but %d on disk; using the disk", flight_id, name, f.received,
@@ -263,11 +272,21 @@ def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str
             sess.rejected_chunks += 1
             s.commit()
             raise _http(exc) from exc
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(part, "ab") as fh:
-            fh.write(body)
-            fh.flush()
-            os.fsync(fh.fileno())
+        part.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            with open(part, "ab") as fh:
+                fh.write(body)
+                fh.flush()
+                os.fsync(fh.fileno())
+        except OSError as exc:
+            # full disk, quota, file-size limit: cut back to the last whole chunk so nothing half-written stays
+            with open(part, "ab") as fh:
+                fh.truncate(offset)
+            sess.rejected_chunks += 1
+            s.commit()
+            log.error("%s/%s: cannot store chunk at %d: %s", flight_id, name, offset, exc)
+            raise HTTPException(status_code=507, detail=f"cannot store the chunk ({exc.strerror}); "
+                                                        f"resume from {offset} when space is back") from exc
         f.received = offset + len(body)
         f.status = "partial"
         sess.bytes_received += len(body)
@@ -287,7 +306,8 @@ def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str
 
 def _finish_file(settings: ApiSettings, s: Any, flight: Flight, f: FlightFile, path: Path) -> None:
     """Verify the whole file's SHA-256 and move it into place; on mismatch discard it and restart at 0."""
-    part = path.with_name(path.name + ".part")
+    part = partial_path(path)
+    part.parent.mkdir(parents=True, exist_ok=True)
     part.touch()
     h = hashlib.sha256()
     with open(part, "rb") as fh:
