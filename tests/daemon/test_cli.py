@@ -24,7 +24,7 @@ def onboard(*args: str, cwd: Path = PROJECT) -> subprocess.CompletedProcess[str]
 
 def test_help_lists_commands() -> None:
     out = onboard("--help")
-    assert out.returncode == 0 and "run" in out.stdout and "convert" in out.stdout
+    assert out.returncode == 0 and all(c in out.stdout for c in ("run", "convert", "check", "rtk"))
     out = onboard("run", "--help")
     assert out.returncode == 0 and "--data-dir" in out.stdout and "--port" in out.stdout
 
