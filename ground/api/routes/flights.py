@@ -1,4 +1,20 @@
-"""Flights: create from a manifest, resumable checksummed file upload, jobs, results and report."""
+"""Flights: create from a manifest, resumable checksummed file upload, jobs, results and report.
+
+Upload protocol (every route needs `Authorization: Bearer <token>`):
+
+1. `POST /flights` {name, files: [{name, size, sha256, role?}]} → 201 with the flight id (200 with the same
+   flight when name and files are identical: an uploader restarted from scratch resumes; 409 when the name
+   exists with other files). Names are single path components (no `/`, `\\`, `..`, NUL, leading dot).
+2. `HEAD /flights/{id}/files/{name}` → `Upload-Offset` (bytes held, where to resume) and `Upload-Length`.
+3. `PUT /flights/{id}/files/{name}?offset=N` body = the next bytes, header `X-Chunk-SHA256` = their SHA-256:
+   200 with the new state; 409 if N is not `Upload-Offset`; 422 if the chunk's hash differs (not stored);
+   413 for a chunk over the limit or past the promised size; 507 when the disk cannot take it. When the last
+   byte arrives the whole file's SHA-256 is checked: the file moves into place (`complete`), or it is discarded
+   and restarts at 0 (422).
+4. Once every file is complete, jobs are queued by role: `rtk` when `rover_obs` + `base_obs` are present,
+   `adjust` when `events` + `orientations` (+ `trajectory`, or the RTK job's) are; or `POST /flights/{id}/jobs`.
+   `GET /flights/{id}/results` and `/report` serve the latest finished adjustment.
+"""
 
 from __future__ import annotations
 
