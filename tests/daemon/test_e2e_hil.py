@@ -13,6 +13,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -178,3 +179,39 @@ def test_port_disappears_and_returns_configuration_reapplied(tmp_path: Path) -> 
     after = [e for e in epochs if e.time.diff_s(gap_start) > unplug_for_s]
     before = [e for e in epochs if e.time.diff_s(gap_start) < 0]
     assert len(before) >= 10 and len(after) >= 10  # recorded on both sides of the outage, in one flight
+
+
+def test_silent_receiver_every_byte_recorded_status_names_the_problem(tmp_path: Path) -> None:
+    """An emulated receiver that never answers configuration (factory NMEA only): the daemon records every byte
+    sent after it opened the port, keeps recording, and the status names MON-VER as the failing message."""
+    scenario = hil_scenario.Scenario.default(model="m8t")
+    world = World(scenario)
+    emu = ReceiverEmulator("m8t", ReceiverOptions(silent=True), world, speed=SPEED, t_start=scenario.start,
+                           initial_baud=115200)
+    port = emu.start()
+    proc, data_dir, status_path = start_daemon(tmp_path, port)
+    try:
+        wait_until(lambda: status(status_path).get("port_open"), timeout_s=30, what="port open")
+        sent_before_open = emu.bytes_out  # an upper bound of what pyserial's open() flushed
+        st = wait_until(lambda: (s := status(status_path)).get("config_state") == "failed" and s,
+                        timeout_s=60, what="configuration failure")
+        assert "MON-VER" in st["config_error"] and "no answer" in st["config_error"]
+        time.sleep(2.0)
+        emu.stop()  # the receiver goes away: nothing more is sent
+        wait_until(lambda: status(status_path).get("state") == "port_lost", timeout_s=30, what="port lost")
+        sent_total = emu.bytes_out
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=30)
+        assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        emu.stop()
+    assert emu.port.tx_overrun_bytes == 0
+    flight = next(data_dir.glob("flight-*"))
+    recorded = b"".join(iter_journal_bytes(flight))
+    assert sent_total - sent_before_open <= len(recorded) <= sent_total
+    assert recorded.count(b"$GNGGA") + recorded.count(b"$GPGGA") >= 3  # the factory NMEA is all there
+    st = status(status_path)
+    assert st["state"] == "stopped" and st["config_state"] == "failed" and st["bytes_recorded"] == len(recorded)
