@@ -1,4 +1,4 @@
-"""`python -m ground adjust|serve`: the thin shell around the importers, the adjustment core and the API.
+"""`python -m ground adjust|calibrate|serve`: the thin shell around the importers, the adjustment core and the API.
 
 `adjust` semantics for lever arm and delay: a value alone is fixed, a value with σ is a prior, `--estimate
 lever-arm,delay` without a value leaves the parameter free. Outputs in OUTDIR: `results.json` (the core's
@@ -305,6 +305,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="largest accepted error of a datum change (PROJ null shifts such as WGS 84 → RGF93 state "
                    "1 m and are refused by default)")
     a.add_argument("-o", "--out", required=True, type=Path, help="output folder")
+    k = sub.add_parser("calibrate", help="lever arm from a ground (pseudo-materialization) acquisition")
+    k.add_argument("targets", type=Path, help="CSV target,group,x,y,z (ground.io.calibration_csv)")
+    k.add_argument("--compare", type=Path, help="a second acquisition (e.g. after landing) to check stability")
+    k.add_argument("-o", "--out", type=Path, help="write the JSON result here")
     s = sub.add_parser("serve", help="run the ground API (FastAPI + uvicorn)")
     s.add_argument("--host", default="127.0.0.1")
     s.add_argument("--port", type=int, default=8600)
@@ -314,6 +318,33 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--max-chunk-mib", type=float, default=16.0)
     s.add_argument("--max-file-gib", type=float, default=8.0)
     return p
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    """`calibrate`: G's pseudo-materialization core on one (or two) target files; prints the adjust options."""
+    from ground.adjust.calibration import CalibrationError, calibrate_lever_arm, compare_calibrations
+    from ground.io.calibration_csv import read_calibration_csv
+
+    try:
+        first = calibrate_lever_arm(read_calibration_csv(args.targets))
+        second = calibrate_lever_arm(read_calibration_csv(args.compare)) if args.compare else None
+    except (InputError, CalibrationError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    out: dict[str, Any] = {"calibration": first.to_dict()}
+    o, sd = first.lever_arm_m, first.sigma_m
+    print("lever arm O (camera frame, antenna − optical centre): "
+          + ", ".join(f"{v * 1000:+.1f} ± {e * 1000:.1f} mm" for v, e in zip(o, sd)))
+    print(f"use: --lever-arm {o[0]:.4f},{o[1]:.4f},{o[2]:.4f} --lever-arm-sigma {max(float(sd.max()), 1e-4):.4f}")
+    if second is not None:
+        cmp = compare_calibrations(first, second)
+        out["second"] = second.to_dict()
+        out["comparison"] = cmp.to_dict()
+        print(f"second acquisition differs by {cmp.abs_m * 1000:.1f} mm "
+              f"({'stable' if cmp.stable else 'NOT stable'} within 3σ), box rotated {cmp.box_rotation_change_deg:.3f}°")
+    if args.out is not None:
+        args.out.write_text(json.dumps(out, indent=2), encoding="utf-8")
+    return 0 if second is None or out["comparison"]["stable"] else 1
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -348,6 +379,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"warning: {w}")
         print(f"wrote {args.out / 'results.json'}, {args.out / 'report.html'}, {args.out / 'exports'}")
         return 0
+    if args.command == "calibrate":
+        return _calibrate(args)
     if args.command == "serve":
         import uvicorn
 

@@ -189,3 +189,48 @@ def test_gcp_in_projected_crs_and_odm_list_with_relative_file(tmp_path: Path) ->
         np.testing.assert_allclose(outs[tag]["translation_m"], outs["ecef"]["translation_m"], atol=2e-3)
         np.testing.assert_allclose(outs[tag]["lever_arm_m"], outs["ecef"]["lever_arm_m"], atol=2e-3)
     assert len(outs["odm"]["checkpoints"]) == 2  # chk_ labels became check points
+
+
+def _calibration_csv(path: Path, box_shift_m: float = 0.0, noise_m: float = 0.0005, seed: int = 0) -> np.ndarray:
+    """Targets of one ground acquisition for a known lever arm; returns that lever arm (camera frame, m)."""
+    from ground.io.rotations import rotation_from_axis_angle
+
+    rng = np.random.default_rng(seed)
+    cam_targets = rng.uniform(-0.08, 0.08, (5, 3))
+    box_targets = rng.uniform(-0.04, 0.04, (4, 3))
+    phase_centre = np.array([0.0, 0.0, 0.012])
+    r2, t2 = rotation_from_axis_angle([0.1, -0.2, 0.05]), np.array([0.09 + box_shift_m, -0.06, -0.08])
+    s1, r1, t1 = 0.5, rotation_from_axis_angle([0.3, 0.1, -0.4]), np.array([1.0, 2.0, 0.5])  # acq → camera
+
+    def to_acq(c: np.ndarray) -> np.ndarray:
+        return (c - t1) @ r1 / s1  # inverse of x ↦ s1·R1·x + t1
+
+    lines = ["target,group,x,y,z"]
+    for i, c in enumerate(cam_targets):
+        lines.append(f"C{i},camera_frame,{c[0]:.6f},{c[1]:.6f},{c[2]:.6f}")
+        a = to_acq(c) + rng.normal(0, noise_m, 3)
+        lines.append(f"C{i},camera_acq,{a[0]:.6f},{a[1]:.6f},{a[2]:.6f}")
+    for i, b in enumerate(box_targets):
+        lines.append(f"B{i},box_frame,{b[0]:.6f},{b[1]:.6f},{b[2]:.6f}")
+        a = to_acq(r2 @ b + t2) + rng.normal(0, noise_m, 3)
+        lines.append(f"B{i},box_acq,{a[0]:.6f},{a[1]:.6f},{a[2]:.6f}")
+    lines.append(f"phase_centre,box_frame,{phase_centre[0]},{phase_centre[1]},{phase_centre[2]}")
+    path.write_text("\n".join(lines) + "\n")
+    return r2 @ phase_centre + t2
+
+
+def test_calibrate_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`python -m ground calibrate` prints the lever arm to pass to adjust; a moved box is flagged (exit 1)."""
+    truth = _calibration_csv(tmp_path / "before.csv")
+    _calibration_csv(tmp_path / "after.csv", seed=1)
+    assert main(["calibrate", str(tmp_path / "before.csv"), "--compare", str(tmp_path / "after.csv"),
+                 "-o", str(tmp_path / "cal.json")]) == 0
+    out = json.loads((tmp_path / "cal.json").read_text())
+    np.testing.assert_allclose(out["calibration"]["lever_arm_m"], truth, atol=0.003)
+    assert "--lever-arm " in capsys.readouterr().out and out["comparison"]["stable"]
+    _calibration_csv(tmp_path / "moved.csv", box_shift_m=0.02, seed=2)
+    assert main(["calibrate", str(tmp_path / "before.csv"), "--compare", str(tmp_path / "moved.csv")]) == 1
+    assert "NOT stable" in capsys.readouterr().out
+    (tmp_path / "bad.csv").write_text("target,group,x,y,z\nC1,elsewhere,1,2,3\n")
+    assert main(["calibrate", str(tmp_path / "bad.csv")]) == 2
+    assert "bad.csv:2" in capsys.readouterr().err
