@@ -396,6 +396,16 @@ def main(argv: list[str] | None = None) -> int:
         except (InputError, ConfigFileError) as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
+        from sqlalchemy.exc import SQLAlchemyError
+
+        from ground.store import Store
+
+        try:  # fail here, clearly, rather than inside the server's start-up
+            settings.data_dir.mkdir(parents=True, exist_ok=True)
+            Store(settings.db_url).close()
+        except (SQLAlchemyError, ImportError, OSError) as exc:
+            print(f"error: cannot open the flight store {settings.db_url.split('@')[-1]}: {exc}", file=sys.stderr)
+            return 2
         uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level="info")
         return 0
     return 2

@@ -200,3 +200,12 @@ def test_full_disk_rejects_the_chunk_and_keeps_what_was_stored(tmp_path: Path) -
     finally:
         proc.terminate()
         proc.wait(timeout=20)
+
+
+def test_serve_refuses_an_unusable_database_url(tmp_path: Path) -> None:
+    """A DATABASE_URL whose driver is missing or whose file cannot be created: exit 2 with the reason."""
+    for url in ("postgresql+nosuchdriver://u@db/flights", f"sqlite:///{tmp_path}/missing/dir/x.sqlite3"):
+        out = subprocess.run([sys.executable, "-m", "ground", "serve", "--data-dir", str(tmp_path / "d")],
+                             cwd=ROOT, env=_env(DIRECTGEO_TOKEN=TOKEN, DATABASE_URL=url), capture_output=True,
+                             text=True, timeout=60, check=False)
+        assert out.returncode == 2 and "cannot open the flight store" in out.stderr, out.stderr
