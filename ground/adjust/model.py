@@ -39,6 +39,12 @@ PARAMETER_NAMES: tuple[str, ...] = (
 CHI2_3DOF_95 = 7.815
 
 
+def _num(x: Any) -> float | None:
+    """float for JSON; None for NaN/±inf (strict JSON has no Infinity)."""
+    v = float(x)
+    return v if np.isfinite(v) else None
+
+
 class AdjustmentRefused(ValueError):
     """The problem as posed cannot be solved meaningfully; the message says why and what to add."""
 
@@ -257,59 +263,58 @@ class AdjustmentResult:
         return self.translation_m + self.scale * p @ self.rotation.T
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able summary (lists and floats only)."""
-        rms_3d = self.checkpoint_rms_m
+        """JSON-able summary (lists, floats; a non-finite number — σ of an undeterminable parameter — is None)."""
         return {
-            "lever_arm_m": [float(x) for x in self.lever_arm_m],
-            "lever_arm_sigma_m": [float(x) for x in self.lever_arm_sigma_m],
-            "delay_s": float(self.delay_s),
-            "delay_sigma_s": float(self.delay_sigma_s),
-            "scale": float(self.scale),
-            "scale_sigma": float(self.scale_sigma),
-            "rotation": [[float(x) for x in row] for row in self.rotation],
-            "rotation_sigma_rad": [float(x) for x in self.rotation_sigma_rad],
-            "translation_m": [float(x) for x in self.translation_m],
-            "translation_sigma_m": [float(x) for x in self.translation_sigma_m],
-            "sigma0": float(self.sigma0),
+            "lever_arm_m": [_num(x) for x in self.lever_arm_m],
+            "lever_arm_sigma_m": [_num(x) for x in self.lever_arm_sigma_m],
+            "delay_s": _num(self.delay_s),
+            "delay_sigma_s": _num(self.delay_sigma_s),
+            "scale": _num(self.scale),
+            "scale_sigma": _num(self.scale_sigma),
+            "rotation": [[_num(x) for x in row] for row in self.rotation],
+            "rotation_sigma_rad": [_num(x) for x in self.rotation_sigma_rad],
+            "translation_m": [_num(x) for x in self.translation_m],
+            "translation_sigma_m": [_num(x) for x in self.translation_sigma_m],
+            "sigma0": _num(self.sigma0),
             "correlations": {
                 "names": list(self.parameter_names),
-                "matrix": [[float(x) for x in row] for row in self.correlations],
+                "matrix": [[_num(x) for x in row] for row in self.correlations],
             },
-            "condition_number": float(self.condition_number),
+            "condition_number": _num(self.condition_number),
             "weakest_combination": self.weakest_combination,
             "warnings": list(self.warnings),
-            "outliers": [{"image": name, "chi2": float(c2)} for name, c2 in self.outliers],
+            "outliers": [{"image": name, "chi2": _num(c2)} for name, c2 in self.outliers],
             "residuals": [
                 {
                     "image": name,
-                    "e_m": float(r[0]),
-                    "n_m": float(r[1]),
-                    "u_m": float(r[2]),
+                    "e_m": _num(r[0]),
+                    "n_m": _num(r[1]),
+                    "u_m": _num(r[2]),
                     "outlier": bool(o),
                 }
                 for name, r, o in zip(self.images, self.residuals_enu_m, self.outlier_mask, strict=True)
             ],
             "gcp_residuals": [
-                {"name": name, "de_m": d[0], "dn_m": d[1], "du_m": d[2]}
+                {"name": name, "de_m": _num(d[0]), "dn_m": _num(d[1]), "du_m": _num(d[2])}
                 for name, d in self.gcp_residuals_enu_m.items()
             ],
             "checkpoints": [
                 {
                     "name": c.name,
-                    "de_m": c.de_m,
-                    "dn_m": c.dn_m,
-                    "du_m": c.du_m,
-                    "abs_m": c.abs_m,
-                    "sigma_m": c.sigma_m,
-                    "sigma_enu_m": list(c.sigma_enu_m),
+                    "de_m": _num(c.de_m),
+                    "dn_m": _num(c.dn_m),
+                    "du_m": _num(c.du_m),
+                    "abs_m": _num(c.abs_m),
+                    "sigma_m": _num(c.sigma_m),
+                    "sigma_enu_m": [_num(x) for x in c.sigma_enu_m],
                 }
                 for c in self.checkpoints
             ],
-            "checkpoint_rms_m": dict(rms_3d),
-            "checkpoint_mean_m": dict(self.checkpoint_mean_m),
-            "checkpoint_std_m": dict(self.checkpoint_std_m),
+            "checkpoint_rms_m": {k: _num(v) for k, v in self.checkpoint_rms_m.items()},
+            "checkpoint_mean_m": {k: _num(v) for k, v in self.checkpoint_mean_m.items()},
+            "checkpoint_std_m": {k: _num(v) for k, v in self.checkpoint_std_m.items()},
             "n_images": len(self.images),
             "n_observations": int(self.n_observations),
-            "variance_inflation": float(self.variance_inflation),
+            "variance_inflation": _num(self.variance_inflation),
             "relative_control": bool(self.relative_control),
         }

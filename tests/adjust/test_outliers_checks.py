@@ -202,3 +202,22 @@ def test_single_strip_with_a_similarity_prior_is_solved() -> None:
     )
     result = adjust(problem, opts)
     assert np.allclose(result.rotation, np.eye(3), atol=1e-4) and result.scale == pytest.approx(1.0, abs=1e-4)
+
+
+def test_to_dict_is_strict_json_when_a_parameter_is_undeterminable(
+    block_factory: Any, problem_factory: Any, quiet: dict
+) -> None:
+    """Relative control with no wobble: O_z has no signal at all; its σ is infinite, written as null."""
+    block = block_factory(
+        1,
+        gcp_names=("P05",),
+        wobble_deg=0.0,
+        camera_angle_noise_deg=0.0,
+        **{k: v for k, v in quiet.items() if k != "camera_angle_noise_deg"},
+    )
+    result = adjust(
+        problem_factory(block), AdjustmentOptions(relative_control=True, camera_centre_sigma_m=0.001)
+    )
+    assert any("O_z" in w and ("not determinable" in w or "not determined" in w) for w in result.warnings)
+    text = json.dumps(result.to_dict(), allow_nan=False)  # raises on NaN/Infinity
+    assert json.loads(text)["n_images"] == len(result.images)
