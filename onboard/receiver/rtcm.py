@@ -343,17 +343,19 @@ def encode_gps_observations(epoch: ObsEpoch, station_id: int, message: int = 100
     for k in range(len(gps)):
         pr = float(gps.pr_m[k])
         amb = int(pr // PRUNIT_GPS_M)
-        pr_mod = pr - amb * PRUNIT_GPS_M
+        pr_mod = round((pr - amb * PRUNIT_GPS_M) / 0.02) * 0.02
         cp = float(gps.cp_cyc[k])
         if math.isfinite(cp):
-            ppr_cyc = cp - pr / LAMBDA_L1_M
+            # Relative to the pseudorange as transmitted (DF011 rounded to 2 cm, as RTKLIB rtcm3e does):
+            # relative to the unrounded one, the decoder's phase would be off by up to 1 cm.
+            ppr_cyc = cp - (amb * PRUNIT_GPS_M + pr_mod) / LAMBDA_L1_M
             ppr_cyc -= PPR_WRAP_CYC * round(ppr_cyc / PPR_WRAP_CYC)
             ppr_m = ppr_cyc * LAMBDA_L1_M
         else:
             ppr_m = -262.144  # 0x80000: invalid
         lock = float(gps.lock_ms[k]) if math.isfinite(gps.lock_ms[k]) else 0.0
         cn0 = float(np.clip(gps.cn0_dbhz[k], 0.0, 63.75)) if math.isfinite(gps.cn0_dbhz[k]) else 0.0
-        w.put_fields(_SAT_1002, {"DF009": int(gps.sv_id[k]), "DF010": 0, "DF011": round(pr_mod / 0.02) * 0.02,
+        w.put_fields(_SAT_1002, {"DF009": int(gps.sv_id[k]), "DF010": 0, "DF011": pr_mod,
                                  "DF012": ppr_m, "DF013": df013_from_lock_ms(lock), "DF014": amb, "DF015": cn0})
         if message == 1004:
             w.put_fields(_SAT_1004_L2, {"DF016": 0, "DF017": -8192 * 0.02, "DF018": -262.144, "DF019": 0,

@@ -1,0 +1,474 @@
+"""Base-station mode, `python -m onboard base`: the recorder on a static LEA-6T/M8T plus an RTCM3 sender.
+
+Neither receiver transmits RTCM3 itself. The daemon records the base's raw journal as on the drone (same
+`Recorder`: configuration profile, journal, status) and, from the epochs it decodes, sends corrections over
+the telemetry radio within a byte budget:
+
+    1004 (or 1002) every epoch   — never dropped
+    1006 every `position_interval_s` (10 s)   — dropped second
+    1019 per observed satellite every `ephemeris_interval_s` (30 s)   — dropped first
+
+(a token bucket of `radio_budget_bytes_s` with `radio_burst_bytes` of burst, in GPS time of the epochs), or,
+with `relay="ubx"`, a compact raw UBX relay (RXM-RAW/RAWX always, navigation frames within the budget).
+The base position is `--position` or the mean of single-point positions over `--survey-in` seconds; nothing is
+sent before it is known (a rover cannot use corrections without it). What was sent is also written to
+`radio-tx.rtcm3` (or `.ubx`) in the flight directory.
+
+Pure parts: `CorrectionScheduler`, `SurveyIn`, `BaseCore` (decoded items in, frames out). Shell: `RadioSender`
+(a thread with a bounded queue: a slow or unplugged radio never stalls recording) and `BaseStation`, a
+`Recorder` whose decoded-item and frame hooks feed the core.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import queue
+import sys
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from onboard.daemon import Recorder, RecorderDeps
+from onboard.errors import LinkLost
+from onboard.gnsstime import GpsTime
+from onboard.hw.ports import ByteStream
+from onboard.receiver.framing import Frame, Protocol
+from onboard.receiver.rtcm import BasePosition, encode_base_position, encode_ephemeris, encode_gps_observations
+from onboard.rtk.ephemeris import EphemerisStore, satellite_states
+from onboard.rtk.pntpos import pntpos
+from onboard.rtk.types import Ephemeris, ObsEpoch
+from onboard.settings import Settings
+
+log = logging.getLogger(__name__)
+
+Arr = npt.NDArray[np.float64]
+UBX_OBS = frozenset({(0x02, 0x10), (0x02, 0x15)})  # RXM-RAW, RXM-RAWX
+UBX_NAV = frozenset({(0x02, 0x11), (0x02, 0x13), (0x0B, 0x31)})  # RXM-SFRB, RXM-SFRBX, AID-EPH
+PRIORITY = {"obs": 0, "position": 1, "ephemeris": 2}
+"""Lower sends first and is dropped last; observations are never dropped."""
+
+
+@dataclass(frozen=True)
+class BaseOptions:
+    """What the base sends and how much the radio may carry."""
+
+    station_id: int = 0
+    obs_message: int = 1004
+    position_interval_s: float = 10.0
+    ephemeris_interval_s: float = 30.0
+    radio_budget_bytes_s: float = 600.0
+    radio_burst_bytes: int = 1024
+    relay: str = "rtcm"
+    position_ecef_m: tuple[float, float, float] | None = None
+    antenna_height_m: float = 0.0
+    survey_in_s: float = 0.0
+    survey_elmask_deg: float = 15.0
+
+    def __post_init__(self) -> None:
+        if self.obs_message not in (1002, 1004):
+            raise ValueError(f"obs_message must be 1002 or 1004, not {self.obs_message}")
+        if self.relay not in ("rtcm", "ubx"):
+            raise ValueError(f"relay must be 'rtcm' or 'ubx', not {self.relay!r}")
+        if self.position_ecef_m is None and self.survey_in_s <= 0 and self.relay == "rtcm":
+            raise ValueError("give the base position or a survey-in duration > 0 s")
+        if self.radio_budget_bytes_s <= 0 or self.radio_burst_bytes <= 0:
+            raise ValueError("radio budget and burst must be > 0")
+
+
+@dataclass
+class SchedulerCounts:
+    """Bytes and messages sent and messages deferred (not sent when due, for the budget) per kind."""
+
+    sent_bytes: int = 0
+    sent: dict[str, int] = field(default_factory=dict)
+    deferred: dict[str, int] = field(default_factory=dict)
+
+
+class CorrectionScheduler:
+    """Token bucket over the radio budget with priorities (pure; time is any monotonic timeline in s).
+
+    `offer(t_s, items)` takes (kind, frame) pairs due now and returns the frames to send, in priority order:
+    "obs" always (the bucket may go into debt, paid back before anything else is sent), then "position",
+    then "ephemeris" while the bucket holds enough bytes. Deferred items are counted; the caller offers them
+    again when they are next due.
+    """
+
+    def __init__(self, budget_bytes_s: float, burst_bytes: int) -> None:
+        self.budget_bytes_s = budget_bytes_s
+        self.burst_bytes = burst_bytes
+        self.credit_bytes = float(burst_bytes)
+        self._t_s: float | None = None
+        self.counts = SchedulerCounts()
+
+    def offer(self, t_s: float, items: list[tuple[str, bytes]]) -> list[tuple[str, bytes]]:
+        """The subset of `items` to send at `t_s` (see class doc)."""
+        if self._t_s is not None and t_s > self._t_s:
+            self.credit_bytes = min(float(self.burst_bytes),
+                                    self.credit_bytes + (t_s - self._t_s) * self.budget_bytes_s)
+        self._t_s = t_s if self._t_s is None else max(self._t_s, t_s)
+        out = []
+        for kind, frame in sorted(items, key=lambda kv: PRIORITY[kv[0]]):
+            if kind == "obs" or self.credit_bytes >= len(frame):
+                self.credit_bytes -= len(frame)
+                out.append((kind, frame))
+                self.counts.sent[kind] = self.counts.sent.get(kind, 0) + 1
+                self.counts.sent_bytes += len(frame)
+            else:
+                self.counts.deferred[kind] = self.counts.deferred.get(kind, 0) + 1
+        return out
+
+
+def spp_position(epoch: ObsEpoch, store: EphemerisStore, iono: tuple | None = None,
+                 elmask_deg: float = 15.0) -> Arr | None:
+    """Single-point position (ECEF m) of one epoch's GPS pseudoranges, None when it fails."""
+    gps = epoch.gps_only()
+    if len(gps) < 4:
+        return None
+    sats = satellite_states(store, gps.sv_id, gps.time, gps.pr_m)
+    if int(np.sum(sats.ok)) < 4:
+        return None
+    sol = pntpos(gps.pr_m, sats, gps.time.tow_s, np.deg2rad(elmask_deg), None, iono)
+    return sol.pos_ecef_m if sol.ok else None
+
+
+class SurveyIn:
+    """Mean of single-point positions over `duration_s` of GPS time (pure)."""
+
+    def __init__(self, duration_s: float) -> None:
+        self.duration_s = duration_s
+        self._first: GpsTime | None = None
+        self._sum = np.zeros(3)
+        self.count = 0
+        self.result_ecef_m: Arr | None = None
+        self.spread_m = float("nan")
+        self._positions: list[Arr] = []
+
+    def add(self, time: GpsTime, pos_ecef_m: Arr) -> Arr | None:
+        """Add one fix; returns the mean once `duration_s` has elapsed since the first (then stays fixed)."""
+        if self.result_ecef_m is not None:
+            return self.result_ecef_m
+        if self._first is None:
+            self._first = time
+        self._positions.append(np.asarray(pos_ecef_m, float))
+        if time.diff_s(self._first) >= self.duration_s and len(self._positions) >= 2:
+            pts = np.array(self._positions)
+            self.result_ecef_m = pts.mean(axis=0)
+            self.spread_m = float(np.sqrt(np.mean(np.sum((pts - self.result_ecef_m) ** 2, axis=1))))
+            log.info("survey-in done: %d fixes over %.0f s, 3D scatter %.2f m", len(pts),
+                     time.diff_s(self._first), self.spread_m)
+        return self.result_ecef_m
+
+
+class BaseCore:
+    """Decoded base receiver items → radio frames (pure). Feed `on_item` (RTCM mode) or `on_frame` (UBX relay)."""
+
+    def __init__(self, options: BaseOptions) -> None:
+        from onboard.rtk.lnav import LnavAssembler
+
+        self.options = options
+        self.scheduler = CorrectionScheduler(options.radio_budget_bytes_s, options.radio_burst_bytes)
+        self.store = EphemerisStore()
+        self._lnav = LnavAssembler()
+        self._week: int | None = None
+        self.survey = SurveyIn(options.survey_in_s) if options.position_ecef_m is None else None
+        self.position: BasePosition | None = None
+        if options.position_ecef_m is not None:
+            self.position = BasePosition(options.station_id, tuple(map(float, options.position_ecef_m)),
+                                         options.antenna_height_m)
+        self._next_position_s: float | None = None
+        self._next_eph_s: dict[int, float] = {}
+        self.encode_errors = 0
+
+    def _add_ephemeris(self, eph: Ephemeris) -> None:
+        if self.store.add(eph):
+            self._next_eph_s.pop(eph.prn, None)  # a new issue goes out at the next chance
+
+    def on_item(self, item: Any) -> list[tuple[str, bytes]]:
+        """One decoded item (ObsEpoch, Ephemeris, SubframeWords); returns (kind, frame) to send now."""
+        from onboard.receiver.decode import SubframeWords
+
+        if isinstance(item, Ephemeris):
+            self._add_ephemeris(item)
+            return []
+        if isinstance(item, SubframeWords):
+            if item.gnss_id == 0:
+                if item.bits == 30:
+                    eph = self._lnav.add_subframe_words30(item.prn, item.words, reference_week=self._week)
+                else:
+                    eph = self._lnav.add_subframe(item.prn, item.words, reference_week=self._week)
+                if eph is not None:
+                    self._add_ephemeris(eph)
+            return []
+        if not isinstance(item, ObsEpoch):
+            return []
+        self._week = item.time.week
+        if self.position is None:
+            self._survey(item)
+            if self.position is None:
+                return []
+        return self._corrections(item)
+
+    def _survey(self, epoch: ObsEpoch) -> None:
+        assert self.survey is not None
+        pos = spp_position(epoch, self.store, None, self.options.survey_elmask_deg)
+        if pos is None:
+            return
+        mean = self.survey.add(epoch.time, pos)
+        if mean is not None:
+            self.position = BasePosition(self.options.station_id, (float(mean[0]), float(mean[1]), float(mean[2])),
+                                         self.options.antenna_height_m)
+
+    def _corrections(self, epoch: ObsEpoch) -> list[tuple[str, bytes]]:
+        o = self.options
+        assert self.position is not None
+        t_s = epoch.time.total_ns / 1e9
+        due: list[tuple[str, bytes]] = []
+        try:
+            due.append(("obs", encode_gps_observations(epoch, o.station_id, o.obs_message)))
+        except ValueError as exc:  # a value outside its RTCM field (corrupt epoch): skip the epoch, count it
+            self.encode_errors += 1
+            log.warning("epoch %s not encodable: %s", epoch.time, exc)
+            return []
+        if self._next_position_s is None or t_s >= self._next_position_s:
+            due.append(("position", encode_base_position(self.position)))
+        eph_prns = []
+        for prn in sorted(set(int(s) for s in epoch.gps_only().sv_id)):
+            if t_s < self._next_eph_s.get(prn, -np.inf):
+                continue
+            eph = self.store.select(prn, epoch.time)
+            if eph is not None:
+                due.append(("ephemeris", encode_ephemeris(eph)))
+                eph_prns.append(prn)
+        sent = self.scheduler.offer(t_s, due)
+        sent_frames = {id(f) for _, f in sent}
+        for kind, frame in due:
+            if id(frame) not in sent_frames:
+                continue
+            if kind == "position":
+                self._next_position_s = t_s + o.position_interval_s
+        for prn, (_, frame) in zip(eph_prns, [d for d in due if d[0] == "ephemeris"]):
+            if id(frame) in sent_frames:
+                self._next_eph_s[prn] = t_s + o.ephemeris_interval_s
+        return sent
+
+    def on_frame(self, frame: Frame, t_s: float) -> list[tuple[str, bytes]]:
+        """UBX relay: raw observation frames always, navigation frames within the budget."""
+        if frame.protocol is not Protocol.UBX:
+            return []
+        key = (frame.msg_class, frame.msg_id)
+        if key in UBX_OBS:
+            return self.scheduler.offer(t_s, [("obs", frame.raw)])
+        if key in UBX_NAV:
+            return self.scheduler.offer(t_s, [("ephemeris", frame.raw)])
+        return []
+
+
+class RadioSender:
+    """Writes frames to the radio from its own thread (bounded queue: drops and counts when full).
+
+    `open_radio` is called (again after LinkLost, with backoff) to get the ByteStream. Every frame handed
+    over is appended to `tx_log` first (what the base meant to send), then written.
+    """
+
+    def __init__(self, open_radio: Callable[[], ByteStream], tx_log: Path | None = None, max_queue: int = 256,
+                 reopen_s: float = 1.0) -> None:
+        self._open = open_radio
+        self._queue: queue.Queue[bytes | None] = queue.Queue(max_queue)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._tx_log = tx_log
+        self._log_file: Any = None
+        self.reopen_s = reopen_s
+        self.bytes_written = 0
+        self.frames_dropped = 0
+        self.write_errors = 0
+        self.radio_open = False
+
+    def start(self) -> None:
+        """Start the writer thread."""
+        if self._tx_log is not None:
+            self._log_file = open(self._tx_log, "ab")  # noqa: SIM115  (closed in stop())
+        self._thread = threading.Thread(target=self._run, name="base-radio", daemon=True)
+        self._thread.start()
+
+    def send(self, frame: bytes) -> bool:
+        """Queue one frame; False (counted) when the queue is full."""
+        if self._log_file is not None:
+            try:
+                self._log_file.write(frame)
+                self._log_file.flush()
+            except OSError as exc:
+                log.warning("radio tx log: %s", exc)
+        try:
+            self._queue.put_nowait(frame)
+            return True
+        except queue.Full:
+            self.frames_dropped += 1
+            return False
+
+    def _run(self) -> None:
+        port: ByteStream | None = None
+        while not self._stop.is_set():
+            if port is None:
+                try:
+                    port = self._open()
+                    self.radio_open = True
+                except LinkLost as exc:
+                    log.warning("radio: %s", exc)
+                    self._stop.wait(self.reopen_s)
+                    continue
+            try:
+                frame = self._queue.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            if frame is None:
+                break
+            try:
+                self.bytes_written += port.write(frame)
+            except LinkLost as exc:
+                self.write_errors += 1
+                self.radio_open = False
+                log.warning("radio write failed: %s", exc)
+                port.close()
+                port = None
+        if port is not None:
+            port.close()
+        self.radio_open = False
+
+    def stop(self) -> None:
+        """Send what is queued (briefly), then stop and close."""
+        self._stop.set()
+        try:
+            self._queue.put_nowait(None)
+        except queue.Full:
+            pass
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        if self._log_file is not None:
+            self._log_file.close()
+            self._log_file = None
+
+
+class BaseStation(Recorder):
+    """The recorder plus the correction sender: records the base journal, sends RTCM3 (or UBX) by radio."""
+
+    def __init__(self, settings: Settings, deps: RecorderDeps, options: BaseOptions,
+                 open_radio: Callable[[], ByteStream]) -> None:
+        super().__init__(settings, deps)
+        self.base_options = options
+        self.core = BaseCore(options)
+        self._open_radio = open_radio
+        self.sender: RadioSender | None = None
+
+    async def run(self) -> int:
+        """Record and send until stopped; returns the exit code."""
+        try:
+            return await super().run()
+        finally:
+            if self.sender is not None:
+                self.sender.stop()
+                c = self.core.scheduler.counts
+                log.info("base: sent %d B (%s), deferred %s, radio wrote %d B, queue drops %d", c.sent_bytes,
+                         c.sent, c.deferred, self.sender.bytes_written, self.sender.frames_dropped)
+
+    def _ensure_sender(self) -> RadioSender | None:
+        if self.sender is None and self.status.flight_dir is not None:
+            suffix = "ubx" if self.base_options.relay == "ubx" else "rtcm3"
+            self.sender = RadioSender(self._open_radio, Path(self.status.flight_dir) / f"radio-tx.{suffix}")
+            self.sender.start()
+        return self.sender
+
+    def _send(self, frames: list[tuple[str, bytes]]) -> None:
+        sender = self._ensure_sender()
+        if sender is None:
+            return
+        for _, frame in frames:
+            sender.send(frame)
+
+    def _on_frame(self, frame: Frame) -> None:
+        super()._on_frame(frame)
+        if self.base_options.relay == "ubx":
+            self._send(self.core.on_frame(frame, self.clock.monotonic_ns() / 1e9))
+
+    def _on_decoded(self, item: Any) -> None:
+        super()._on_decoded(item)
+        if self.base_options.relay == "rtcm":
+            # Best effort like all parsing: a bug here must never reach the recording path.
+            try:
+                self._send(self.core.on_item(item))
+            except (ValueError, ArithmeticError, IndexError) as exc:
+                log.error("base corrections: %s", exc)
+
+
+# --- CLI -----------------------------------------------------------------------------------------------
+
+
+def _xyz(text: str) -> tuple[float, float, float]:
+    vals = [float(v) for v in text.replace(" ", ",").split(",") if v]
+    if len(vals) != 3:
+        raise argparse.ArgumentTypeError(f"expected X,Y,Z (ECEF m), got {text!r}")
+    return (vals[0], vals[1], vals[2])
+
+
+def add_base_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:  # type: ignore[type-arg]
+    """Register `base` (base-station mode)."""
+    p = subparsers.add_parser("base", help="base station: record the base receiver and send RTCM3 by radio",
+                              description=__doc__.split("\n\n")[0])
+    p.add_argument("--port", required=True, help="base receiver serial device")
+    p.add_argument("--radio", required=True, help="telemetry radio serial device")
+    p.add_argument("--radio-baud", type=int, default=57600)
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--position", type=_xyz, metavar="X,Y,Z", help="base antenna ECEF m (use --position=...)")
+    where.add_argument("--survey-in", type=float, metavar="SECONDS", help="mean of single-point fixes over S s")
+    p.add_argument("--antenna-height", type=float, default=0.0, help="ARP to phase centre, m (sent in 1006)")
+    p.add_argument("--station-id", type=int, default=0)
+    p.add_argument("--message", type=int, choices=(1002, 1004), default=1004)
+    p.add_argument("--budget", type=float, default=600.0, help="radio byte budget, B/s (default 600)")
+    p.add_argument("--relay", choices=("rtcm", "ubx"), default="rtcm", help="RTCM3 (default) or raw UBX relay")
+    p.add_argument("--config", type=Path, help="TOML configuration file (as for `run`)")
+    p.add_argument("--baud", type=int, help="receiver line rate to open at (overrides port.baud)")
+    p.add_argument("--data-dir", type=Path, help="where the base journal is recorded")
+    p.add_argument("--status", type=Path, help="status snapshot JSON path")
+    p.add_argument("--no-configure", action="store_true", help="record only; never configure the receiver")
+    p.set_defaults(func=base_main)
+    return p
+
+
+def base_main(args: argparse.Namespace) -> int:
+    """Run the base station; returns the exit code."""
+    import asyncio
+
+    from onboard.daemon import serial_port_opener
+    from onboard.errors import ConfigFileError
+    from onboard.hw.serial_port import SerialByteStream
+    from onboard.sdnotify import SdNotifier
+    from onboard.settings import load_settings
+
+    overrides = {
+        "port.device": args.port,
+        "port.baud": args.baud,
+        "journal.data_dir": str(args.data_dir) if args.data_dir else None,
+        "status.path": str(args.status) if args.status else None,
+        "receiver.configure": False if args.no_configure else None,
+    }
+    try:
+        settings = load_settings(args.config, overrides=overrides)
+        options = BaseOptions(station_id=args.station_id, obs_message=args.message,
+                              radio_budget_bytes_s=args.budget, relay=args.relay, position_ecef_m=args.position,
+                              antenna_height_m=args.antenna_height, survey_in_s=args.survey_in or 0.0)
+    except (ConfigFileError, ValueError) as exc:
+        print(f"onboard base: error: {exc}", file=sys.stderr)
+        return 2
+    deps = RecorderDeps(open_port=serial_port_opener(settings), notifier=SdNotifier())
+
+    def open_radio() -> ByteStream:
+        return SerialByteStream(args.radio, args.radio_baud, 0.1)
+
+    station = BaseStation(settings, deps, options, open_radio)
+    return asyncio.run(station.run())

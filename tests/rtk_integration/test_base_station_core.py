@@ -1,0 +1,136 @@
+"""Base-station core: the radio budget's priorities, the message schedule, survey-in (pure parts)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from pyrtcm import RTCMReader
+
+from onboard.base_station import BaseCore, BaseOptions, CorrectionScheduler, SurveyIn, spp_position
+from onboard.formats.rinex_nav import read_rinex_nav
+from onboard.formats.rinex_obs import read_rinex_obs
+from onboard.gnsstime import GpsTime
+from onboard.receiver.framing import iter_frames
+from onboard.rtk.ephemeris import EphemerisStore
+from tests.conftest import shared_file
+
+GEONET = "gnss/geonet-0759-3040-20050402/"
+BASE_3040 = (-3978241.958, 3382840.234, 3649900.853)
+
+
+def _base_data():
+    obs = read_rinex_obs(shared_file(GEONET + "30400920.05o.gz"))
+    nav = read_rinex_nav(shared_file(GEONET + "30400920.05n.gz"))
+    return [e.gps_only() for e in obs.epochs], nav
+
+
+def test_scheduler_never_drops_observations_and_drops_ephemerides_before_position() -> None:
+    sch = CorrectionScheduler(budget_bytes_s=200.0, burst_bytes=200)
+    sent = sch.offer(0.0, [("ephemeris", b"e" * 67), ("obs", b"o" * 150), ("position", b"p" * 27)])
+    # 200 B of credit: obs (150) first, then the position (27); the 67 B ephemeris does not fit
+    assert [k for k, _ in sent] == ["obs", "position"] and sch.counts.deferred == {"ephemeris": 1}
+    sent = sch.offer(0.1, [("obs", b"o" * 300), ("position", b"p" * 27)])  # obs over budget: sent anyway
+    assert [k for k, _ in sent] == ["obs"] and sch.credit_bytes < 0
+    sent = sch.offer(1.0, [("ephemeris", b"e" * 67)])  # the debt is paid back before anything optional
+    assert sent == [] and sch.counts.deferred == {"ephemeris": 2, "position": 1}
+    sent = sch.offer(3.0, [("ephemeris", b"e" * 67)])
+    assert [k for k, _ in sent] == ["ephemeris"]
+
+
+def test_core_sends_1004_every_epoch_1006_every_10_s_1019_every_30_s_within_budget() -> None:
+    epochs, nav = _base_data()  # 30 s epochs; resample the schedule at 1 Hz by shifting the tags
+    ep0 = epochs[0]
+    core = BaseCore(BaseOptions(station_id=3040, position_ecef_m=BASE_3040, radio_budget_bytes_s=600.0))
+    for e in nav.ephemerides:
+        core.on_item(e)
+    sent: list[tuple[float, list[int], int]] = []
+    for k in range(120):
+        ep = replace(ep0, time=ep0.time.add_s(k))
+        frames = core.on_item(ep)
+        nums = [int(RTCMReader.parse(f).identity) for _, f in frames]
+        sent.append((float(k), nums, sum(len(f) for _, f in frames)))
+    assert all(nums.count(1004) == 1 for _, nums, _ in sent)
+    pos_times = [t for t, nums, _ in sent if 1006 in nums]
+    assert pos_times == [0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0, 100.0, 110.0]
+    n_sats = len(ep0)
+    eph_times = [t for t, nums, _ in sent for n in nums if n == 1019]
+    # every observed satellite's ephemeris, 4 rounds in 120 s (the burst lets the first round go at once)
+    assert len(eph_times) == 4 * n_sats
+    total = sum(b for _, _, b in sent)
+    assert total <= 600.0 * 119 + 1024
+
+
+def test_tight_budget_keeps_every_observation_and_position_sheds_ephemerides() -> None:
+    epochs, nav = _base_data()
+    ep0 = epochs[0]
+    obs_size = len(BaseCore(BaseOptions(position_ecef_m=BASE_3040)).on_item(ep0)[0][1])
+    # the observations plus 10 B/s: room for 1006 (27 B) every 10 s, not for 1019 (67 B) per satellite per 30 s
+    core = BaseCore(BaseOptions(position_ecef_m=BASE_3040, radio_budget_bytes_s=obs_size + 10.0,
+                                radio_burst_bytes=300))
+    for e in nav.ephemerides:
+        core.on_item(e)
+    count = {1004: 0, 1006: 0, 1019: 0}
+    for k in range(300):
+        for _, f in core.on_item(replace(ep0, time=ep0.time.add_s(k))):
+            count[int(RTCMReader.parse(f).identity)] += 1
+    assert count[1004] == 300
+    assert count[1006] >= 25  # the position keeps its 10 s schedule out of the ~20-40 B/s left
+    assert count[1019] < 5 * len(ep0) and core.scheduler.counts.deferred.get("ephemeris", 0) > 0
+
+
+def test_corrections_decode_back_to_the_epoch_and_position() -> None:
+    epochs, nav = _base_data()
+    core = BaseCore(BaseOptions(station_id=12, position_ecef_m=BASE_3040, obs_message=1002))
+    frames = core.on_item(epochs[3])
+    msgs = [RTCMReader.parse(f) for _, f in frames]
+    obs = next(m for m in msgs if m.identity == "1002")
+    assert obs.DF003 == 12 and obs.DF004 == epochs[3].time.tow_ns // 1_000_000 and obs.DF006 == len(epochs[3])
+    pos = next(m for m in msgs if m.identity == "1006")
+    assert (pos.DF025, pos.DF026, pos.DF027) == pytest.approx(BASE_3040, abs=1e-4)
+    assert [f.msg_id for f in iter_frames(b"".join(f for _, f in frames))] == [1002, 1006]
+
+
+def test_survey_in_is_the_mean_of_spp_over_the_duration_and_gates_sending() -> None:
+    epochs, nav = _base_data()
+    store = EphemerisStore(nav.ephemerides)
+    single = spp_position(epochs[0], store)
+    assert single is not None and np.linalg.norm(single - BASE_3040) < 15.0
+    core = BaseCore(BaseOptions(survey_in_s=300.0))
+    for e in nav.ephemerides:
+        core.on_item(e)
+    sent_at = []
+    for k, ep in enumerate(epochs[:20]):  # 30 s epochs: done after the 11th (300 s after the first)
+        if core.on_item(ep):
+            sent_at.append(k)
+    assert sent_at[0] == 10 and sent_at == list(range(10, 20))
+    assert core.position is not None
+    assert np.linalg.norm(np.array(core.position.arp_ecef_m) - BASE_3040) < 10.0
+
+
+def test_survey_in_without_ephemerides_sends_nothing_and_bad_options_are_refused() -> None:
+    epochs, _ = _base_data()
+    core = BaseCore(BaseOptions(survey_in_s=10.0))
+    assert all(core.on_item(ep) == [] for ep in epochs[:5]) and core.position is None
+    s = SurveyIn(0.0)
+    t = GpsTime.from_week_tow_s(1316, 0.0)
+    assert s.add(t, np.zeros(3)) is None  # one fix is no mean
+    with pytest.raises(ValueError, match="survey-in"):
+        BaseOptions()
+    with pytest.raises(ValueError, match="1002 or 1004"):
+        BaseOptions(position_ecef_m=BASE_3040, obs_message=1077)
+
+
+def test_cli_registers_base_and_refuses_a_missing_or_bad_position(capsys) -> None:
+    from onboard.__main__ import build_parser, main
+
+    args = build_parser().parse_args(["base", "--port", "/dev/null", "--radio", "/dev/null",
+                                      "--position=-3978241.958,3382840.234,3649900.853", "--budget", "300"])
+    assert args.position == pytest.approx(BASE_3040) and args.budget == 300.0 and args.message == 1004
+    with pytest.raises(SystemExit):  # neither --position nor --survey-in
+        main(["base", "--port", "/dev/null", "--radio", "/dev/null"])
+    with pytest.raises(SystemExit):
+        main(["base", "--port", "x", "--radio", "y", "--position", "1,2"])
+    assert main(["base", "--port", "x", "--radio", "y", "--survey-in", "0"]) == 2
+    assert "survey-in" in capsys.readouterr().err

@@ -1,0 +1,129 @@
+"""`onboard base` over real ptys: the hil_sim base receiver emulator in, the RTCM3 radio stream out.
+
+The base station (the recorder plus the correction sender) configures the emulated M8T, journals it, and
+writes RTCM3 to a radio pty. What comes out of the radio must decode with pyrtcm to the observations the
+base journal recorded, carry the base position and the ephemerides, and stay within the byte budget.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import threading
+import time
+import tty
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pyrtcm import RTCMReader
+
+from onboard.base_station import BaseOptions, BaseStation
+from onboard.daemon import RecorderDeps
+from onboard.hw.serial_port import SerialByteStream
+from onboard.receiver.decode import iter_journal
+from onboard.receiver.framing import Protocol, StreamFramer
+from onboard.receiver.rtcm import PRUNIT_GPS_M
+from onboard.rtk.types import ObsEpoch
+from tests.conftest import shared_file
+from tests.daemon.helpers import make_settings, status, wait_until
+
+pytestmark = [pytest.mark.timeout(120)]
+SPEED = 4.0
+BUDGET_B_S = 400.0
+BURST_B = 600
+
+
+def _read_all(fd: int, into: bytearray, stop: threading.Event) -> None:
+    import select
+
+    while not stop.is_set():
+        r, _, _ = select.select([fd], [], [], 0.05)
+        if r:
+            try:
+                into += os.read(fd, 65536)
+            except (BlockingIOError, OSError):
+                pass
+
+
+def test_base_station_sends_rtcm_matching_its_journal_within_budget(tmp_path: Path) -> None:
+    shared_file("gnss/broadcast-nav-20100701/brdc1820.10n")
+    from hil_sim.pty_server import ReceiverEmulator
+    from hil_sim.receiver import ReceiverOptions
+    from hil_sim.scenario import Scenario
+    from hil_sim.world import World
+
+    world = World(Scenario.default(model="m8t", duration_s=600.0))
+    emu = ReceiverEmulator("m8t", ReceiverOptions(time_valid_after_s=1.0), world, speed=SPEED, receiver="base")
+    port = emu.start()
+    radio_master, radio_slave = os.openpty()
+    tty.setraw(radio_slave)
+    radio_path = os.ttyname(radio_slave)
+    got = bytearray()
+    stop = threading.Event()
+    reader = threading.Thread(target=_read_all, args=(radio_master, got, stop), daemon=True)
+    reader.start()
+    settings = make_settings(tmp_path, port_device=port, port_baud=9600)
+    deps = RecorderDeps(open_port=lambda: SerialByteStream(port, 9600, 0.05))
+    options = BaseOptions(station_id=42, position_ecef_m=tuple(world.base_ecef_m), radio_budget_bytes_s=BUDGET_B_S,
+                          radio_burst_bytes=BURST_B)
+    station = BaseStation(settings, deps, options, lambda: SerialByteStream(radio_path, 57600, 0.05))
+    result: dict[str, int] = {}
+    thread = threading.Thread(target=lambda: result.setdefault("rc", asyncio.run(station.run())), daemon=True)
+    thread.start()
+    try:
+        st = wait_until(lambda: (s := status(settings.status_path)).get("config_state") in ("verified", "failed")
+                        and s, timeout_s=60, what="configuration")
+        assert st["config_state"] == "verified", st.get("config_error")
+        wait_until(lambda: station.core.scheduler.counts.sent.get("obs", 0) >= 40, timeout_s=40,
+                   what="40 epochs of corrections")
+    finally:
+        loop = station._loop
+        if loop is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(station.request_stop, "test stop", 0)
+        thread.join(20)
+        time.sleep(0.2)
+        stop.set()
+        reader.join(5)
+        emu.stop()
+        os.close(radio_master)
+        os.close(radio_slave)
+    assert result.get("rc") == 0
+    flight = Path(station.status.flight_dir or "")
+
+    # What came out of the radio is exactly what the base logged as sent, frame for frame, CRC-valid.
+    assert bytes(got) == (flight / "radio-tx.rtcm3").read_bytes()
+    framer = StreamFramer()
+    frames = framer.feed(bytes(got)) + framer.flush()
+    assert frames and all(f.protocol is Protocol.RTCM3 for f in frames) and framer.skipped_bytes == 0
+    msgs = [RTCMReader.parse(f.raw) for f in frames]
+    numbers = [int(m.identity) for m in msgs]
+    assert numbers.count(1004) >= 40 and 1006 in numbers and 1019 in numbers
+
+    # Every 1004 is an epoch of the journal: same time tag and satellites, pseudorange to 2 cm, phase to 1 mm.
+    journal = {e.time.tow_ns // 1_000_000: e.gps_only() for e in iter_journal(flight) if isinstance(e, ObsEpoch)}
+    checked = 0
+    for m in msgs:
+        if m.identity != "1004":
+            continue
+        ep = journal[int(m.DF004)]
+        assert int(m.DF003) == 42 and int(m.DF006) == len(ep)
+        for k in range(1, int(m.DF006) + 1):
+            prn = int(getattr(m, f"DF009_{k:02d}"))
+            j = int(np.flatnonzero(ep.sv_id == prn)[0])
+            pr = float(getattr(m, f"DF011_{k:02d}")) + int(getattr(m, f"DF014_{k:02d}")) * PRUNIT_GPS_M
+            assert pr == pytest.approx(ep.pr_m[j], abs=0.02)
+            ppr_m = float(getattr(m, f"DF012_{k:02d}"))
+            lam = 299792458.0 / 1575.42e6
+            wrapped = (ep.cp_cyc[j] - pr / lam) % 1500.0
+            assert min(abs(ppr_m / lam % 1500.0 - wrapped), 1500.0 - abs(ppr_m / lam % 1500.0 - wrapped)) < 0.002
+            checked += 1
+    assert checked >= 40 * 5
+    pos = next(m for m in msgs if m.identity == "1006")
+    np.testing.assert_allclose([pos.DF025, pos.DF026, pos.DF027], world.base_ecef_m, atol=1e-3)
+
+    # Byte budget: over any window of whole epochs, sent ≤ budget × span + burst (1004 alone fit easily).
+    times = sorted({int(m.DF004) for m in msgs if m.identity == "1004"})
+    span_s = (times[-1] - times[0]) / 1000.0 + 1.0
+    assert len(got) <= BUDGET_B_S * span_s + BURST_B
+    assert station.sender is not None and station.sender.frames_dropped == 0
