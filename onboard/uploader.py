@@ -134,6 +134,7 @@ class Uploader:
         self.client = client or httpx.Client(base_url=base_url, timeout=self.options.timeout_s)
         self.headers = {"Authorization": f"Bearer {token}"}
         self.sleep = sleep
+        self.chunk_bytes = self.options.chunk_bytes  # halved when the server says a chunk is over its limit
 
     def close(self) -> None:
         """Close the HTTP client."""
@@ -204,7 +205,7 @@ class Uploader:
                 if offset >= entry.size and entry.size > 0:
                     break
                 fh.seek(offset)
-                chunk = fh.read(self.options.chunk_bytes)
+                chunk = fh.read(self.chunk_bytes)
                 r = self._request(report, "PUT", url, params={"offset": offset}, content=chunk,
                                   headers={CHUNK_SHA_HEADER: hashlib.sha256(chunk).hexdigest(),
                                            "Content-Type": "application/octet-stream"})
@@ -218,6 +219,10 @@ class Uploader:
                     continue
                 if r.status_code == 409 and "already complete" in r.text:
                     break
+                if r.status_code == 413 and "limit" in r.text and len(chunk) > 1024:
+                    self.chunk_bytes = max(1024, len(chunk) // 2)
+                    log.info("server refused a %d-byte chunk; using %d-byte chunks", len(chunk), self.chunk_bytes)
+                    continue
                 if r.status_code in (409, 422) and rejected < self.options.max_retries:
                     # offset moved (another run) or the chunk arrived damaged / whole file restarted: ask again
                     rejected += 1

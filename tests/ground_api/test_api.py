@@ -327,3 +327,13 @@ def test_unfinished_jobs_survive_a_restart_and_flight_names_are_unique(api_setti
             assert c.get(f"/flights/{rep.flight_id}/results").json()["n_images"] > 30
     finally:
         srv.stop()
+
+
+def test_uploader_adapts_to_the_server_chunk_limit(live: LiveServer, tmp_path: Path) -> None:
+    """Uploader configured for 1 MiB chunks, server limit 64 KiB: chunks are halved until accepted."""
+    folder = _flight_folder(tmp_path, sizes=(400_000,))
+    up = Uploader(live.url, TOKEN, UploaderOptions(chunk_bytes=1 << 20), sleep=lambda s: None)
+    rep = up.upload_flight(folder)
+    assert up.chunk_bytes <= live.settings.max_chunk_bytes
+    fdir = live.settings.flights_dir / rep.flight_id
+    assert (fdir / "000000.ubx").read_bytes() == (folder / "000000.ubx").read_bytes()
