@@ -378,7 +378,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
     p = sub.add_parser("flight", help="a whole simulated flight through the real daemon, RTK and adjustment",
                        description=__doc__)
     p.add_argument("--model", choices=("lea6t", "m8t"), default="m8t")
-    p.add_argument("--speed", type=float, default=4.0, help="simulated seconds per real second (default 4)")
+    p.add_argument("--speed", type=float, default=6.0, help="simulated seconds per real second (default 6)")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--flight-s", type=float, default=0.0, help="stop after this many simulated s (default: landing)")
     p.add_argument("--camera-period", type=float, default=2.0, help="TimePulse camera period, s (2–3)")
