@@ -238,8 +238,17 @@ class Recorder:
             segment_max_bytes=int(s.journal_segment_max_mb * 1e6),
             segment_max_s=s.journal_segment_max_s,
         )
-        self.journal = Journal(flight_dir, self.clock, options, self.deps.files)
-        self.events = EventLog(flight_dir / EVENTS_NAME, self.clock, s.journal_sync_interval_s, self.deps.files)
+        try:
+            self.journal = Journal(flight_dir, self.clock, options, self.deps.files)
+            self.events = EventLog(flight_dir / EVENTS_NAME, self.clock, s.journal_sync_interval_s,
+                                   self.deps.files)
+        except OSError as exc:
+            log.error("cannot open the flight %s: %s", flight_dir, exc)
+            self.status.state = "error"
+            self.status.message = f"cannot open the flight {flight_dir}: {exc}"
+            self._write_status()
+            self.deps.notifier.notify(STATUS=self.status.message)
+            return EXIT_DISK_FULL if exc.errno in (errno.ENOSPC, errno.EDQUOT) else EXIT_IO_ERROR
         self._resume_pairing(flight_dir / EVENTS_NAME)
         self.status.flight = flight_dir.name
         self.status.flight_dir = str(flight_dir)

@@ -178,3 +178,19 @@ def test_status_snapshot_complete(tmp_path: Path) -> None:
         assert key in st, key
     assert st["config_state"] == "disabled" and st["disk_free_bytes"] > 0 and st["segment"] == "000000.ubx"
     assert run.stop() == 0
+
+
+def test_unwritable_data_dir_is_a_clear_error(tmp_path: Path) -> None:
+    """The data directory cannot be written (read-only mount, wrong owner): exit 1, status says why."""
+    from onboard.daemon import EXIT_IO_ERROR
+    from onboard.logger.files import OsFileLayer
+
+    class ReadOnlyLayer(OsFileLayer):
+        def create(self, path: Path):  # type: ignore[no-untyped-def]
+            raise OSError(errno.EROFS, "Read-only file system", str(path))
+
+    settings = make_settings(tmp_path, receiver_configure=False)
+    run = RunningRecorder(settings, RecorderDeps(open_port=FakeByteStream, files=ReadOnlyLayer()))
+    assert run.join() == EXIT_IO_ERROR
+    st = status(settings.status_path)
+    assert st["state"] == "error" and "Read-only file system" in st["message"]
