@@ -148,6 +148,8 @@ class AdjustmentProblem:
     acceleration_enu_m_s2: npt.NDArray[np.float64] | None = None
     #: images left out while building the problem, with the reason (no event, outside the trajectory, gap …)
     skipped: tuple[tuple[str, str], ...] = ()
+    #: what building the problem changed on the way (e.g. trigger events converted to flash times)
+    notes: tuple[str, ...] = ()
 
     @classmethod
     def from_arrays(

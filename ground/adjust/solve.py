@@ -74,6 +74,10 @@ def build_problem(
     )
     if not matched:
         raise AdjustmentRefused("no image has both a pose and an event: check that image names match")
+    matched, notes, dropped = _one_event_kind(matched)
+    skipped.extend(dropped)
+    if not matched:
+        raise AdjustmentRefused("no image is left once the event kinds are reconciled: " + dropped[0][1])
     times_ns = np.array([e.time.total_ns for _, e in matched], dtype=np.int64)
     ant = interpolate_antenna(trajectory, times_ns, origin_ecef_m, max_gap_s)
     keep = np.flatnonzero(ant.valid)
@@ -95,7 +99,49 @@ def build_problem(
         ant.origin_ecef_m,
         ant.acc_enu_m_s2[keep],
     )
-    return replace(base, skipped=tuple(skipped))
+    return replace(base, skipped=tuple(skipped), notes=tuple(notes))
+
+
+def _one_event_kind(
+    matched: list[tuple[CameraPose, ImageEvent]],
+) -> tuple[list[tuple[CameraPose, ImageEvent]], list[str], list[tuple[str, str]]]:
+    """Bring every event to one kind, since one t_d cannot serve trigger pulses (≈ 64 ms) and flashes (≈ 0).
+
+    A missed flash leaves its trigger pulse: the minority kind is converted to the majority kind with the image's
+    own measured trigger→flash delay, else the median of those measured on this flight. With no measured delay at
+    all, the minority images are skipped with the reason. Returns (events, notes, skipped).
+    """
+    kinds = [e.kind for _, e in matched]
+    n_flash = kinds.count("flash")
+    if n_flash in (0, len(kinds)):
+        return matched, [], []
+    majority = "flash" if 2 * n_flash >= len(kinds) else "trigger"
+    measured = [e.measured_delay_s for _, e in matched if e.measured_delay_s is not None]
+    if not measured:
+        reason = (
+            f"{'trigger' if majority == 'flash' else 'flash'} event among {majority} events, and no measured "
+        )
+        reason += "trigger→flash delay to convert it"
+        return (
+            [(p, e) for p, e in matched if e.kind == majority],
+            [],
+            [(p.image, reason) for p, e in matched if e.kind != majority],
+        )
+    median_s = float(np.median(measured))
+    out = []
+    converted = 0
+    for pose, e in matched:
+        if e.kind != majority:
+            d = e.measured_delay_s if e.measured_delay_s is not None else median_s
+            t = e.time.add_s(d if majority == "flash" else -d)
+            e = ImageEvent(e.image, t, majority, e.measured_delay_s)
+            converted += 1
+        out.append((pose, e))
+    note = (
+        f"{converted} {'trigger' if majority == 'flash' else 'flash'} event(s) converted to {majority} times with the "
+        f"measured trigger→flash delay (median {median_s * 1e3:.2f} ms over {len(measured)} image(s))"
+    )
+    return out, [note], []
 
 
 @dataclass
@@ -649,6 +695,7 @@ def _warnings(
         out.append(
             f"{not_fixed} image(s) use a trajectory that is not RTK-fixed (q ≠ 1); consider relative control"
         )
+    out.extend(problem.notes)
     if problem.skipped:
         out.append(
             f"{len(problem.skipped)} image(s) skipped while building the problem (no event, gap, outside)"

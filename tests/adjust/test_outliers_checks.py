@@ -152,9 +152,11 @@ def test_build_problem_skips_what_it_cannot_use(block_factory: Any, quiet: dict)
     poses = list(block.poses)
     events = list(block.events[1:])  # the first image has no event
     last = block.trajectory.t_ns[-1]
-    events.append(ImageEvent("IMG_LATE.JPG", type(events[0].time).from_total_ns(int(last) + 10**9)))
+    events.append(
+        ImageEvent("IMG_LATE.JPG", type(events[0].time).from_total_ns(int(last) + 10**9), "trigger")
+    )
     poses.append(replace(poses[-1], image="IMG_LATE.JPG"))
-    events.append(ImageEvent("NO_POSE.JPG", events[0].time))
+    events.append(ImageEvent("NO_POSE.JPG", events[0].time, "trigger"))
     problem = build_problem(poses, events, block.trajectory, block.control, block.origin_ecef_m)
     reasons = dict(problem.skipped)
     assert reasons[block.poses[0].image].startswith("no event")
@@ -221,3 +223,30 @@ def test_to_dict_is_strict_json_when_a_parameter_is_undeterminable(
     assert any("O_z" in w and ("not determinable" in w or "not determined" in w) for w in result.warnings)
     text = json.dumps(result.to_dict(), allow_nan=False)  # raises on NaN/Infinity
     assert json.loads(text)["n_images"] == len(result.images)
+
+
+def test_missed_flashes_leave_trigger_events_that_are_converted(block_factory: Any, quiet: dict) -> None:
+    """Flash marks with their measured pulse→flash delay; 10 flashes missed → those images only have the
+    trigger pulse (64 ms earlier). One t_d cannot serve both: the triggers are moved by the measured delay."""
+    block = block_factory(19, gcp_names=("P05",), event_kind="flash", delay_s=0.0, **quiet)
+    measured = 0.0641
+    events = []
+    for k, e in enumerate(block.events):
+        if k % 20 == 5:
+            events.append(ImageEvent(e.image, e.time.add_s(-measured), "trigger", None))
+        else:
+            events.append(ImageEvent(e.image, e.time, "flash", measured))
+    problem = build_problem(block.poses, events, block.trajectory, block.control, block.origin_ecef_m)
+    assert problem.notes and "trigger event(s) converted to flash times" in problem.notes[0]
+    assert len(problem.images) == len(block.poses)
+    lever = LeverArmSpec("prior", tuple(block.truth_lever_arm_m), (0.005,) * 3)
+    result = adjust(problem, AdjustmentOptions(lever_arm=lever, camera_centre_sigma_m=0.001))
+    assert abs(result.delay_s) < 0.5e-3
+    converted = {e.image for e in events if e.kind == "trigger"}
+    assert not converted & {name for name, _ in result.outliers}
+    assert problem.notes[0] in result.warnings
+    # without any measured delay, the minority kind is skipped with its reason, never mixed in
+    bare = [ImageEvent(e.image, e.time, e.kind, None) for e in events]
+    problem = build_problem(block.poses, bare, block.trajectory, block.control, block.origin_ecef_m)
+    assert len(problem.skipped) == sum(1 for e in events if e.kind == "trigger")
+    assert "no measured trigger→flash delay" in problem.skipped[0][1]
