@@ -219,14 +219,20 @@ def adjust_job(settings: Any, params: dict[str, Any], files: dict[str, str | Non
         datum_tolerance_m=float(params.get("datum_tolerance_m", crsmod.MAX_DATUM_ERROR_M)),
     )
     res = run_adjust(req, out_dir)
-    return (f"adjusted {res['n_images']} images: lever arm {np.round(res['lever_arm_m'], 4).tolist()} m, "
-            f"delay {res['delay_s'] * 1e3:.1f} ms, sigma0 {res['sigma0']:.2f}")
+    lever_txt = ", ".join(_num(v, 1, ".4f") for v in res["lever_arm_m"])
+    return (f"adjusted {res['n_images']} images: lever arm ({lever_txt}) m, "
+            f"delay {_num(res['delay_s'], 1e3, '.1f')} ms, sigma0 {_num(res['sigma0'], 1, '.2f')}")
 
 
 def _reprocessed(out_dir: Path) -> Path | None:
     """The newest `SOL.pos` written by an RTK job of the same flight (sibling job folders), if any."""
     sols = sorted(out_dir.parent.glob("*/SOL.pos"), key=lambda p: p.stat().st_mtime)
     return sols[-1] if sols else None
+
+
+def _num(value: float | None, scale: float = 1.0, fmt: str = ".3f") -> str:
+    """A result number for printing; None (σ of an undeterminable parameter in to_dict) prints as such."""
+    return "undetermined" if value is None else format(value * scale, fmt)
 
 
 def _opt_float(v: Any) -> float | None:
@@ -372,9 +378,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"refused: {exc}", file=sys.stderr)
             return 3
         lv, lvs = res["lever_arm_m"], res["lever_arm_sigma_m"]
-        print(f"{res['n_images']} images, sigma0 {res['sigma0']:.3f}")
-        print("lever arm (m): " + ", ".join(f"{v:+.4f}±{s:.4f}" for v, s in zip(lv, lvs)))
-        print(f"delay: {res['delay_s'] * 1e3:+.2f} ± {res['delay_sigma_s'] * 1e3:.2f} ms")
+        print(f"{res['n_images']} images, sigma0 {_num(res['sigma0'], 1, '.3f')}")
+        print("lever arm (m): " + ", ".join(f"{_num(v, 1, '+.4f')} ± {_num(s, 1, '.4f')}" for v, s in zip(lv, lvs)))
+        print(f"delay: {_num(res['delay_s'], 1e3, '+.2f')} ± {_num(res['delay_sigma_s'], 1e3, '.2f')} ms")
         for w in res["warnings"]:
             print(f"warning: {w}")
         print(f"wrote {args.out / 'results.json'}, {args.out / 'report.html'}, {args.out / 'exports'}")

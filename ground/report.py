@@ -21,6 +21,16 @@ from onboard.rtk.geodesy import ecef_to_enu
 Q_COLOURS = {1: ("fix", "#2ca02c"), 2: ("float", "#ff7f0e"), 5: ("single", "#d62728")}
 
 
+UNDETERMINED = "undetermined"
+
+
+def _v(value: float | None, scale: float = 1.0, fmt: str = ".1f") -> str:
+    """A number of the results for display; None/non-finite (an undeterminable parameter's σ) says so."""
+    if value is None or not np.isfinite(value):
+        return UNDETERMINED
+    return format(value * scale, fmt)
+
+
 def _png(fig: Figure) -> str:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=96, bbox_inches="tight")
@@ -50,7 +60,7 @@ def correlation_figure(names: list[str], matrix: np.ndarray) -> Figure:
 
 def residual_figures(residuals: list[dict[str, Any]], centres_enu: np.ndarray | None) -> list[Figure]:
     """Per-image residuals: E/N/U against image order (outliers marked), and a horizontal vector map."""
-    e = np.array([[r["e_m"], r["n_m"], r["u_m"]] for r in residuals]).reshape(-1, 3) * 100.0
+    e = np.array([[r["e_m"], r["n_m"], r["u_m"]] for r in residuals], dtype=float).reshape(-1, 3) * 100.0
     out = np.array([r["outlier"] for r in residuals], dtype=bool)
     fig = Figure(figsize=(9, 5))
     axes = fig.subplots(3, 1, sharex=True)
@@ -65,11 +75,11 @@ def residual_figures(residuals: list[dict[str, Any]], centres_enu: np.ndarray | 
     if centres_enu is not None and centres_enu.shape[0] == e.shape[0]:
         fig2 = Figure(figsize=(6, 6))
         ax = fig2.add_subplot()
-        scale = max(float(np.ptp(centres_enu[:, :2])) / 20.0, 1e-3) / max(float(np.abs(e[:, :2]).max()), 1e-3)
+        scale = max(float(np.ptp(centres_enu[:, :2])) / 20.0, 1e-3) / max(float(np.nan_to_num(np.nanmax(np.abs(e[:, :2])))), 1e-3)
         ax.quiver(centres_enu[:, 0], centres_enu[:, 1], e[:, 0] * scale, e[:, 1] * scale, angles="xy",
                   scale_units="xy", scale=1, color=np.where(out, "#d62728", "#1f77b4"))
-        sc = ax.scatter(centres_enu[:, 0], centres_enu[:, 1], c=e[:, 2], cmap="RdBu_r", s=14,
-                        vmin=-np.abs(e[:, 2]).max(), vmax=np.abs(e[:, 2]).max())
+        lim = max(float(np.nan_to_num(np.nanmax(np.abs(e[:, 2])))), 1e-3)
+        sc = ax.scatter(centres_enu[:, 0], centres_enu[:, 1], c=e[:, 2], cmap="RdBu_r", s=14, vmin=-lim, vmax=lim)
         fig2.colorbar(sc, ax=ax, label="Up residual (cm)")
         ax.set_aspect("equal")
         ax.set_xlabel("East (m)")
@@ -81,7 +91,7 @@ def residual_figures(residuals: list[dict[str, Any]], centres_enu: np.ndarray | 
 
 def delay_comparison_figure(residuals: list[dict[str, Any]], velocity_enu_m_s: np.ndarray, delay_s: float) -> Figure:
     """|e_i| per image with the estimated delay and with t_d = 0 (e_i + V_i·t_d), as Daakir et al. 2015 fig. 9."""
-    e = np.array([[r["e_m"], r["n_m"], r["u_m"]] for r in residuals]).reshape(-1, 3)
+    e = np.array([[r["e_m"], r["n_m"], r["u_m"]] for r in residuals], dtype=float).reshape(-1, 3)
     without = e + velocity_enu_m_s * delay_s
     fig = Figure(figsize=(9, 3.2))
     ax = fig.add_subplot()
@@ -123,14 +133,17 @@ def trajectory_figure(traj: Trajectory, origin_ecef_m: np.ndarray, cams_enu: np.
 def _parameter_rows(res: dict[str, Any]) -> list[tuple[str, str, str, str]]:
     rows = []
     for k, axis in enumerate("xyz"):
-        rows.append((f"lever arm O_{axis}", f"{res['lever_arm_m'][k] * 1000:.1f}", f"{res['lever_arm_sigma_m'][k] * 1000:.1f}", "mm"))
-    rows.append(("shutter delay t_d", f"{res['delay_s'] * 1000:.2f}", f"{res['delay_sigma_s'] * 1000:.2f}", "ms"))
-    rows.append(("scale μ", f"{res['scale']:.7f}", f"{res['scale_sigma'] * 1e6:.1f} ppm", ""))
+        rows.append((f"lever arm O_{axis}", _v(res["lever_arm_m"][k], 1000), _v(res["lever_arm_sigma_m"][k], 1000),
+                     "mm"))
+    rows.append(("shutter delay t_d", _v(res["delay_s"], 1000, ".2f"), _v(res["delay_sigma_s"], 1000, ".2f"), "ms"))
+    rows.append(("scale μ", _v(res["scale"], 1, ".7f"), _v(res["scale_sigma"], 1e6), "ppm"))
     for k, axis in enumerate("ENU"):
-        rows.append((f"translation T_{axis}", f"{res['translation_m'][k]:.4f}", f"{res['translation_sigma_m'][k]:.4f}", "m"))
+        rows.append((f"translation T_{axis}", _v(res["translation_m"][k], 1, ".4f"),
+                     _v(res["translation_sigma_m"][k], 1, ".4f"), "m"))
     for k, axis in enumerate("ENU"):
-        rows.append((f"rotation σ about {axis}", "—", f"{np.degrees(res['rotation_sigma_rad'][k]) * 3600:.1f}", "arcsec"))
-    rows.append(("σ̂₀ (a-posteriori)", f"{res['sigma0']:.3f}", "", ""))
+        sig = res["rotation_sigma_rad"][k]
+        rows.append((f"rotation σ about {axis}", "—", _v(None if sig is None else np.degrees(sig), 3600), "arcsec"))
+    rows.append(("σ̂₀ (a-posteriori)", _v(res["sigma0"], 1, ".3f"), "", ""))
     return rows
 
 
@@ -144,15 +157,15 @@ def render_report(res: dict[str, Any], problem: AdjustmentProblem | None = None,
                   origin_ecef_m: np.ndarray | None = None) -> str:
     """The report as one HTML string (figures inline)."""
     names = list(res["correlations"]["names"])
-    matrix = np.asarray(res["correlations"]["matrix"], dtype=float).reshape(len(names), len(names))
+    matrix = np.array(res["correlations"]["matrix"], dtype=float).reshape(len(names), len(names))  # None → NaN
     cams_enu = None
     if problem is not None:
-        rot = np.asarray(res["rotation"], dtype=float)
+        rot = np.array(res["rotation"], dtype=float)
         cams_enu = np.asarray(res["translation_m"]) + res["scale"] * problem.centre_rel @ rot.T
     parts = [
         "<h2>Parameters</h2>",
         _table(["parameter", "value", "σ", "unit"], _parameter_rows(res), "parameters"),
-        (f"<p>condition number {res['condition_number']:.3g}; weakest combination: "
+        (f"<p>condition number {_v(res['condition_number'], 1, '.3g')}; weakest combination: "
          f"{html.escape(str(res['weakest_combination']))}</p>"),
     ]
     if res["warnings"]:
@@ -161,19 +174,21 @@ def render_report(res: dict[str, Any], problem: AdjustmentProblem | None = None,
     parts.append("<h2>Residuals per image</h2>")
     parts += [_img(f, alt) for f, alt in zip(residual_figures(res["residuals"], cams_enu),
                                             ("residuals per image (E, N, U)", "horizontal residual map"))]
-    if problem is not None and len(res["residuals"]) == len(problem.images):
+    if problem is not None and len(res["residuals"]) == len(problem.images) and res["delay_s"] is not None:
         parts.append(_img(delay_comparison_figure(res["residuals"], problem.velocity_enu_m_s, res["delay_s"]),
                           "residual norm with and without the delay"))
     if res["outliers"]:
-        parts.append(_table(["outlier image", "χ²"], [(o["image"], f"{o['chi2']:.1f}") for o in res["outliers"]],
+        parts.append(_table(["outlier image", "χ²"], [(o["image"], _v(o["chi2"])) for o in res["outliers"]],
                             "outliers"))
     parts.append("<h2>Check points</h2>")
     if res["checkpoints"]:
-        rows: list[tuple[str, ...]] = [(c["name"], f"{c['de_m'] * 100:.1f}", f"{c['dn_m'] * 100:.1f}", f"{c['du_m'] * 100:.1f}",
-                 f"{c['abs_m'] * 100:.1f}", f"{c['sigma_m'] * 100:.1f}") for c in res["checkpoints"]]
+        rows: list[tuple[str, ...]] = [
+            (c["name"], *(_v(c[k], 100) for k in ("de_m", "dn_m", "du_m", "abs_m", "sigma_m")))
+            for c in res["checkpoints"]
+        ]
         for stat in ("mean", "std", "rms"):
             d = res[f"checkpoint_{stat}_m"]
-            rows.append((stat, *(f"{d.get(k, float('nan')) * 100:.1f}" for k in ("e", "n", "u", "3d")), ""))
+            rows.append((stat, *(_v(d.get(k), 100) for k in ("e", "n", "u", "3d")), ""))
         parts.append(_table(["point", "δE (cm)", "δN (cm)", "δU (cm)", "|δ| (cm)", "σ (cm)"], rows, "checkpoints"))
     else:
         parts.append("<p>no check points</p>")

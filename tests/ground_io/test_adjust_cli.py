@@ -234,3 +234,21 @@ def test_calibrate_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     (tmp_path / "bad.csv").write_text("target,group,x,y,z\nC1,elsewhere,1,2,3\n")
     assert main(["calibrate", str(tmp_path / "bad.csv")]) == 2
     assert "bad.csv:2" in capsys.readouterr().err
+
+
+def test_report_shows_undetermined_parameters(tmp_path: Path) -> None:
+    """to_dict() writes null for the σ (and correlations) of an undeterminable parameter: the report says
+    "undetermined" instead of failing."""
+    from ground.report import render_report
+
+    write_synthetic_flight(tmp_path, n_lines=1)
+    assert main(_args(tmp_path, "--lever-arm", "0.05,-0.12,-0.08")) == 0
+    res = json.loads((tmp_path / "out" / "results.json").read_text())
+    res["delay_sigma_s"] = None
+    res["rotation_sigma_rad"][2] = None
+    res["correlations"]["matrix"][0][1] = None
+    res["residuals"][0]["u_m"] = None
+    if res["checkpoints"]:
+        res["checkpoints"][0]["sigma_m"] = None
+    html = render_report(res)
+    assert html.count("undetermined") >= 2 and 'id="parameters"' in html
