@@ -144,6 +144,8 @@ def _parameter_rows(res: dict[str, Any]) -> list[tuple[str, str, str, str]]:
         sig = res["rotation_sigma_rad"][k]
         rows.append((f"rotation σ about {axis}", "—", _v(None if sig is None else np.degrees(sig), 3600), "arcsec"))
     rows.append(("σ̂₀ (a-posteriori)", _v(res["sigma0"], 1, ".3f"), "", ""))
+    if "variance_inflation" in res:  # serial correlation of the trajectory errors (σ inflated by its root)
+        rows.append(("variance inflation", _v(res["variance_inflation"], 1, ".2f"), "", ""))
     return rows
 
 
