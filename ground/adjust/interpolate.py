@@ -8,12 +8,14 @@ Extrapolation and gaps are refused: such events are flagged, never guessed.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from ground.adjust.types import Trajectory
+from onboard.gnsstime import GpsTime
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 
 NS_PER_S = 1_000_000_000
@@ -69,11 +71,11 @@ def trajectory_velocities_ecef(traj: Trajectory, max_gap_s: float) -> npt.NDArra
 
 def interpolate_antenna(
     traj: Trajectory,
-    event_ns: npt.ArrayLike,
+    event_ns: npt.ArrayLike | Sequence[GpsTime],
     origin_ecef_m: npt.ArrayLike | None = None,
     max_gap_s: float = 1.5,
 ) -> AntennaSamples:
-    """Antenna position/velocity/σ at event times (GPS ns since the GPS epoch, int64), in ENU about the origin.
+    """Antenna position/velocity/σ at event times (GpsTime, or GPS ns since the GPS epoch as int64), in ENU.
 
     `origin_ecef_m` defaults to the first trajectory position. An event before the first or after the last epoch
     (extrapolation), or inside an interval longer than `max_gap_s`, is flagged invalid with its reason.
@@ -96,7 +98,10 @@ def interpolate_antenna(
     var_enu = (sd**2) @ (rot**2).T  # diag(R·diag(σ²)·Rᵀ)
     q = np.asarray(traj.q, dtype=np.int8)
 
-    te = np.asarray(event_ns, dtype=np.int64).ravel()
+    if isinstance(event_ns, Sequence) and event_ns and isinstance(event_ns[0], GpsTime):
+        te = np.array([e.total_ns for e in event_ns], dtype=np.int64)  # type: ignore[union-attr]
+    else:
+        te = np.asarray(event_ns, dtype=np.int64).ravel()
     m = te.size
     k = np.searchsorted(t, te, side="right") - 1  # t[k] <= te < t[k+1]
     reasons = [""] * m

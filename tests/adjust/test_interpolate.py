@@ -98,3 +98,13 @@ def test_unusable_trajectories_raise() -> None:
     single = Trajectory(traj.t_ns[:1], traj.pos_ecef_m[:1], None, traj.sd_m[:1], traj.q[:1])
     with pytest.raises(ValueError, match="≥ 2 epochs"):
         interpolate_antenna(single, np.array([T0_NS]), ORIGIN)
+
+
+def test_gps_time_events_are_accepted() -> None:
+    from onboard.gnsstime import GpsTime
+
+    traj = _trajectory(np.arange(0, 10.0, 1.0))
+    times = [GpsTime.from_total_ns(T0_NS + 2_500_000_000), GpsTime.from_total_ns(T0_NS + 7_250_000_000)]
+    by_time = interpolate_antenna(traj, times, ORIGIN)
+    by_ns = interpolate_antenna(traj, np.array([t.total_ns for t in times]), ORIGIN)
+    assert np.array_equal(by_time.pos_enu_m, by_ns.pos_enu_m) and by_time.valid.all()

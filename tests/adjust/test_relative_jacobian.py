@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pytest
 
 from ground.adjust.model import AdjustmentOptions, DelaySpec, LeverArmSpec, SimilaritySpec
 from ground.adjust.relative import consecutive_pairs
@@ -88,3 +89,15 @@ def test_variance_inflation_sees_time_correlated_residuals() -> None:
     offsets = np.repeat(rng.normal(0, 0.5, (4, 3)), 40, axis=0)
     assert variance_inflation(white + offsets, t, n_params=0) > 4.0
     assert variance_inflation(white[:5], t[:5], n_params=0) == 1.0  # too little to say: no inflation
+
+
+def test_linear_delay_start_recovers_the_delay_of_an_affine_model() -> None:
+    from ground.adjust.solve import _delay_start
+
+    rng = np.random.default_rng(3)
+    c = rng.uniform(-50, 50, (200, 3))
+    v = rng.normal(0, 4, (200, 3))
+    a = rng.normal(size=(3, 3))
+    g = c @ a.T + np.array([10.0, -3.0, 2.0]) - v * 0.064
+    assert _delay_start(c, g, v) == pytest.approx(0.064, abs=1e-9)
+    assert _delay_start(c[:4], g[:4], v[:4]) == 0.0  # too few images for 13 unknowns: no start, not a guess
