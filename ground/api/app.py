@@ -50,6 +50,7 @@ def create_app(settings: ApiSettings, job_functions: dict[str, JobFunction] | No
         lifespan=lifespan,
     )
     app.state.settings = settings
+    app.state.file_locks = flights.FileLocks()
     app.include_router(flights.router)
 
     @app.get("/health", tags=["health"])

@@ -53,9 +53,19 @@ CHUNK_SHA_HEADER = "X-Chunk-SHA256"
 OFFSET_HEADER = "Upload-Offset"
 LENGTH_HEADER = "Upload-Length"
 
-# one lock per (flight, file): chunk appends to one file are serialised (single-process server)
-_locks: dict[tuple[str, str], threading.Lock] = {}
-_locks_guard = threading.Lock()
+
+
+class FileLocks:
+    """One lock per (flight, file), so chunk appends to one file are serialised (one per app, on app.state)."""
+
+    def __init__(self) -> None:
+        self._locks: dict[tuple[str, str], threading.Lock] = {}
+        self._guard = threading.Lock()
+
+    def get(self, flight_id: str, name: str) -> threading.Lock:
+        """The lock of this file (created on first use)."""
+        with self._guard:
+            return self._locks.setdefault((flight_id, name), threading.Lock())
 
 
 #: partial uploads live here, apart from the final names (a manifest name can never start with a dot)
@@ -65,11 +75,6 @@ PARTIAL_DIR = ".partial"
 def partial_path(path: Path) -> Path:
     """Where the bytes of a file being uploaded accumulate until its SHA-256 is verified."""
     return path.parent / PARTIAL_DIR / path.name
-
-
-def _file_lock(flight_id: str, name: str) -> threading.Lock:
-    with _locks_guard:
-        return _locks.setdefault((flight_id, name), threading.Lock())
 
 
 def _limits(s: ApiSettings) -> Limits:
@@ -258,12 +263,12 @@ async def put_chunk(
         raise HTTPException(status_code=400, detail=f"missing {CHUNK_SHA_HEADER} header")
     client = request.client.host if request.client else ""
     return await run_in_threadpool(_append_chunk, settings, store, flight_id, name, path, offset, body,
-                                   claimed, client, request.app.state.jobs)
+                                   claimed, client, request.app.state.jobs, request.app.state.file_locks)
 
 
 def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str, path: Path, offset: int,
-                  body: bytes, claimed: str, client: str, jobs: JobRunner) -> FileOut:
-    with _file_lock(flight_id, name), store.session() as s:
+                  body: bytes, claimed: str, client: str, jobs: JobRunner, locks: FileLocks) -> FileOut:
+    with locks.get(flight_id, name), store.session() as s:
         flight, f = _lookup_file(s, flight_id, name)
         if f.status == "complete":
             raise HTTPException(status_code=409, detail=f"{name} is already complete")
