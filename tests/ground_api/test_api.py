@@ -254,6 +254,11 @@ def test_uploaded_orientations_trigger_the_adjustment(live: LiveServer, tmp_path
         html = c.get(f"/flights/{rep.flight_id}/report")
         assert html.headers["content-type"].startswith("text/html")
         assert 'id="parameters"' in html.text and "data:image/png;base64," in html.text
+        exports = c.get(f"/flights/{rep.flight_id}/exports").json()
+        assert {"geo.txt", "pix4d.csv", "metashape.txt", "opk.csv"} <= set(exports)
+        geo = c.get(f"/flights/{rep.flight_id}/exports/geo.txt").text.splitlines()
+        assert geo[0] == "EPSG:4979" and len(geo) == truth.n_images + 1
+        assert c.get(f"/flights/{rep.flight_id}/exports/..%2Fresults.json").status_code in (400, 404)
         # an explicit job with a bad parameter fails with a message, the server keeps serving
         r = c.post(f"/flights/{rep.flight_id}/jobs", json={"kind": "adjust", "params": {"estimate": ["scale"]}})
         assert r.status_code == 202

@@ -429,3 +429,23 @@ def get_report(flight_id: str, settings: SettingsDep,
     """The self-contained HTML report of the latest finished adjustment."""
     path = _latest_output(settings, store, flight_id, "report.html")
     return HTMLResponse(content=path.read_text(encoding="utf-8"))
+
+
+@router.get("/{flight_id}/exports", response_model=list[str])
+def list_exports(flight_id: str, settings: SettingsDep, store: StoreDep) -> list[str]:
+    """Geotag/orientation export files of the latest finished adjustment (geo.txt, pix4d.csv, …)."""
+    folder = _latest_output(settings, store, flight_id, "results.json").parent / "exports"
+    return sorted(p.name for p in folder.iterdir() if p.is_file()) if folder.is_dir() else []
+
+
+@router.get("/{flight_id}/exports/{name}", response_class=FileResponse)
+def get_export(flight_id: str, name: str, settings: SettingsDep, store: StoreDep) -> FileResponse:
+    """One export file of the latest finished adjustment."""
+    try:
+        check_file_name(name)
+    except UploadRejected as exc:
+        raise _http(exc) from exc
+    path = _latest_output(settings, store, flight_id, "results.json").parent / "exports" / name
+    if not path.is_file():
+        raise HTTPException(status_code=404, detail=f"no export {name!r}")
+    return FileResponse(path, media_type="text/plain", filename=name)
