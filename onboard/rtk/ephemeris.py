@@ -139,6 +139,50 @@ class EphemerisStore:
         return [e for prn in sorted(self._by_prn) for e in self._by_prn[prn]]
 
 
+_EPH_FIELDS = ("sqrt_a", "e", "i0_rad", "omega0_rad", "omega_rad", "m0_rad", "delta_n_rad_s", "omega_dot_rad_s",
+               "idot_rad_s", "cuc_rad", "cus_rad", "crc_m", "crs_m", "cic_rad", "cis_rad", "af0_s", "af1_s_s",
+               "af2_s_s2", "tgd_s")
+
+
+def _batch_position(p: npt.NDArray[np.float64], tk: npt.NDArray[np.float64],
+                    toe_s: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """eph_position() for many ephemerides at once (rows of `p` in _EPH_FIELDS order): ECEF positions (n,3)
+    and the relativistic clock term (n,) (s)."""
+    (sqrt_a, ecc, i0, omega0, omega_arg, m0, dn, omega_dot, idot, cuc, cus, crc, crs, cic, cis) = p[:15]
+    a = sqrt_a * sqrt_a
+    n = np.sqrt(MU_GPS_M3_S2 / (a * a * a)) + dn
+    mk = m0 + n * tk
+    ek = mk.copy()
+    for _ in range(12):  # fixed-point Kepler: error shrinks by e (< 0.03) per step, e¹² < 1e-18
+        ek = mk + ecc * np.sin(ek)
+    sin_e, cos_e = np.sin(ek), np.cos(ek)
+    u = np.arctan2(np.sqrt(1.0 - ecc * ecc) * sin_e, cos_e - ecc) + omega_arg
+    r = a * (1.0 - ecc * cos_e)
+    inc = i0 + idot * tk
+    sin2u, cos2u = np.sin(2.0 * u), np.cos(2.0 * u)
+    u = u + cus * sin2u + cuc * cos2u
+    r = r + crs * sin2u + crc * cos2u
+    inc = inc + cis * sin2u + cic * cos2u
+    x, y = r * np.cos(u), r * np.sin(u)
+    omega = omega0 + (omega_dot - OMEGA_E_RAD_S) * tk - OMEGA_E_RAD_S * toe_s
+    cos_o, sin_o, cos_i = np.cos(omega), np.sin(omega), np.cos(inc)
+    pos = np.stack([x * cos_o - y * cos_i * sin_o, x * sin_o + y * cos_i * cos_o, y * np.sin(inc)], axis=1)
+    return pos, F_REL_S_SQRT_M * ecc * sqrt_a * sin_e
+
+
+def _eph_params(store: EphemerisStore, ephs: list[Ephemeris]) -> npt.NDArray[np.float64]:
+    """(19, n) parameter rows for a list of ephemerides, cached on the store (the set changes every ~2 h)."""
+    key = tuple(id(e) for e in ephs)
+    cache: dict[tuple[int, ...], npt.NDArray[np.float64]] = store.__dict__.setdefault("_param_cache", {})
+    arr = cache.get(key)
+    if arr is None:
+        if len(cache) > 64:
+            cache.clear()
+        arr = np.array([[getattr(e, f) for e in ephs] for f in _EPH_FIELDS])
+        cache[key] = arr
+    return arr
+
+
 def satellite_states(
     store: EphemerisStore, prns: npt.ArrayLike, t_rx: GpsTime, pr_m: npt.ArrayLike
 ) -> SatState:
@@ -146,6 +190,7 @@ def satellite_states(
 
     Transmission time = t_rx − pr/c − satellite clock (RTKLIB satposs()); the result is in the ECEF frame
     of the transmission instant (the caller rotates for Earth rotation during travel, see geometric_range).
+    Vectorised over satellites: the same formulas as eph_position / eph_position_velocity.
     """
     prn_arr = np.asarray(prns, dtype=np.int16)
     pr = np.asarray(pr_m, dtype=float)
@@ -156,16 +201,43 @@ def satellite_states(
     drift = np.zeros(n)
     var = np.zeros(n)
     ok = np.zeros(n, dtype=bool)
+    ephs: list[Ephemeris] = []
+    rows: list[int] = []
     for i in range(n):
-        t_tx = t_rx.add_s(-pr[i] / CLIGHT_M_S)
-        eph = store.select(int(prn_arr[i]), t_tx)
+        if not np.isfinite(pr[i]):
+            continue
+        eph = store.select(int(prn_arr[i]), t_rx.add_s(-pr[i] / CLIGHT_M_S))
         if eph is None or eph.health != 0:
             continue
-        t_tx = t_tx.add_s(-eph_clock_s(eph, t_tx))
-        p, v, c, d = eph_position_velocity(eph, t_tx)
-        pos[i], vel[i], clk[i], drift[i] = p, v, c - eph.tgd_s, d
-        var[i] = ura_sigma_m(eph.ura_index) ** 2
-        ok[i] = True
+        ephs.append(eph)
+        rows.append(i)
+    if not rows:
+        return SatState(prn_arr, pos, vel, clk, drift, var, ok)
+    idx = np.array(rows)
+    p = _eph_params(store, ephs)
+    af0, af1, af2, tgd = p[15], p[16], p[17], p[18]
+    toe_s = np.array([e.toe_s for e in ephs])
+    rx_toe = np.array([t_rx.diff_ns(e.toe) for e in ephs]) / 1e9
+    rx_toc = np.array([t_rx.diff_ns(e.toc) for e in ephs]) / 1e9
+    tau = pr[idx] / CLIGHT_M_S
+
+    def clock(dt: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        for _ in range(2):  # as eph_clock_s: the polynomial evaluated at t − dts
+            dt = dt - (af0 + af1 * dt + af2 * dt * dt)
+        return af0 + af1 * dt + af2 * dt * dt
+
+    off = -tau - clock(rx_toc - tau)  # t_tx − t_rx (s)
+    step = 1e-3
+    p0, rel0 = _batch_position(p, rx_toe + off, toe_s)
+    p1, rel1 = _batch_position(p, rx_toe + off + step, toe_s)
+    c0 = clock(rx_toc + off) + rel0
+    c1 = clock(rx_toc + off + step) + rel1
+    pos[idx] = p0
+    vel[idx] = (p1 - p0) / step
+    clk[idx] = c0 - tgd
+    drift[idx] = (c1 - c0) / step
+    var[idx] = np.array([ura_sigma_m(e.ura_index) ** 2 for e in ephs])
+    ok[idx] = True
     return SatState(prn_arr, pos, vel, clk, drift, var, ok)
 
 

@@ -32,6 +32,8 @@ class RtkOptions:
     min_amb_dd: int = 4
     """Fewest double-difference ambiguities a (partial) fix may rest on."""
     partial_ar: bool = True
+    exclude_half_cycle: bool = False
+    """Drop phase flagged with an unresolved half cycle (LLI bit 1) from the filter, not only from AR."""
     max_partial_drop: int = 6
     phase_sigma_a_m: float = 0.003
     phase_sigma_b_m: float = 0.003

@@ -10,7 +10,7 @@ from __future__ import annotations
 import bisect
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -18,7 +18,7 @@ import numpy.typing as npt
 from onboard.gnsstime import GpsTime
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.rtkpos import NavData, rtk_init, rtk_pos
-from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_NONE, ObsEpoch, Solution
+from onboard.rtk.types import LLI_SLIP, Q_FIX, Q_FLOAT, Q_NONE, ObsEpoch, Solution
 
 log = logging.getLogger(__name__)
 
@@ -26,6 +26,8 @@ Arr = npt.NDArray[np.float64]
 DIRECTIONS = ("forward", "backward", "combined")
 COMBINE_FIX_AGREEMENT_M = 0.05
 """Forward and backward fixes further apart than this (3D, m) are not reported as fixed."""
+COMBINE_FLOAT_VOUCH_M = 0.5
+"""A fix in one direction is kept where the other is float only if that float's 3D σ is below this (m)."""
 
 
 def pair_epochs(rover: Sequence[ObsEpoch], base: Sequence[ObsEpoch], tolerance_s: float = 0.025,
@@ -59,6 +61,29 @@ class RunStats:
     slips: int = 0
 
 
+def reverse_slip_flags(epochs: Sequence[ObsEpoch]) -> list[ObsEpoch]:
+    """Epochs for a backward pass: each observation gets the loss-of-lock bit of the satellite's next phase
+    observation in time.
+
+    LLI bit 0 says "lost lock since the previous phase observation"; processed in reverse, the slip lies
+    between this epoch and the one processed next (RTKLIB postpos does the same for its backward solution).
+    Gaps count: a flag on the epoch after a phase gap belongs to the epoch before the gap."""
+    by_time = sorted(epochs, key=lambda e: e.time)
+    pending: dict[tuple[int, int], int] = {}  # flag of the later phase observation, per satellite
+    out: list[ObsEpoch] = [by_time[0]] * len(by_time) if by_time else []
+    for k in range(len(by_time) - 1, -1, -1):
+        ep = by_time[k]
+        lli = ep.lli & ~np.uint8(LLI_SLIP)
+        for j, (g, sv) in enumerate(zip(ep.gnss_id, ep.sv_id)):
+            key = (int(g), int(sv))
+            if not np.isfinite(ep.cp_cyc[j]):
+                continue
+            lli[j] |= pending.get(key, 0)
+            pending[key] = int(ep.lli[j]) & LLI_SLIP
+        out[k] = replace(ep, lli=lli.astype(np.uint8))
+    return out
+
+
 def run_filter(rover: Sequence[ObsEpoch], paired_base: Sequence[ObsEpoch | None], nav: NavData,
                base_pos_ecef_m: Arr | None, options: RtkOptions, backward: bool = False,
                init_pos_ecef_m: Arr | None = None, progress: Callable[[int], None] | None = None
@@ -69,6 +94,13 @@ def run_filter(rover: Sequence[ObsEpoch], paired_base: Sequence[ObsEpoch | None]
     """
     st = rtk_init(options, None if backward else init_pos_ecef_m)
     order = range(len(rover) - 1, -1, -1) if backward else range(len(rover))
+    if backward:
+        rover = reverse_slip_flags(rover)
+        base_rev = {id(b): r for b, r in zip(
+            sorted({id(b): b for b in paired_base if b is not None}.values(), key=lambda e: e.time),
+            reverse_slip_flags(sorted({id(b): b for b in paired_base if b is not None}.values(),
+                                      key=lambda e: e.time)))}
+        paired_base = [None if b is None else base_rev[id(b)] for b in paired_base]
     sols: list[Solution | None] = [None] * len(rover)
     stats = RunStats(epochs=len(rover))
     for i in order:
@@ -122,7 +154,10 @@ def combine(fwd: Solution, bwd: Solution) -> Solution:
                         fwd.age_s, ratio)
     if fwd.q == Q_FIX or bwd.q == Q_FIX:
         fixed, other = (fwd, bwd) if fwd.q == Q_FIX else (bwd, fwd)
-        if other.q != Q_FLOAT or _consistent(fixed, other):
+        if other.q != Q_FLOAT:
+            return fixed
+        # the other direction's float must be converged enough to vouch for the fix, and agree with it
+        if float(np.sqrt(np.trace(other.cov_pos_m2))) <= COMBINE_FLOAT_VOUCH_M and _consistent(fixed, other):
             return fixed
         pos, cov = _smooth(fwd, bwd)
         return Solution(fwd.time, pos, fwd.vel_ecef_m_s, Q_FLOAT, max(fwd.ns, bwd.ns), cov, fwd.cov_vel_m2_s2,

@@ -83,6 +83,7 @@ class RtkState:
     prev_cp_r: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
     prev_dop_r: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
     prev_time_r: GpsTime | None = None
+    last_t_r: list[GpsTime | None] = field(default_factory=lambda: [None] * NSAT)
     prev_zb: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
     prev_time_b: GpsTime | None = None
     fix_count: int = 0
@@ -164,8 +165,8 @@ def _process_noise(st: RtkState, dt: float, pos: Arr) -> Arr:
     adt = abs(dt)
     q = np.zeros((NX0, NX0))
     q[:3, :3] = qa * adt**3 / 3.0
-    q[:3, 3:] = qa * adt**2 / 2.0
-    q[3:, :3] = qa * adt**2 / 2.0
+    q[:3, 3:] = qa * dt * adt / 2.0  # negative when propagating backward in time
+    q[3:, :3] = qa * dt * adt / 2.0
     q[3:, 3:] = qa * adt
     return q
 
@@ -216,16 +217,21 @@ def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t
     o = st.options
     slip = ((rov.lli & LLI_SLIP) != 0) | ((base.lli & LLI_SLIP) != 0)
     slip &= common
-    # Doppler-predicted phase on the rover
+    # Doppler-predicted phase on the rover, from each satellite's last phase (across short gaps)
     if st.prev_time_r is not None:
+        dt_all = np.array([t_r.diff_s(t) if t is not None else np.nan for t in st.last_t_r])
         dt = t_r.diff_s(st.prev_time_r)
-        if 0 < abs(dt) <= 30.0:
+        if np.any(np.isfinite(dt_all)):
             dop_avg = np.where(np.isfinite(st.prev_dop_r), 0.5 * (rov.dop_hz + st.prev_dop_r), rov.dop_hz)
-            d = (rov.cp_cyc - st.prev_cp_r) + dop_avg * dt  # RINEX: phase follows range, Doppler = −range rate
+            d = (rov.cp_cyc - st.prev_cp_r) + dop_avg * dt_all  # RINEX: phase follows range, Doppler = −rate
+            d[~(np.abs(dt_all) <= 30.0)] = np.nan
             ok = np.isfinite(d) & common
             if ok.sum() >= 2:
-                d = d - np.median(d[ok])
-                thr = o.slip_threshold_cyc * max(1.0, abs(dt))
+                # the receiver-clock part is common to all satellites: take it from those not flagged,
+                # a burst of flagged slips would otherwise corrupt it
+                clean = ok & ~slip
+                d = d - np.median(d[clean] if clean.sum() >= 2 else d[ok])
+                thr = o.slip_threshold_cyc * np.maximum(1.0, np.abs(np.nan_to_num(dt_all, nan=1.0)))
                 slip |= ok & (np.abs(d) > thr)
     # base: phase − geometric range (known static base), differenced in time
     if st.prev_time_b is not None and t_b != st.prev_time_b:
@@ -241,14 +247,15 @@ def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t
 
 
 def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Arr,
-            valid_phase: npt.NDArray[np.bool_], slip: npt.NDArray[np.bool_]) -> None:
+            valid_phase: npt.NDArray[np.bool_], slip: npt.NDArray[np.bool_], count_lock: bool = True) -> None:
     """Ambiguity bookkeeping (RTKLIB udbias): reset on slip or long outage, initialise new ones.
 
     New SD ambiguities come from phase − code; with a known rover position (take-off point) from phase −
     modelled range instead (Daakir et al. 2015 eq. 2), which lets the first epoch fix.
     """
     o = st.options
-    st.outage[~valid_phase] += 1
+    if count_lock:
+        st.outage[~valid_phase] += 1
     lost = (st.outage > o.max_outage_epochs) & (st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
     reset = np.flatnonzero(lost | (slip & valid_phase))
     if reset.size:
@@ -267,8 +274,9 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
         k = np.flatnonzero(new)
         st.x[NX0 + k] = sd[k]
         st.p[NX0 + k, NX0 + k] = var
-    st.lock[valid_phase] += 1
-    st.lock[~valid_phase] = 0
+    if count_lock:
+        st.lock[valid_phase] += 1
+        st.lock[~valid_phase] = 0
 
 
 def _dd_matrix(idx: npt.NDArray[np.int64], ref: int) -> Arr:
@@ -509,16 +517,20 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     rng_r, _, _, el_r = _model_range_m(rov, st.x[:3])
     el = el_r
     common = rov.has & bas.has & (el >= o.elmask_rad) & spp.used
-    phase_ok = common & np.isfinite(rov.cp_cyc) & np.isfinite(bas.cp_cyc)
+    half = ((rov.lli & LLI_HALF_CYCLE) != 0) | ((bas.lli & LLI_HALF_CYCLE) != 0)
+    # phase with an unresolved half cycle may jump by ½ cycle when the receiver resolves it: not used at all
+    phase_ok = common & np.isfinite(rov.cp_cyc) & np.isfinite(bas.cp_cyc) & ~(half & o.exclude_half_cycle)
     base_zb = LAMBDA_L1_M * bas.cp_cyc - rng_b
     base_zb_cyc = base_zb / LAMBDA_L1_M
     slip = _detect_slips(st, rov, bas, base_zb_cyc, rover.time, base.time, phase_ok)
-    half = ((rov.lli & LLI_HALF_CYCLE) != 0) | ((bas.lli & LLI_HALF_CYCLE) != 0)
     _udbias(st, rov, bas, rng_r, rng_b, phase_ok, slip)
 
     # remember raw data for next epoch's slip tests
-    st.prev_cp_r = rov.cp_cyc.copy()
-    st.prev_dop_r = rov.dop_hz.copy()
+    have = np.isfinite(rov.cp_cyc) & np.isfinite(rov.dop_hz)
+    st.prev_cp_r[have] = rov.cp_cyc[have]
+    st.prev_dop_r[have] = rov.dop_hz[have]
+    for k in np.flatnonzero(have):
+        st.last_t_r[k] = rover.time
     st.prev_time_r = rover.time
     if st.prev_time_b != base.time:
         st.prev_zb = base_zb_cyc
@@ -548,12 +560,24 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         if kind == 0:
             # a phase outlier: treat as a slip of that satellite (or of the reference when most rows fail)
             phase_bad = bad & (dd.kind == 0)
-            if phase_bad.sum() > max(1, 0.5 * (dd.kind == 0).sum()) and dd.ref_phase >= 0:
-                slot = dd.ref_phase
+            n_phase = int((dd.kind == 0).sum())
+            if n_phase <= 4 or phase_bad.sum() > 1:
+                # too few double differences (or several bad) to tell which satellite slipped: start the
+                # ambiguities afresh rather than keep a possibly slipped one (and a wrong hold) alive
+                log.debug("%s: phase outliers on %d of %d DDs -> all ambiguities reset", rover.time,
+                          int(phase_bad.sum()), n_phase)
+                reset = np.flatnonzero(st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
+                _reset_amb(st, reset)
+                st.slips += int(reset.size)
+                use_phase = phase_ok & code_ok
+                st.fix_count = 0
+                _udbias(st, rov, bas, rng_r, rng_b, use_phase, np.zeros(NSAT, bool), count_lock=False)
+                continue
             log.debug("%s: phase outlier PRN %d (%.2f m) -> ambiguity reset", rover.time, slot + 1, dd.v[worst])
             _reset_amb(st, np.array([slot]))
             use_phase[slot] = False
             st.slips += 1
+            st.held_prns[:] = False
         elif kind == 1:
             code_ok[slot] = False
             use_phase[slot] = False

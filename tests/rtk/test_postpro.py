@@ -53,8 +53,10 @@ def test_combine_rules():
     assert both.q == Q_FIX and np.allclose(both.pos_ecef_m, a + 0.002)
     disagree = combine(_sol(Q_FIX, a, 0.003), _sol(Q_FIX, a + [0.19, 0, 0], 0.003))
     assert disagree.q == Q_FLOAT  # two different integer sets: neither is trusted
-    one = combine(_sol(Q_FIX, a, 0.003), _sol(Q_FLOAT, a + 0.1, 0.3))
+    one = combine(_sol(Q_FIX, a, 0.003), _sol(Q_FLOAT, a + 0.1, 0.2))
     assert one.q == Q_FIX and np.allclose(one.pos_ecef_m, a)
+    unconverged = combine(_sol(Q_FIX, a, 0.003), _sol(Q_FLOAT, a + 0.1, 2.0))
+    assert unconverged.q == Q_FLOAT  # a float of metres cannot vouch for the other direction's fix
     clash = combine(_sol(Q_FIX, a, 0.003), _sol(Q_FLOAT, a + 2.0, 0.05))
     assert clash.q == Q_FLOAT  # the fix is outside the other direction's float ellipsoid
 
@@ -62,13 +64,13 @@ def test_combine_rules():
 def test_combined_run_on_geonet_is_fixed_and_matches_the_reference():
     d = "gnss/geonet-0759-3040-20050402/"
     nav = read_rinex_nav(shared_file(d + "07590920.05n.gz"))
-    rov = read_rinex_obs(shared_file(d + "07590920.05o.gz")).epochs[:40]
+    rov = read_rinex_obs(shared_file(d + "07590920.05o.gz")).epochs
     bas = read_rinex_obs(shared_file(d + "30400920.05o.gz")).epochs
     sols, stats = postprocess(rov, bas, Nav(EphemerisStore(nav.ephemerides), (nav.iono_alpha, nav.iono_beta)),
                               np.array([-3978241.958, 3382840.234, 3649900.853]), RtkOptions(), "combined")
-    assert len(stats) == 2 and len(sols) == 40
+    assert len(stats) == 2 and len(sols) == 120
     q = np.array([s.q for s in sols])
-    assert np.mean(q == Q_FIX) >= 0.9
+    assert np.mean(q == Q_FIX) >= 0.6  # combined is conservative: a fix needs support from both passes
     ref = np.array([-3976219.1873, 3382371.6051, 3652511.1423])
     err = np.array([np.linalg.norm(s.pos_ecef_m - ref) for s in sols])
     assert err[q == Q_FIX].max() < 0.03
