@@ -14,7 +14,7 @@ import argparse
 import csv
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -41,7 +41,7 @@ class Case:
     rtklib: str
     load: Callable[[], tuple[list[ObsEpoch], list[ObsEpoch], Nav, np.ndarray, Callable[[GpsTime], np.ndarray | None],
                              np.ndarray | None]]
-    options: RtkOptions = RtkOptions()
+    options: RtkOptions = field(default_factory=RtkOptions)
 
 
 def _nav(*paths: Path) -> Nav:

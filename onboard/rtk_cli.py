@@ -39,10 +39,7 @@ class ObsInput:
 def _is_rinex(path: Path) -> bool:
     from onboard.receiver.decode import iter_file_bytes
 
-    try:
-        head = next(iter_file_bytes(path, 4096), b"")
-    except InputError:
-        raise
+    head = next(iter_file_bytes(path, 4096), b"")
     return b"RINEX VERSION" in head[:200]
 
 

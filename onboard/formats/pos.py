@@ -54,7 +54,7 @@ def pos_header_lines(llh: bool = False, velocity: bool = False, calendar: bool =
                      info: Sequence[str] = ()) -> list[str]:
     """The `%` header: free information lines, then the column-title line."""
     lines = [f"% {s}" for s in info]
-    titles = _LLH_TITLES if llh else _XYZ_TITLES
+    titles: tuple[str, ...] = _LLH_TITLES if llh else _XYZ_TITLES
     if velocity:
         titles = titles + (_VEL_ENU if llh else _VEL_XYZ)
     time_title = "%  GPST                 " if calendar else "%  GPST          "

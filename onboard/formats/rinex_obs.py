@@ -22,7 +22,14 @@ from onboard.errors import InputError
 from onboard.gnsstime import GpsTime, gpst_from_calendar
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.types import (
-    GNSS_BEIDOU, GNSS_GALILEO, GNSS_GLONASS, GNSS_GPS, GNSS_QZSS, GNSS_SBAS, LLI_SLIP, ObsEpoch,
+    GNSS_BEIDOU,
+    GNSS_GALILEO,
+    GNSS_GLONASS,
+    GNSS_GPS,
+    GNSS_QZSS,
+    GNSS_SBAS,
+    LLI_SLIP,
+    ObsEpoch,
 )
 
 log = logging.getLogger(__name__)

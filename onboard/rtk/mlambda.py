@@ -6,9 +6,8 @@ modified search of Chang, Yang & Zhou (2005), as RTKLIB lambda.c: LD(), reductio
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt

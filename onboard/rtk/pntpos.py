@@ -87,7 +87,7 @@ def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: 
     corr = np.zeros(m)
     corr_at: Arr | None = None  # position where az/el/atmosphere were last evaluated
 
-    def full(a: Arr, fill: float) -> Arr:
+    def full(a: np.ndarray, fill: float | bool) -> np.ndarray:
         out = np.full(n, fill, dtype=a.dtype)
         out[idx] = a
         return out
@@ -157,7 +157,6 @@ def doppler_velocity(dop_hz: Arr | None, sats: SatState, e: Arr, pos: Arr,
         return np.full(3, np.nan), np.nan
     rate_obs = -LAMBDA_L1_M * dop[m]
     vs = sats.vel_m_s[m]
-    ps = sats.pos_m[m]
     # range-rate model incl. Sagnac rate (RTKLIB resdop())
     sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, 1] * pos[0] - vs[:, 0] * pos[1])
     em = e[m]

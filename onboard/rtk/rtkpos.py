@@ -220,7 +220,6 @@ def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t
     # Doppler-predicted phase on the rover, from each satellite's last phase (across short gaps)
     if st.prev_time_r is not None:
         dt_all = np.array([t_r.diff_s(t) if t is not None else np.nan for t in st.last_t_r])
-        dt = t_r.diff_s(st.prev_time_r)
         if np.any(np.isfinite(dt_all)):
             dop_avg = np.where(np.isfinite(st.prev_dop_r), 0.5 * (rov.dop_hz + st.prev_dop_r), rov.dop_hz)
             d = (rov.cp_cyc - st.prev_cp_r) + dop_avg * dt_all  # RINEX: phase follows range, Doppler = −rate
