@@ -1,0 +1,484 @@
+"""Real-time RTK in the recorder: base corrections from the telemetry radio, one solution per rover epoch.
+
+Two threads beside the recorder's own, so the engine can never delay or block recording:
+
+    radio thread:   radio ByteStream → radio journal (`<flight>/radio/`, the recorder's `Journal`: bytes are
+                    on their way to disk before anything parses them) → framer → RTCM3 (1002/1004/1074/1077,
+                    1005/1006, 1019) or a UBX relay (RXM-RAW/RAWX, SFRB(X), AID-EPH) → latest base epochs,
+                    base position, ephemerides; reopens a vanished radio with backoff
+    engine thread:  rover items from a bounded queue (`submit`, non-blocking: a full queue drops and counts)
+                    → `rtk_pos` with the latest base epoch at or before the rover epoch (waiting at most
+                    `base_wait_s` for the matching one, the radio's latency) → `<flight>/solution.pos`
+                    → `snapshot()` (Q, ratio, satellites, age of corrections, baseline, time to first fix)
+
+Radio gaps: corrections older than `max_base_age_s` are not used (the engine reports a single-point
+solution), so the filter never runs on stale corrections — on the hil_sim flight a 20 s gap at 30 s maximum
+age ended in wrong fixes; at 5 s none, and fixes return within seconds of the base coming back.
+
+Wiring into the recorder: `RtkRecorder` is the recorder with this service attached through its decoded-item
+hook (`Recorder._on_decoded`) and its status writes; `rtk.json` is written beside the status snapshot. The
+daemon's own wiring (a settings key for the radio device and these three calls: `start(flight_dir)` after the
+flight directory is chosen, `submit(item)` for each decoded item, `stop()` at close) is left to the daemon's
+owner; see `RtkRecorder` for the exact calls.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import queue
+import threading
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from onboard.daemon import Recorder, RecorderDeps
+from onboard.errors import LinkLost
+from onboard.gnsstime import GpsTime
+from onboard.hw.ports import ByteStream, Clock, SystemClock
+from onboard.logger.journal import Journal, JournalOptions
+from onboard.receiver.framing import Frame, Protocol, StreamFramer
+from onboard.receiver.rtcm import BasePosition, RtcmDecoder
+from onboard.rtk.ephemeris import EphemerisStore
+from onboard.rtk.options import RtkOptions
+from onboard.rtk.rtkpos import Nav, rtk_init, rtk_pos
+from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, Ephemeris, ObsEpoch, Solution
+from onboard.settings import Settings
+
+log = logging.getLogger(__name__)
+
+Arr = npt.NDArray[np.float64]
+RADIO_DIR = "radio"
+SOLUTION_NAME = "solution.pos"
+RTK_STATUS_NAME = "rtk.json"
+
+
+@dataclass(frozen=True)
+class RtkServiceOptions:
+    """Real-time RTK settings. `base_pos_ecef_m` overrides the position the base sends (1005/1006)."""
+
+    engine: RtkOptions = field(default_factory=RtkOptions)
+    max_base_age_s: float = 5.0
+    base_wait_s: float = 0.5
+    queue_max_items: int = 64
+    base_buffer_epochs: int = 30
+    base_pos_ecef_m: tuple[float, float, float] | None = None
+    radio_read_bytes: int = 4096
+    radio_reopen_s: float = 1.0
+    journal: JournalOptions = field(default_factory=JournalOptions)
+    restart_after_outage: bool = False
+    """Restart the filter when corrections return after an outage. Off: on the hil_sim flight the engine kept
+    its ambiguities across 15-20 s gaps and fixed again at once, correctly, while a cold restart 170 s into the
+    flight fixed 5 m off (reported to the engine's owner)."""
+    lock_rules: Any = None
+    """`onboard.receiver.decode.LockTrackerOptions` for the rover's RXM-RAWX phase validity and slips (None:
+    RTKLIB's Gen8 thresholds, the same rules `onboard rtk` applies to a journal)."""
+
+
+@dataclass
+class RtkStatus:
+    """What the status snapshot shows about real-time RTK (JSON-able via `to_json`)."""
+
+    running: bool = False
+    radio_open: bool = False
+    radio_error: str | None = None
+    radio_bytes: int = 0
+    base_frames: int = 0
+    base_epochs: int = 0
+    base_position_ecef_m: list[float] | None = None
+    epochs: int = 0
+    dropped_epochs: int = 0
+    fixed: int = 0
+    float_: int = 0
+    single: int = 0
+    q: int = Q_NONE
+    ratio: float = 0.0
+    ns: int = 0
+    age_s: float | None = None
+    baseline_m: float | None = None
+    last_gpst: str | None = None
+    ttff_s: float | None = None
+    engine_ms_last: float = 0.0
+    engine_ms_max: float = 0.0
+    errors: int = 0
+    restarts: int = 0
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-able dict (field `float_` as "float")."""
+        d = dict(self.__dict__)
+        d["float"] = d.pop("float_")
+        return d
+
+
+class BaseStream:
+    """Radio bytes → base epochs / position / ephemerides (pure: no I/O, no clock, no threads).
+
+    RTCM3 frames go through `RtcmDecoder` (GPS week from `reference`, the latest rover time); UBX frames (a
+    raw relay) through the UBX decoder with RTKLIB's lock rules. Epochs of one time from several messages are
+    merged.
+    """
+
+    def __init__(self, buffer_epochs: int = 30) -> None:
+        from onboard.receiver.decode import DecodeStats, LockTracker
+        from onboard.rtk.lnav import LnavAssembler
+
+        self.framer = StreamFramer()
+        self.rtcm = RtcmDecoder()
+        self.ubx_stats = DecodeStats()
+        self.tracker = LockTracker()
+        self.lnav = LnavAssembler()
+        self.epochs: deque[ObsEpoch] = deque(maxlen=buffer_epochs)
+        self.position: BasePosition | None = None
+        self.ephemerides: list[Ephemeris] = []
+        self.frames = 0
+        self.epoch_count = 0
+
+    def feed(self, data: bytes, reference: GpsTime | None) -> int:
+        """Decode what `data` completes; returns the number of new base epochs."""
+        new = 0
+        for frame in self.framer.feed(data):
+            new += self._frame(frame, reference)
+        return new
+
+    def _add_epoch(self, ep: ObsEpoch) -> int:
+        from onboard.rtk_inputs import EPOCH_MERGE_TOLERANCE_NS, _merge
+
+        ep = ep.gps_only()
+        if len(ep) == 0:
+            return 0
+        last = self.epochs[-1] if self.epochs else None
+        if last is not None and abs(ep.time.diff_ns(last.time)) < EPOCH_MERGE_TOLERANCE_NS:
+            self.epochs[-1] = _merge(last, ep)
+            return 0
+        if last is not None and ep.time < last.time:
+            return 0
+        self.epochs.append(ep)
+        self.epoch_count += 1
+        return 1
+
+    def _frame(self, frame: Frame, reference: GpsTime | None) -> int:
+        self.frames += 1
+        if frame.protocol is Protocol.RTCM3:
+            if reference is None:
+                if frame.msg_id not in (1005, 1006):
+                    return 0  # no week to resolve yet: the rover has not produced an epoch
+                reference = GpsTime(0, 0)
+            item = self.rtcm.decode(frame, reference)
+        elif frame.protocol is Protocol.UBX:
+            from onboard.receiver.decode import SubframeWords, decode_frame
+
+            item = decode_frame(frame, self.ubx_stats)
+            if isinstance(item, ObsEpoch):
+                item = self.tracker.update(item)
+            elif isinstance(item, SubframeWords):
+                week = self.ubx_stats.reference_week
+                if item.gnss_id != 0:
+                    item = None
+                elif item.bits == 30:
+                    item = self.lnav.add_subframe_words30(item.prn, item.words, reference_week=week)
+                else:
+                    item = self.lnav.add_subframe(item.prn, item.words, reference_week=week)
+        else:
+            return 0
+        if isinstance(item, ObsEpoch):
+            return self._add_epoch(item)
+        if isinstance(item, BasePosition):
+            self.position = item
+        elif isinstance(item, Ephemeris):
+            self.ephemerides.append(item)
+        return 0
+
+    def latest_at(self, t: GpsTime, tolerance_s: float) -> ObsEpoch | None:
+        """Latest base epoch with time ≤ t + tolerance (None when none is buffered)."""
+        limit = t.add_s(tolerance_s)
+        for ep in reversed(self.epochs):
+            if ep.time <= limit:
+                return ep
+        return None
+
+
+class RtkService:
+    """The real-time RTK worker (see module doc). Thread-safe `submit`/`snapshot`; `start`/`stop` once."""
+
+    def __init__(self, options: RtkServiceOptions, open_radio: Callable[[], ByteStream] | None,
+                 clock: Clock | None = None) -> None:
+        self.options = options
+        self._open_radio = open_radio
+        self.clock = clock or SystemClock()
+        self.engine_options = replace(options.engine, max_age_s=options.max_base_age_s)
+        self._queue: queue.Queue[Any] = queue.Queue(options.queue_max_items)
+        self._stop = threading.Event()
+        self._cond = threading.Condition()
+        self._base = BaseStream(options.base_buffer_epochs)
+        self._reference: GpsTime | None = None
+        self._status = RtkStatus()
+        self._threads: list[threading.Thread] = []
+        self._journal: Journal | None = None
+        self._pos_file: Any = None
+        self.flight_dir: Path | None = None
+        self.solutions_written = 0
+
+    # -- lifecycle ----------------------------------------------------------------------------------------
+    def start(self, flight_dir: Path) -> None:
+        """Open the radio journal and solution file in `flight_dir` and start both threads."""
+        from onboard.formats.pos import pos_header_lines
+
+        self.flight_dir = Path(flight_dir)
+        new_file = not (self.flight_dir / SOLUTION_NAME).exists()
+        self._pos_file = open(self.flight_dir / SOLUTION_NAME, "a", encoding="ascii")  # noqa: SIM115
+        if new_file:
+            info = ["program   : directgeo onboard real-time RTK (GPS L1)", "pos mode  : kinematic",
+                    f"elev mask : {np.rad2deg(self.engine_options.elmask_rad):.1f} deg",
+                    f"amb res   : {self.engine_options.ar_mode}", ""]
+            for line in pos_header_lines(info=info):
+                self._pos_file.write(line + "\n")
+            self._pos_file.flush()
+        self._status.running = True
+        engine = threading.Thread(target=self._engine_thread, name="rtk-engine", daemon=True)
+        self._threads = [engine]
+        if self._open_radio is not None:
+            self._journal = Journal(self.flight_dir / RADIO_DIR, self.clock, self.options.journal)
+            self._threads.append(threading.Thread(target=self._radio_thread, name="rtk-radio", daemon=True))
+        for t in self._threads:
+            t.start()
+
+    def stop(self) -> None:
+        """Stop both threads, close the radio journal (manifest) and the solution file."""
+        self._stop.set()
+        with self._cond:
+            self._cond.notify_all()
+        for t in self._threads:
+            t.join(timeout=5.0)
+        if self._journal is not None:
+            try:
+                self._journal.close("stopped")
+            except OSError as exc:
+                log.error("radio journal close failed: %s", exc)
+        if self._pos_file is not None:
+            self._pos_file.close()
+            self._pos_file = None
+        self._status.running = False
+
+    # -- rover side (called from the recorder's loop: never blocks) -----------------------------------------
+    def submit(self, item: Any) -> bool:
+        """Hand over one decoded rover item (ObsEpoch, Ephemeris, SubframeWords); False when dropped."""
+        from onboard.receiver.decode import SubframeWords
+
+        if not isinstance(item, (ObsEpoch, Ephemeris, SubframeWords)):
+            return True
+        try:
+            self._queue.put_nowait(item)
+            return True
+        except queue.Full:
+            if isinstance(item, ObsEpoch):
+                self._status.dropped_epochs += 1
+            return False
+
+    def snapshot(self) -> dict[str, Any]:
+        """The current RTK status as a JSON-able dict."""
+        return self._status.to_json()
+
+    # -- radio thread ---------------------------------------------------------------------------------------
+    def _radio_thread(self) -> None:
+        assert self._open_radio is not None and self._journal is not None
+        port: ByteStream | None = None
+        st = self._status
+        while not self._stop.is_set():
+            if port is None:
+                try:
+                    port = self._open_radio()
+                    st.radio_open, st.radio_error = True, None
+                except LinkLost as exc:
+                    st.radio_open, st.radio_error = False, str(exc)
+                    self._stop.wait(self.options.radio_reopen_s)
+                    continue
+            try:
+                data = port.read(self.options.radio_read_bytes)
+            except LinkLost as exc:
+                port.close()
+                port = None
+                st.radio_open, st.radio_error = False, str(exc)
+                log.warning("radio lost: %s", exc)
+                continue
+            try:
+                if data:
+                    self._journal.append(data, self.clock.monotonic_ns(), self.clock.wall_ns())
+                self._journal.maybe_sync()
+            except OSError as exc:  # the recorder's own journal reports the disk; keep correcting
+                st.errors += 1
+                log.error("radio journal: %s", exc)
+            if not data:
+                continue
+            st.radio_bytes += len(data)
+            with self._cond:
+                new = self._base.feed(data, self._reference)
+                if new:
+                    self._cond.notify_all()
+            st.base_frames = self._base.frames
+            st.base_epochs = self._base.epoch_count
+            pos = self._base.position
+            st.base_position_ecef_m = None if pos is None else [float(v) for v in pos.phase_centre_ecef_m]
+        if port is not None:
+            port.close()
+        st.radio_open = False
+
+    # -- engine thread --------------------------------------------------------------------------------------
+    def _engine_thread(self) -> None:
+        from onboard.receiver.decode import LockTracker, LockTrackerOptions, SubframeWords
+        from onboard.rtk.lnav import LnavAssembler
+
+        state = rtk_init(self.engine_options)
+        store = EphemerisStore()
+        nav = Nav(store)
+        tracker = LockTracker(self.options.lock_rules or LockTrackerOptions())
+        lnav = LnavAssembler()
+        n_base_eph = 0
+        outage_epochs = 0
+        first_time: GpsTime | None = None
+        while not self._stop.is_set():
+            try:
+                item = self._queue.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            if isinstance(item, Ephemeris):
+                store.add(item)
+                continue
+            if isinstance(item, SubframeWords):
+                if item.gnss_id == 0:
+                    week = self._reference.week if self._reference is not None else None
+                    eph = (lnav.add_subframe_words30(item.prn, item.words, reference_week=week) if item.bits == 30
+                           else lnav.add_subframe(item.prn, item.words, reference_week=week))
+                    if eph is not None:
+                        store.add(eph)
+                continue
+            rover = tracker.update(item)
+            self._reference = rover.time
+            if first_time is None:
+                first_time = rover.time
+            base, base_pos = self._wait_base(rover.time)
+            with self._cond:
+                ephs = self._base.ephemerides[n_base_eph:]
+                n_base_eph = len(self._base.ephemerides)
+            for eph in ephs:
+                store.add(eph)
+            if len(store) == 0:
+                continue
+            if base is None and state.initialized:
+                outage_epochs += 1
+            elif base is not None and outage_epochs and self.options.restart_after_outage:
+                # Optional: the filter's ambiguities were not checked across the outage.
+                log.info("%s: corrections back after %d epochs without: filter restarted", rover.time,
+                         outage_epochs)
+                state = rtk_init(self.engine_options)
+                self._status.restarts += 1
+                outage_epochs = 0
+            t0 = self.clock.monotonic_ns()
+            try:
+                sol = rtk_pos(state, rover, base, nav, base_pos)
+            except (ValueError, ArithmeticError, IndexError, np.linalg.LinAlgError) as exc:
+                self._status.errors += 1
+                log.error("rtk_pos at %s: %s", rover.time, exc)
+                continue
+            ms = (self.clock.monotonic_ns() - t0) / 1e6
+            self._publish(sol, base, base_pos, first_time, ms)
+
+    def _wait_base(self, t: GpsTime) -> tuple[ObsEpoch | None, Arr | None]:
+        """The base epoch for rover time `t`: wait up to `base_wait_s` for one at ≥ t − tolerance to arrive."""
+        tol = self.engine_options.pair_tolerance_s
+        deadline = self.clock.monotonic_ns() + round(self.options.base_wait_s * 1e9)
+        with self._cond:
+            while True:
+                newest = self._base.epochs[-1] if self._base.epochs else None
+                if newest is not None and newest.time.diff_s(t) >= -tol:
+                    break
+                left = (deadline - self.clock.monotonic_ns()) / 1e9
+                if left <= 0 or self._stop.is_set():
+                    break
+                self._cond.wait(min(left, 0.1))
+            base = self._base.latest_at(t, tol)
+            pos = self._base.position
+        if self.options.base_pos_ecef_m is not None:
+            base_pos: Arr | None = np.array(self.options.base_pos_ecef_m, float)
+        else:
+            base_pos = None if pos is None else pos.phase_centre_ecef_m
+        if base is not None and t.diff_s(base.time) > self.options.max_base_age_s:
+            base = None  # stale: the engine reports single rather than filtering on old corrections
+        return base, base_pos
+
+    def _publish(self, sol: Solution, base: ObsEpoch | None, base_pos: Arr | None, first: GpsTime,
+                 engine_ms: float) -> None:
+        from onboard.formats.pos import format_solution
+
+        st = self._status
+        st.epochs += 1
+        st.q, st.ratio, st.ns = int(sol.q), float(sol.ratio), int(sol.ns)
+        st.age_s = float(sol.age_s) if base is not None else None
+        st.fixed += sol.q == Q_FIX
+        st.float_ += sol.q == Q_FLOAT
+        st.single += sol.q == Q_SINGLE
+        st.last_gpst = str(sol.time)
+        st.engine_ms_last = engine_ms
+        st.engine_ms_max = max(st.engine_ms_max, engine_ms)
+        if base_pos is not None and sol.q in (Q_FIX, Q_FLOAT):
+            st.baseline_m = float(np.linalg.norm(sol.pos_ecef_m - base_pos))
+        if sol.q == Q_FIX and st.ttff_s is None:
+            st.ttff_s = sol.time.diff_s(first)
+        if sol.q == Q_NONE or self._pos_file is None:
+            return
+        try:
+            self._pos_file.write(format_solution(sol) + "\n")
+            self._pos_file.flush()
+            self.solutions_written += 1
+        except OSError as exc:
+            st.errors += 1
+            log.error("solution file: %s", exc)
+
+
+def write_rtk_status(path: Path, snapshot: dict[str, Any]) -> None:
+    """Write the RTK snapshot atomically (temp file + rename), like the recorder's status."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(snapshot, indent=1, sort_keys=True) + "\n")
+    os.replace(tmp, path)
+
+
+class RtkRecorder(Recorder):
+    """The recorder with real-time RTK attached (the three calls the daemon needs, through its hooks)."""
+
+    def __init__(self, settings: Settings, deps: RecorderDeps, options: RtkServiceOptions,
+                 open_radio: Callable[[], ByteStream] | None) -> None:
+        super().__init__(settings, deps)
+        self.rtk = RtkService(options, open_radio, deps.clock)
+        self._rtk_started = False
+
+    async def run(self) -> int:
+        """Record (and solve) until stopped; returns the exit code."""
+        try:
+            return await super().run()
+        finally:
+            if self._rtk_started:
+                self.rtk.stop()
+                self._write_rtk_status()
+
+    def _on_decoded(self, item: Any) -> None:
+        super()._on_decoded(item)
+        self.rtk.submit(item)
+
+    def _write_status(self) -> None:
+        if not self._rtk_started and self.status.flight_dir is not None:
+            self._rtk_started = True  # first status write after the flight directory was chosen
+            self.rtk.start(Path(self.status.flight_dir))
+        super()._write_status()
+        if self._rtk_started:
+            self._write_rtk_status()
+
+    def _write_rtk_status(self) -> None:
+        try:
+            write_rtk_status(self.settings.status_path.with_name(RTK_STATUS_NAME), self.rtk.snapshot())
+        except OSError as exc:
+            log.warning("rtk status not written: %s", exc)
