@@ -162,10 +162,12 @@ def run_pipeline(chunks: list[tuple[bytes, float]], journal_on: bool, parse: str
     return time.process_time() - cpu0
 
 
-def daemon_run(chunks: list[tuple[bytes, float]] | None, workdir: Path, timeout_s: float = 900.0) -> tuple[float, int, int]:
+def daemon_run(
+    chunks: list[tuple[bytes, float]] | None, workdir: Path, stall_s: float = 30.0
+) -> tuple[float, int, int, int]:
     """Run the real recorder on a pty, feed `chunks` (None: start and stop only), stop it with SIGTERM.
 
-    Returns (CPU s user+sys, peak RSS kB, bytes journaled).
+    Returns (CPU s user+sys, peak RSS kB, bytes journaled, signals needed to stop it).
     """
     master, slave = os.openpty()
     tty.setraw(slave)
@@ -188,19 +190,39 @@ def daemon_run(chunks: list[tuple[bytes, float]] | None, workdir: Path, timeout_
             while view:
                 view = view[os.write(master, view):]
             total += len(data)
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
+        # Wait until everything is journaled, or the journal stops growing for `stall_s`.
+        last, last_change = -1, time.monotonic()
+        while time.monotonic() - last_change < stall_s:
             written = sum(p.stat().st_size for d in data_dir.glob("flight-*") for p in list_segments(d))
             if written >= total:
                 break
+            if written != last:
+                last, last_change = written, time.monotonic()
             time.sleep(0.1)
     finally:
-        proc.send_signal(signal.SIGTERM)
-        _pid, _status, usage = os.wait4(proc.pid, 0)
+        usage, terms = _stop(proc)
         os.close(master)
         os.close(slave)
     written = sum(p.stat().st_size for d in data_dir.glob("flight-*") for p in list_segments(d))
-    return usage.ru_utime + usage.ru_stime, usage.ru_maxrss, written
+    return usage.ru_utime + usage.ru_stime, usage.ru_maxrss, written, terms
+
+
+def _stop(proc: subprocess.Popen[bytes], grace_s: float = 20.0) -> tuple[resource.struct_rusage, int]:
+    """SIGTERM, again after `grace_s` if it is still running, SIGKILL after three tries.
+
+    Returns the child's resource usage and how many signals it took (1 = clean stop on the first SIGTERM).
+    """
+    for attempt in range(1, 4):
+        proc.send_signal(signal.SIGTERM if attempt < 3 else signal.SIGKILL)
+        deadline = time.monotonic() + grace_s
+        while time.monotonic() < deadline:
+            pid, _status, usage = os.wait4(proc.pid, os.WNOHANG)
+            if pid:
+                proc.returncode = _status
+                return usage, attempt
+            time.sleep(0.05)
+    _pid, _status, usage = os.wait4(proc.pid, 0)
+    return usage, 4
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -244,9 +266,13 @@ def main(argv: list[str] | None = None) -> int:
         rss_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
         print(f"\n3. peak RSS\n{'this bench process (imports + hour replays)':<46}{rss_kb / 1024:>8.1f} MB")
         if not args.no_daemon:
-            idle_cpu, idle_rss, _ = daemon_run(None, work)
-            cpu, rss, written = daemon_run(chunks, work)
+            idle_cpu, idle_rss, _, idle_terms = daemon_run(None, work)
+            cpu, rss, written, terms = daemon_run(chunks, work)
             ok = "all bytes journaled" if written == n_bytes else f"only {written} of {n_bytes} B journaled"
+            for label, n in (("start + stop", idle_terms), ("fed run", terms)):
+                if n > 1:
+                    print(f"   WARNING: daemon {label}: the first SIGTERM did not stop it within 20 s "
+                          f"({'a second SIGTERM did' if n == 2 else 'needed SIGKILL'}); CPU below includes the wait")
             print(f"{'daemon, start + stop only':<46}{idle_rss / 1024:>8.1f} MB   CPU {idle_cpu:.2f} s")
             print(f"{'daemon, fed the stream as fast as the pty goes':<46}{rss / 1024:>8.1f} MB   CPU {cpu:.2f} s "
                   f"({ok}); minus start/stop: {(cpu - idle_cpu) * per_h:.2f} CPU s per hour of data")
