@@ -394,8 +394,11 @@ class RtkService:
         deadline = self.clock.monotonic_ns() + round(self.options.base_wait_s * 1e9)
         with self._cond:
             while True:
-                newest = self._base.epochs[-1] if self._base.epochs else None
-                if newest is not None and newest.time.diff_s(t) >= -tol:
+                eps = self._base.epochs
+                newest = eps[-1] if eps else None
+                # the base may send at a lower rate than the rover: wait only when its next epoch is due by t
+                interval_s = newest.time.diff_s(eps[-2].time) if len(eps) >= 2 else 0.0
+                if newest is not None and newest.time.diff_s(t) + interval_s > tol:
                     break
                 left = (deadline - self.clock.monotonic_ns()) / 1e9
                 if left <= 0 or self._stop.is_set():
