@@ -22,6 +22,13 @@ def _capture(name: str) -> bytes:
     return shared_file(name).read_bytes()
 
 
+@cache
+def _real_frames() -> tuple[Frame, ...]:
+    names = ["ubx/gpsd_ublox-neo-m8t.log", "ubx/pyublox_6P-raw-PPP-2.ubx", "ubx/pyubx2_pygpsdata-ALL.log",
+             "ubx/rtklib_ubx_20080526.ubx"]
+    return tuple(f for n in names for f in iter_frames(_capture(n), frozenset({Protocol.UBX})))
+
+
 def _decode_all(data: bytes, chunk: int) -> tuple[list[Frame], DecodeStats]:
     frames: list[Frame] = []
     stats = DecodeStats()
@@ -52,10 +59,7 @@ def test_random_payloads_of_known_messages_never_raise(ids: tuple[int, int], pay
 @given(st.sampled_from(KNOWN_IDS), st.integers(0, 6), st.data())
 def test_real_frames_with_bytes_flipped_never_raise(ids: tuple[int, int], n_flips: int, data: st.DataObject) -> None:
     """Real payloads with a few bytes changed (checksum recomputed, so the decoder sees them)."""
-    names = ["ubx/gpsd_ublox-neo-m8t.log", "ubx/pyublox_6P-raw-PPP-2.ubx", "ubx/pyubx2_pygpsdata-ALL.log",
-             "ubx/rtklib_ubx_20080526.ubx"]
-    frames = [f for n in names for f in iter_frames(_capture(n), frozenset({Protocol.UBX}))]
-    frame = data.draw(st.sampled_from(frames))
+    frame = data.draw(st.sampled_from(_real_frames()))
     payload = bytearray(frame.payload)
     for _ in range(n_flips if payload else 0):
         payload[data.draw(st.integers(0, len(payload) - 1))] = data.draw(st.integers(0, 255))
