@@ -146,7 +146,12 @@ class GpioTiming:
 
 
 class Recorder:
-    """The recorder: owns the journal, event log, port thread, decoder hook-up and status."""
+    """The recorder: owns the journal, event log, port thread, decoder hook-up and status.
+
+    Subclass hooks (used by `rtk_service.RtkRecorder` and `base_station.BaseStation`; kept stable): called on
+    the event loop, always call `super()` first — `_on_frame(frame)` every valid frame, `_on_decoded(item)`
+    every decoded item, `_write_status()` every snapshot.
+    """
 
     def __init__(self, settings: Settings, deps: RecorderDeps) -> None:
         self.settings = settings
