@@ -39,62 +39,81 @@ def ld_factor(q: Arr) -> tuple[Arr, Arr]:
     return lmat, d
 
 
-def _gauss(lmat: Arr, z: Arr, i: int, j: int) -> None:
-    mu = round(lmat[i, j])
+# The decorrelation and search below work on nested Python lists: for the n ≤ ~15 ambiguities of single-
+# frequency GPS, element-wise numpy indexing costs more than the arithmetic.
+
+
+def _gauss(lmat: list[list[float]], z: list[list[float]], i: int, j: int) -> None:
+    mu = round(lmat[i][j])
     if mu != 0:
-        lmat[i:, j] -= mu * lmat[i:, i]
-        z[:, j] -= mu * z[:, i]
+        n = len(lmat)
+        for k in range(i, n):
+            lmat[k][j] -= mu * lmat[k][i]
+        for k in range(n):
+            z[k][j] -= mu * z[k][i]
 
 
-def _perm(lmat: Arr, d: Arr, j: int, delta: float, z: Arr) -> None:
+def _perm(lmat: list[list[float]], d: list[float], j: int, delta: float, z: list[list[float]]) -> None:
+    n = len(lmat)
     eta = d[j] / delta
-    lam = d[j + 1] * lmat[j + 1, j] / delta
+    lam = d[j + 1] * lmat[j + 1][j] / delta
     d[j] = eta * d[j + 1]
     d[j + 1] = delta
-    a0 = lmat[j, :j].copy()
-    a1 = lmat[j + 1, :j].copy()
-    lmat[j, :j] = -lmat[j + 1, j] * a0 + a1
-    lmat[j + 1, :j] = eta * a0 + lam * a1
-    lmat[j + 1, j] = lam
-    lmat[j + 2 :, [j, j + 1]] = lmat[j + 2 :, [j + 1, j]]
-    z[:, [j, j + 1]] = z[:, [j + 1, j]]
+    lj, lj1 = lmat[j], lmat[j + 1]
+    l10 = lj1[j]
+    for k in range(j):
+        a0, a1 = lj[k], lj1[k]
+        lj[k] = -l10 * a0 + a1
+        lj1[k] = eta * a0 + lam * a1
+    lj1[j] = lam
+    for k in range(j + 2, n):
+        row = lmat[k]
+        row[j], row[j + 1] = row[j + 1], row[j]
+    for k in range(n):
+        row = z[k]
+        row[j], row[j + 1] = row[j + 1], row[j]
 
 
-def reduction(lmat: Arr, d: Arr) -> Arr:
-    """Decorrelate in place (integer Gauss transforms + permutations); returns the unimodular Z (RTKLIB reduction())."""
-    n = d.shape[0]
-    z = np.eye(n)
+def reduction(lmat_in: Arr, d_in: Arr) -> tuple[Arr, Arr, Arr]:
+    """Decorrelate (integer Gauss transforms + permutations, RTKLIB reduction()): returns (L, D, Z)."""
+    n = d_in.shape[0]
+    lmat = lmat_in.tolist()
+    d = d_in.tolist()
+    z = np.eye(n).tolist()
     j = n - 2
     k = n - 2
     while j >= 0:
         if j <= k:
             for i in range(j + 1, n):
                 _gauss(lmat, z, i, j)
-        delta = d[j] + lmat[j + 1, j] ** 2 * d[j + 1]
+        delta = d[j] + lmat[j + 1][j] ** 2 * d[j + 1]
         if delta + 1e-6 < d[j + 1]:
             _perm(lmat, d, j, delta, z)
             k = j
             j = n - 2
         else:
             j -= 1
-    return z
+    return np.array(lmat), np.array(d), np.array(z)
 
 
-def search(lmat: Arr, d: Arr, zs: Arr, m: int = 2) -> tuple[Arr, Arr]:
+def search(lmat_a: Arr, d_a: Arr, zs_a: Arr, m: int = 2) -> tuple[Arr, Arr]:
     """MLAMBDA search: the `m` best integer vectors (n, m) and their squared distances (m,), best first."""
-    n = d.shape[0]
-    s_mat = np.zeros((n, n))
-    dist = np.zeros(n)
-    zb = np.zeros(n)
-    z = np.zeros(n)
-    step = np.zeros(n)
-    cands = np.zeros((n, m))
-    sdist = np.zeros(m)
+    n = d_a.shape[0]
+    lmat = lmat_a.tolist()
+    d = d_a.tolist()
+    zs = zs_a.tolist()
+    s_mat = [[0.0] * n for _ in range(n)]
+    dist = [0.0] * n
+    zb = [0.0] * n
+    z = [0.0] * n
+    step = [0.0] * n
+    cands: list[list[float]] = [[0.0] * n for _ in range(m)]
+    sdist = [0.0] * m
     nn, imax = 0, 0
-    maxdist = np.inf
+    maxdist = float("inf")
     k = n - 1
     zb[k] = zs[k]
-    z[k] = round(zb[k])
+    z[k] = float(round(zb[k]))
     y = zb[k] - z[k]
     step[k] = 1.0 if y > 0 else -1.0
     for _ in range(_LOOP_MAX):
@@ -103,23 +122,27 @@ def search(lmat: Arr, d: Arr, zs: Arr, m: int = 2) -> tuple[Arr, Arr]:
             if k != 0:
                 k -= 1
                 dist[k] = newdist
-                s_mat[k, : k + 1] = s_mat[k + 1, : k + 1] + (z[k + 1] - zb[k + 1]) * lmat[k + 1, : k + 1]
-                zb[k] = zs[k] + s_mat[k, k]
-                z[k] = round(zb[k])
+                dz = z[k + 1] - zb[k + 1]
+                lrow = lmat[k + 1]
+                srow, sprev = s_mat[k], s_mat[k + 1]
+                for i in range(k + 1):
+                    srow[i] = sprev[i] + dz * lrow[i]
+                zb[k] = zs[k] + srow[k]
+                z[k] = float(round(zb[k]))
                 y = zb[k] - z[k]
                 step[k] = 1.0 if y > 0 else -1.0
             else:
                 if nn < m:
                     if nn == 0 or newdist > sdist[imax]:
                         imax = nn
-                    cands[:, nn] = z
+                    cands[nn] = list(z)
                     sdist[nn] = newdist
                     nn += 1
                 else:
                     if newdist < sdist[imax]:
-                        cands[:, imax] = z
+                        cands[imax] = list(z)
                         sdist[imax] = newdist
-                        imax = int(np.argmax(sdist))
+                        imax = max(range(m), key=sdist.__getitem__)
                     maxdist = sdist[imax]
                 z[0] += step[0]
                 y = zb[0] - z[0]
@@ -133,8 +156,8 @@ def search(lmat: Arr, d: Arr, zs: Arr, m: int = 2) -> tuple[Arr, Arr]:
             step[k] = -step[k] - (1.0 if step[k] > 0 else -1.0)
     else:
         raise LambdaError("MLAMBDA search did not terminate")
-    order = np.argsort(sdist[:nn])
-    return cands[:, order], sdist[order]
+    order = sorted(range(nn), key=sdist.__getitem__)
+    return np.array([cands[i] for i in order]).T.reshape(n, nn), np.array([sdist[i] for i in order])
 
 
 @dataclass
@@ -168,8 +191,8 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2) -> LambdaResult:
     n = a.shape[0]
     if n == 0 or q.shape != (n, n):
         raise LambdaError(f"bad shapes: a {a.shape}, Q {q.shape}")
-    lmat, d = ld_factor(q)
-    z = reduction(lmat, d)
+    lmat0, d0 = ld_factor(q)
+    lmat, d, z = reduction(lmat0, d0)
     zs = z.T @ a
     e, s = search(lmat, d, zs, m)
     f = np.linalg.solve(z.T, e)

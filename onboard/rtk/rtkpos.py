@@ -139,6 +139,14 @@ def _model_range_m(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr, Arr, Arr]
     return r - CLIGHT_M_S * rcv.sats.clock_s + trop, e, az, el
 
 
+def _range_with_trop_m(rcv: _Receiver, pos_ecef_m: Arr, trop_m: Arr) -> tuple[Arr, Arr]:
+    """As _model_range_m with the troposphere already evaluated this epoch (it changes negligibly with
+    the millimetre-to-metre position updates inside one epoch): modelled range and LOS."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r, e = geometric_range(rcv.sats.pos_m, pos_ecef_m)
+    return r - CLIGHT_M_S * rcv.sats.clock_s + trop_m, e
+
+
 def _solution(t: GpsTime, pos: Arr, vel: Arr, q: int, ns: int, cov: Arr, covv: Arr, age: float,
               ratio: float) -> Solution:
     return Solution(time=t, pos_ecef_m=np.array(pos, float), vel_ecef_m_s=np.array(vel, float), q=q, ns=ns,
@@ -302,10 +310,10 @@ class _DD:
 
 
 def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, phase_ok: npt.NDArray[np.bool_],
-           code_ok: npt.NDArray[np.bool_], el: Arr, with_doppler: bool) -> tuple[_DD, Arr]:
+           code_ok: npt.NDArray[np.bool_], el: Arr, with_doppler: bool, trop_r: Arr) -> tuple[_DD, Arr]:
     """Double-difference residuals at state `x` (RTKLIB ddres): phase, code, rover Doppler between satellites."""
     o = st.options
-    rng_r, e, _, _ = _model_range_m(rov, x[:3])
+    rng_r, e = _range_with_trop_m(rov, x[:3], trop_r)
     var_sd = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m)
     rows_v: list[Arr] = []
     rows_h: list[Arr] = []
@@ -514,6 +522,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
 
     rng_b, _, _, _ = _model_range_m(bas, base_pos)
     rng_r, _, _, el_r = _model_range_m(rov, st.x[:3])
+    trop_r = rng_r - _range_with_trop_m(rov, st.x[:3], np.zeros(NSAT))[0]
     el = el_r
     common = rov.has & bas.has & (el >= o.elmask_rad) & spp.used
     half = ((rov.lli & LLI_HALF_CYCLE) != 0) | ((bas.lli & LLI_HALF_CYCLE) != 0)
@@ -542,7 +551,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     x_post, p_post = st.x, st.p
     dd = None
     for _it in range(4):
-        dd, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, o.use_doppler)
+        dd, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, o.use_doppler, trop_r)
         if dd.v.size == 0:
             break
         # innovation gating with the innovation covariance
@@ -590,7 +599,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
                          st.p[3:6, 3:6], age, 0.0)
 
     # post-fit residual check of the float solution
-    dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False)
+    dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False, trop_r)
     ok_post = _valid_residuals(dd_post, o.validation_sigma_factor)
     bad_phase = dd_post.slot[(dd_post.kind == 0) & ~ok_post]
     if bad_phase.size and st.held_prns.any():
@@ -622,7 +631,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             use_fix = np.zeros(NSAT, bool)
             use_fix[fix.slots] = True
             use_fix[fix.ref] = True
-            dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False)
+            dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False, trop_r)
             resid_ok = bool(np.all(_valid_residuals(dd_fix, o.validation_sigma_factor)))
             if maha > _CHI2_3DOF_999 or not resid_ok:
                 log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", rover.time, maha, resid_ok)
