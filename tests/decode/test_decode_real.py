@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import math
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
 from pyubx2 import UBXReader
 
+from onboard.errors import InputError
 from onboard.gnsstime import GpsTime
 from onboard.receiver.decode import (
     Ack,
@@ -20,6 +22,7 @@ from onboard.receiver.decode import (
     TimeMarks,
     decode_frame,
     iter_file,
+    iter_journal,
 )
 from onboard.receiver.framing import Frame, Protocol, StreamFramer, iter_frames, ubx_frame
 from onboard.rtk.ephemeris import eph_position, geometric_range
@@ -288,3 +291,20 @@ def test_dual_frequency_rawx_keeps_one_l1_entry_per_satellite() -> None:
         assert got == list(expect) and len(set(got)) == len(got)
         for pr, want in zip(ours.pr_m.tolist(), expect.values()):
             assert pr == want or math.isnan(pr)  # NaN where prValid is clear
+
+
+def test_iter_journal_reads_segments_in_order_across_a_torn_segment(tmp_path: Path) -> None:
+    """A flight whose first segment ends mid-frame (power cut, restart = new segment): every complete frame of
+    both segments decodes, the torn frame is dropped and the framer resynchronises at the next segment."""
+    data = shared_file("ubx/gpsd_ublox-neo-m8t.log").read_bytes()
+    frames = [f for f in iter_frames(data, frozenset({Protocol.UBX})) if (f.msg_class, f.msg_id) == (0x02, 0x15)]
+    tenth = frames[10]
+    flight = tmp_path / "flight-20180101T000000Z"
+    flight.mkdir()
+    (flight / "000000.ubx").write_bytes(data[: tenth.offset + 100])  # torn inside the 11th RXM-RAWX
+    (flight / "000001.ubx").write_bytes(data[tenth.offset + len(tenth.raw) :])
+    epochs = [i for i in iter_journal(flight) if isinstance(i, ObsEpoch)]
+    assert len(epochs) == 38
+    assert epochs[9].time.diff_s(epochs[10].time) == pytest.approx(-2.0)  # the torn 11th epoch is missing
+    with pytest.raises(InputError):
+        list(iter_journal(tmp_path / "missing"))

@@ -182,3 +182,52 @@ def test_command_line_exit_code_without_traceback(tmp_path: Path) -> None:
                            str(tmp_path)], check=False, capture_output=True, text=True, env=env, timeout=60)
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr and "nope.ubx.gz: no such file" in proc.stderr
+
+
+def test_progress_bar_on_a_terminal_only(tmp_path: Path) -> None:
+    """With stderr on a real pseudo-terminal the command draws a tqdm bar; piped, it prints none."""
+    import fcntl
+    import struct
+    import termios
+
+    src = str(shared_file("ubx/rtklib_ubx_20080526.ubx"))
+    env = dict(os.environ, PYTHONPATH=str(PROJECT_ROOT))
+    master, slave = os.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # a terminal has a size
+    try:
+        proc = subprocess.run([sys.executable, "-m", "onboard.convert", src, "-o", str(tmp_path / "tty")],
+                              check=False, stdout=subprocess.PIPE, stderr=slave, env=env, timeout=120)
+        os.set_blocking(master, False)
+        chunks = []
+        while True:
+            try:
+                chunk = os.read(master, 65536)
+            except (BlockingIOError, OSError):
+                break
+            if not chunk:
+                break
+            chunks.append(chunk)
+    finally:
+        os.close(master)
+        os.close(slave)
+    on_tty = b"".join(chunks).decode(errors="replace")
+    assert proc.returncode == 0 and "rtklib_ubx_20080526.ubx" in on_tty and "B/s" in on_tty
+    piped = subprocess.run([sys.executable, "-m", "onboard.convert", src, "-o", str(tmp_path / "pipe")],
+                           check=False, capture_output=True, text=True, env=env, timeout=120)
+    assert piped.returncode == 0 and "B/s" not in piped.stderr
+    assert (tmp_path / "tty" / "rtklib_ubx_20080526.obs").read_text().split("END OF HEADER")[1] == \
+        (tmp_path / "pipe" / "rtklib_ubx_20080526.obs").read_text().split("END OF HEADER")[1]
+
+
+def test_header_names_the_receiver_from_mon_ver() -> None:
+    import datetime as dt
+
+    from onboard.convert import Collected, header_info
+    from onboard.receiver.decode import MonVer
+
+    col = Collected(mon_ver=MonVer("ROM CORE 3.01 (107888)", "00080000", ("FWVER=TIM 1.10", "MOD=NEO-M8T")),
+                    fixes_ecef_m=[(1.0, 2.0, 3.0), (1.2, 2.0, 3.0), (50.0, 2.0, 3.0)])
+    info = header_info(col, "DRONE", dt.datetime(2024, 5, 1, 12, 0, 0, tzinfo=dt.timezone.utc))
+    assert info.receiver_type == "U-BLOX NEO-M8T" and info.receiver_version == "ROM CORE 3.01 (107888)"
+    assert info.approx_pos_ecef_m == (1.2, 2.0, 3.0)  # median: one wild fix does not move it
+    assert info.marker_name == "DRONE" and info.date_utc == "20240501 120000 UTC"
