@@ -227,7 +227,7 @@ def test_header_names_the_receiver_from_mon_ver() -> None:
 
     col = Collected(mon_ver=MonVer("ROM CORE 3.01 (107888)", "00080000", ("FWVER=TIM 1.10", "MOD=NEO-M8T")),
                     fixes_ecef_m=[(1.0, 2.0, 3.0), (1.2, 2.0, 3.0), (50.0, 2.0, 3.0)])
-    info = header_info(col, "DRONE", dt.datetime(2024, 5, 1, 12, 0, 0, tzinfo=dt.timezone.utc))
+    info = header_info(col, "DRONE", dt.datetime(2024, 5, 1, 12, 0, 0, tzinfo=dt.UTC))
     assert info.receiver_type == "U-BLOX NEO-M8T" and info.receiver_version == "ROM CORE 3.01 (107888)"
     assert info.approx_pos_ecef_m == (1.2, 2.0, 3.0)  # median: one wild fix does not move it
     assert info.marker_name == "DRONE" and info.date_utc == "20240501 120000 UTC"
