@@ -5,7 +5,7 @@ Steps (shared/docs/adjustment.md § Solving):
 2. delay start: the linear 13-unknown model A·C + T = G + V·d (A a general 3×3), only a start;
 3. `scipy.optimize.least_squares` on whitened residuals (analytic Jacobian: 3 rows per image × ≤ 11 columns, so
    the cost is linear in the number of images), priors as extra whitened rows, robust loss;
-4. outliers: per-image χ²₃ / σ̂₀²(robust) > threshold, dropped; 5. a clean pass with a linear loss;
+4. outliers: per-image χ²₃ / σ̂₀²(robust) > threshold (99.9 %), dropped; 5. a clean pass with a linear loss;
 6. Σ = σ̂₀²(JᵀJ)⁻¹, σ̂₀² = Σr²/(m − n), correlations, condition number, the weakest combination, warnings.
 """
 

@@ -149,11 +149,11 @@ def test_relative_control_cancels_a_bias_that_jumps_between_lines(
     biased = replace(problem, antenna_enu_m=problem.antenna_enu_m + offsets[seg])
     lever = LeverArmSpec(mode="prior", value_m=tuple(block.truth_lever_arm_m), sigma_m=(0.005,) * 3)
     opts = AdjustmentOptions(lever_arm=lever, camera_centre_sigma_m=0.001, max_pair_dt_s=8.0)
-    with pytest.raises(AdjustmentRefused, match="outliers"):  # absolute control sees inconsistent lines
-        adjust(biased, opts)
-    absolute = adjust(biased, replace(opts, max_outlier_fraction=1.0))
+    absolute = adjust(biased, opts)
     relative = adjust(biased, replace(opts, relative_control=True))
+    # absolute control sees inconsistent lines: residuals far above their σ, said in a warning
+    assert absolute.sigma0 > 10 and any(w.startswith("σ̂₀ = ") for w in absolute.warnings)
     assert absolute.checkpoint_rms_m["3d"] > 0.05
-    assert len(relative.outliers) < 0.06 * len(problem.images)  # only the χ²₃ 95 % tail of good images
+    assert len(relative.outliers) <= 0.01 * len(problem.images)  # the χ²₃ 99.9 % test keeps good images
     assert relative.checkpoint_rms_m["3d"] < 0.01
     assert relative.delay_s == pytest.approx(block.truth_delay_s, abs=0.002)
