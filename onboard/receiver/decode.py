@@ -8,8 +8,9 @@ Representation
 --------------
 - RXM-RAW / RXM-RAWX -> `ObsEpoch` (L1 signals only; one entry per satellite, the first L1 signal reported).
   The high-rate raw messages are unpacked here with declarative numpy record layouts (u-blox 6 Receiver
-  Description §RXM-RAW, u-blox 8 §RXM-RAWX), not through pyubx2: at 5 Hz on a Pi the per-field Python objects
-  pyubx2 builds cost ~30x more (see bench/bench_recorder.py); the tests check both agree on real captures.
+  Description §RXM-RAW, u-blox 8 §RXM-RAWX), not through pyubx2: the per-field Python objects pyubx2 builds
+  cost 9–25x more per epoch than framer + this decoder (bench/bench_recorder.py), which matters at 5 Hz on a
+  Pi; the tests check both agree on every raw epoch of the real captures.
   RXM-RAW: `cp_cyc` NaN when cpMes is 0 (RTKLIB writes such phase as blank); `lli` is the receiver's own
   RINEX LLI field; `lock_ms` NaN (RXM-RAW has none). Phase with mesQI < 5 is still passed on, as RTKLIB
   does: the receiver's `lli` carries its own loss-of-lock verdict.
@@ -21,7 +22,7 @@ Representation
 - RXM-SFRB -> `SubframeWords(bits=24)`; RXM-SFRBX GPS L1 C/A -> `SubframeWords(bits=30)`;
   AID-EPH (104-byte reply) -> `Ephemeris` via `onboard.rtk.lnav.ephemeris_from_aid_eph`, 8-byte reply -> None.
 - TIM-TM2 -> `TimeMarks` holding one `CameraMark` per edge whose "new" bit is set (a time without its new bit
-  is stale and dropped).
+  is stale and dropped); times on the UTC time base (the M8P's default) are moved to GPS time (+ leap s).
 - ACK-ACK/NAK -> `Ack`; MON-VER -> `MonVer`; NAV-SOL/NAV-PVT/NAV-POSECEF -> `NavFix`;
   any CFG-* reply -> `CfgReply(name, fields)` (pyubx2's field dict; CFG-TP through our own table).
 """
