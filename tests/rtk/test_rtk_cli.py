@@ -119,3 +119,17 @@ def test_unreadable_rover_and_bad_coordinates(tmp_path, capsys):
     assert "X,Y,Z" in err
     err = _run_err(capsys, ["rtk", "--rover", str(tmp_path / "missing.obs"), "--base", "b", "-o", "x"])
     assert "no such file" in err
+
+
+def test_ubx_rover_log_with_its_own_ephemerides(tmp_path, capsys):
+    """The raw M8P rover log (RXM-RAWX + RXM-SFRBX, gzip) needs no --nav: ephemerides come from the log."""
+    d = "gnss/ublox-m8p-galway-2018/"
+    out = tmp_path / "u.pos"
+    rc = main(["rtk", "--rover", str(shared_file(d + "raw/rover-20181004-1237.ubx.gz")),
+               "--base", str(shared_file(d + "rinex/base-20181004-1236.rtcm.obs.gz")), "-o", str(out)])
+    assert rc == 0, capsys.readouterr().err
+    track = read_pos(out)
+    assert len(track.q) == 1205
+    assert np.mean(track.q == 1) >= 0.9
+    ref = np.array([3774088.9931, -601661.8217, 5089321.3853])
+    assert np.linalg.norm(track.pos_ecef_m[track.q == 1] - ref, axis=1).max() < 0.10
