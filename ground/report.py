@@ -73,18 +73,23 @@ def residual_figures(residuals: list[dict[str, Any]], centres_enu: np.ndarray | 
     axes[0].set_title("residuals e_i = S(C_i) + R·R_i·O − G_i − V_i·t_d per image")
     figs = [fig]
     if centres_enu is not None and centres_enu.shape[0] == e.shape[0]:
-        fig2 = Figure(figsize=(6, 6))
+        # figure shaped like the block so that the equal-aspect map, its colour bar and the title do not collide
+        span = np.maximum(np.ptp(centres_enu[:, :2], axis=0), 1.0)
+        aspect = float(np.clip(span[1] / span[0], 0.25, 2.0))
+        fig2 = Figure(figsize=(8, 1.6 + 6.4 * aspect), layout="constrained")
         ax = fig2.add_subplot()
-        scale = max(float(np.ptp(centres_enu[:, :2])) / 20.0, 1e-3) / max(float(np.nan_to_num(np.nanmax(np.abs(e[:, :2])))), 1e-3)
+        e_max_cm = max(float(np.nan_to_num(np.nanmax(np.abs(e[:, :2])))), 1e-3)
+        scale = max(float(np.ptp(centres_enu[:, :2])) / 20.0, 1e-3) / e_max_cm  # metres of map per cm
         ax.quiver(centres_enu[:, 0], centres_enu[:, 1], e[:, 0] * scale, e[:, 1] * scale, angles="xy",
                   scale_units="xy", scale=1, color=np.where(out, "#d62728", "#1f77b4"))
         lim = max(float(np.nan_to_num(np.nanmax(np.abs(e[:, 2])))), 1e-3)
         sc = ax.scatter(centres_enu[:, 0], centres_enu[:, 1], c=e[:, 2], cmap="RdBu_r", s=14, vmin=-lim, vmax=lim)
-        fig2.colorbar(sc, ax=ax, label="Up residual (cm)")
+        fig2.colorbar(sc, ax=ax, label="Up residual (cm)", shrink=0.8, aspect=30)
         ax.set_aspect("equal")
         ax.set_xlabel("East (m)")
         ax.set_ylabel("North (m)")
-        ax.set_title("horizontal residuals (arrows, exaggerated) at the camera centres")
+        ax.set_title(f"horizontal residuals at the camera centres (arrows: 1 cm drawn as {scale:.2g} m; "
+                     "dots: Up residual)", fontsize=10)
         figs.append(fig2)
     return figs
 
@@ -130,23 +135,64 @@ def trajectory_figure(traj: Trajectory, origin_ecef_m: np.ndarray, cams_enu: np.
     return fig
 
 
-def _parameter_rows(res: dict[str, Any]) -> list[tuple[str, str, str, str]]:
+def _how(spec: dict[str, Any] | None, key: str, k: int | None, scale: float, unit: str) -> str:
+    """How a parameter entered the adjustment, from results.json `inputs` (free / prior v ± σ / fixed)."""
+    if not spec:
+        return ""
+    if spec.get("mode") == "free":
+        return "estimated (free)"
+    value = spec[f"value_{key}"] if k is None else spec[f"value_{key}"][k]
+    sigma = spec[f"sigma_{key}"] if k is None else spec[f"sigma_{key}"][k]
+    if spec.get("mode") == "prior":
+        return f"estimated, prior {value * scale:.1f} ± {sigma * scale:.1f} {unit}"
+    return "fixed (given)"
+
+
+def _parameter_rows(res: dict[str, Any]) -> list[tuple[str, str, str, str, str]]:
+    inputs = res.get("inputs") or {}
+    free = "estimated (free)" if inputs else ""
     rows = []
     for k, axis in enumerate("xyz"):
         rows.append((f"lever arm O_{axis}", _v(res["lever_arm_m"][k], 1000), _v(res["lever_arm_sigma_m"][k], 1000),
-                     "mm"))
-    rows.append(("shutter delay t_d", _v(res["delay_s"], 1000, ".2f"), _v(res["delay_sigma_s"], 1000, ".2f"), "ms"))
-    rows.append(("scale μ", _v(res["scale"], 1, ".7f"), _v(res["scale_sigma"], 1e6), "ppm"))
+                     "mm", _how(inputs.get("lever_arm"), "m", k, 1000, "mm")))
+    rows.append(("shutter delay t_d", _v(res["delay_s"], 1000, ".2f"), _v(res["delay_sigma_s"], 1000, ".2f"), "ms",
+                 _how(inputs.get("delay"), "s", None, 1000, "ms")))
+    rows.append(("scale μ", _v(res["scale"], 1, ".7f"), _v(res["scale_sigma"], 1e6), "ppm", free))
     for k, axis in enumerate("ENU"):
         rows.append((f"translation T_{axis}", _v(res["translation_m"][k], 1, ".4f"),
-                     _v(res["translation_sigma_m"][k], 1, ".4f"), "m"))
+                     _v(res["translation_sigma_m"][k], 1, ".4f"), "m", free))
     for k, axis in enumerate("ENU"):
         sig = res["rotation_sigma_rad"][k]
-        rows.append((f"rotation σ about {axis}", "—", _v(None if sig is None else np.degrees(sig), 3600), "arcsec"))
-    rows.append(("σ̂₀ (a-posteriori)", _v(res["sigma0"], 1, ".3f"), "", ""))
+        rows.append((f"rotation about {axis} (matrix in results.json)", "—",
+                     _v(None if sig is None else np.degrees(sig), 3600), "arcsec", free))
+    rows.append(("σ̂₀ (a-posteriori, 1 = residuals as large as their stated σ)", _v(res["sigma0"], 1, ".3f"), "",
+                 "", ""))
     if "variance_inflation" in res:  # serial correlation of the trajectory errors (σ inflated by its root)
-        rows.append(("variance inflation", _v(res["variance_inflation"], 1, ".2f"), "", ""))
+        rows.append(("variance inflation for time-correlated GNSS errors (σ above include it)",
+                     _v(res["variance_inflation"], 1, ".2f"), "", "", ""))
     return rows
+
+
+def _summary(res: dict[str, Any]) -> str:
+    """One paragraph a surveyor reads first: what went in, what came out, where the exports are."""
+    inputs = res.get("inputs") or {}
+    n_gcp = len(res.get("gcp_residuals") or [])
+    n_chk = len(res.get("checkpoints") or [])
+    rms = (res.get("checkpoint_rms_m") or {}).get("3d")
+    items = [
+        f"{res['n_images']} images adjusted, {len(res['outliers'])} flagged as outliers (left out of the final "
+        f"pass), {len(res.get('skipped') or [])} left out while matching",
+        f"{n_gcp} GCP(s) in the adjustment; {n_chk} check point(s) kept out of it"
+        + (f": 3D RMS {_v(rms, 100, '.1f')} cm" if n_chk else ""),
+        "aerial control: " + ("relative (differenced between consecutive images)" if res.get("relative_control")
+                              else "absolute (antenna positions)"),
+    ]
+    if inputs:
+        items.append(f"frames: adjustment in local ENU about ECEF {', '.join(f'{v:.3f}' for v in inputs['origin_ecef_m'])}"
+                     f" m; exports in {inputs['export_crs']}")
+    items.append("sign convention: lever arm O = antenna phase centre − optical centre, camera frame x right, "
+                 "y down, z forward (along the viewing direction); t_d = event time → exposure")
+    return "<ul id=\"summary\">" + "".join(f"<li>{html.escape(i)}</li>" for i in items) + "</ul>"
 
 
 def _table(headers: list[str], rows: list[tuple[Any, ...]], table_id: str) -> str:
@@ -165,8 +211,9 @@ def render_report(res: dict[str, Any], problem: AdjustmentProblem | None = None,
         rot = np.array(res["rotation"], dtype=float)
         cams_enu = np.asarray(res["translation_m"]) + res["scale"] * problem.centre_rel @ rot.T
     parts = [
+        _summary(res),
         "<h2>Parameters</h2>",
-        _table(["parameter", "value", "σ", "unit"], _parameter_rows(res), "parameters"),
+        _table(["parameter", "value", "σ", "unit", "how"], _parameter_rows(res), "parameters"),
         (f"<p>condition number {_v(res['condition_number'], 1, '.3g')}; weakest combination: "
          f"{html.escape(str(res['weakest_combination']))}</p>"),
     ]
@@ -182,7 +229,13 @@ def render_report(res: dict[str, Any], problem: AdjustmentProblem | None = None,
     if res["outliers"]:
         parts.append(_table(["outlier image", "χ²"], [(o["image"], _v(o["chi2"])) for o in res["outliers"]],
                             "outliers"))
-    parts.append("<h2>Check points</h2>")
+    if res.get("gcp_residuals"):
+        parts.append("<h2>GCP residuals</h2><p>S(P_rel) − P_ground of the GCPs used in the adjustment</p>")
+        parts.append(_table(["GCP", "δE (cm)", "δN (cm)", "δU (cm)"],
+                            [(g["name"], *(_v(g[k], 100) for k in ("de_m", "dn_m", "du_m")))
+                             for g in res["gcp_residuals"]], "gcps"))
+    parts.append("<h2>Check points</h2><p>independent: never in the adjustment; δ = adjusted − surveyed, "
+                 "σ propagated from the parameters and the point's own σ</p>")
     if res["checkpoints"]:
         rows: list[tuple[str, ...]] = [
             (c["name"], *(_v(c[k], 100) for k in ("de_m", "dn_m", "du_m", "abs_m", "sigma_m")))
@@ -202,7 +255,7 @@ def render_report(res: dict[str, Any], problem: AdjustmentProblem | None = None,
                                                                               for s in res["skipped"]], "skipped"))
     style = ("body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}"
              "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:2px 8px;"
-             "text-align:right}th{background:#eee}img{max-width:100%}figcaption{font-size:small;color:#555}")
+             "text-align:right}td:first-child,#parameters td:last-child{text-align:left}th{background:#eee}img{max-width:100%}figcaption{font-size:small;color:#555}")
     title = f"directgeo adjustment report — {res['n_images']} images"
     return (f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
             f"<style>{style}</style></head><body><h1>{html.escape(title)}</h1>{''.join(parts)}</body></html>")

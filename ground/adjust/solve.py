@@ -680,9 +680,10 @@ def _warnings(
                 f"vertical lever arm O_z and vertical translation T_u are correlated (ρ = {rho:+.3f}): O_z rests "
                 "on the GCP heights; prefer a calibrated lever arm prior"
             )
+    named = {frozenset(("O_z", "T_u"))} | ({frozenset((axis_names[along], "t_d"))} if along is not None else set())
     for a in range(len(names)):
         for b in range(a + 1, len(names)):
-            if abs(corr[a, b]) > thr:
+            if abs(corr[a, b]) > thr and frozenset((names[a], names[b])) not in named:  # named pairs said above
                 out.append(f"|ρ({names[a]}, {names[b]})| = {abs(corr[a, b]):.3f} > {thr}")
     if cond > 1e10:
         out.append(

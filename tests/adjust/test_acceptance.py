@@ -92,6 +92,7 @@ def test_constant_heading_and_speed_names_the_along_track_pair(
     result = adjust(problem_factory(block), AdjustmentOptions(camera_centre_sigma_m=0.0058))
     along = [w for w in result.warnings if w.startswith("along-track lever arm O_y and shutter delay t_d")]
     assert along, result.warnings
+    assert not any(w.startswith("|ρ(O_y, t_d)|") for w in result.warnings)  # said once, by name
     names = result.parameter_names
     assert abs(result.correlations[names.index("O_y"), names.index("t_d")]) > 0.98
     assert set(result.weakest_combination.replace("+", " ").replace("-", " ").split()) == {
@@ -127,3 +128,4 @@ def test_one_gcp_names_the_vertical_pair(block_factory: Any, problem_factory: An
     block = block_factory(1, gcp_names=("P05",))
     result = adjust(problem_factory(block), AdjustmentOptions(camera_centre_sigma_m=0.0058))
     assert any(w.startswith("vertical lever arm O_z and vertical translation T_u") for w in result.warnings)
+    assert not any(w.startswith("|ρ(T_u, O_z)|") for w in result.warnings)  # said once, by name

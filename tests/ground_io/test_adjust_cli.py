@@ -252,3 +252,26 @@ def test_report_shows_undetermined_parameters(tmp_path: Path) -> None:
         res["checkpoints"][0]["sigma_m"] = None
     html = render_report(res)
     assert html.count("undetermined") >= 2 and 'id="parameters"' in html
+
+
+def test_report_says_how_each_parameter_entered_and_what_went_in(tmp_path: Path) -> None:
+    """The report's summary names the GCP and check-point counts and the check-point RMS; each parameter row says
+    whether it was free, a prior (with its value ± σ) or fixed; a correlation that has its own named warning is
+    not repeated as a generic |ρ| line."""
+    import re
+
+    write_synthetic_flight(tmp_path, n_lines=3)
+    assert main(_args(tmp_path, "--lever-arm", "0.05,-0.12,-0.08", "--lever-arm-sigma", "0.005")) == 0
+    res = json.loads((tmp_path / "out" / "results.json").read_text())
+    page = (tmp_path / "out" / "report.html").read_text()
+    summary = re.search(r'<ul id="summary">(.*?)</ul>', page).group(1)
+    assert f"{len(res['gcp_residuals'])} GCP(s) in the adjustment; 2 check point(s)" in summary
+    assert f"3D RMS {res['checkpoint_rms_m']['3d'] * 100:.1f} cm" in summary
+    rows = re.findall(r"<tr><td>(lever arm O_x|shutter delay t_d)</td>.*?<td>([^<]*)</td></tr>", page)
+    assert dict(rows) == {"lever arm O_x": "estimated, prior 50.0 ± 5.0 mm", "shutter delay t_d": "estimated (free)"}
+    assert 'id="gcps"' in page
+    if any(w.startswith("vertical lever arm O_z and vertical translation T_u") for w in res["warnings"]):
+        assert not any(w.startswith("|ρ(T_u, O_z)|") for w in res["warnings"])
+    assert main(_args(tmp_path, "--lever-arm", "0.05,-0.12,-0.08", "--delay", "0.065")) == 0
+    page = (tmp_path / "out" / "report.html").read_text()
+    assert re.search(r"<tr><td>lever arm O_y</td>.*?<td>fixed \(given\)</td></tr>", page)
