@@ -59,6 +59,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="simulated s to valid time (default: the scenario camera's valid_after_s)")
     r.add_argument("--corrupt-rate", type=float, default=0.0, help="probability per byte written")
     r.add_argument("--drop-epoch-rate", type=float, default=0.0, help="probability per raw epoch")
+    r.add_argument("--drop-flash-mark-rate", type=float, default=0.0,
+                   help="probability per TIM-TM2 flash report (EXTINT0) of losing it (a missed flash)")
     r.add_argument("--bounce-prob", type=float, default=0.0, help="hot-shoe bounce probability per flash")
     r.add_argument("--unplug", type=_window, action="append", default=[], metavar="AT_S:DURATION_S",
                    help="port disappears at simulated AT_S for DURATION_S (repeatable)")
@@ -141,7 +143,8 @@ def run_receiver(args: argparse.Namespace) -> int:
         camera_tp_idx=args.camera_tp,
         time_valid_after_s=valid_after, receiver=args.receiver,
         faults=FaultOptions(seed=args.seed, corrupt_byte_rate=args.corrupt_rate,
-                            drop_epoch_rate=args.drop_epoch_rate, bounce_prob=args.bounce_prob,
+                            drop_epoch_rate=args.drop_epoch_rate,
+                            drop_flash_mark_rate=args.drop_flash_mark_rate, bounce_prob=args.bounce_prob,
                             unplug_windows_s=tuple(args.unplug)))
     emu = ReceiverEmulator(args.model, options, world, speed=args.speed, link=args.link,
                            t_start=scenario.start, initial_baud=args.baud)

@@ -13,6 +13,10 @@ What each fault does (documented behaviour the daemon is tested against):
   reader gets EIO/hang-up) and the `--link` symlink removed; afterwards a new pty is created and the link
   points at it. The receiver keeps running and keeps its configuration (a USB-serial adapter re-enumerating,
   not a power cycle); output produced meanwhile is lost.
+- lost flash report: each TIM-TM2 report of the flash line (EXTINT0) is withheld with probability
+  `drop_flash_mark_rate` (as when line noise destroys that one frame): the flash's falling edge and the
+  contact's rising edge are lost together, so the next flash report's `count` jumps by one extra — the only
+  sign the recorder gets of a missed flash.
 - hot-shoe bounce: with probability `bounce_prob` per flash, the contact opens and closes again
   `bounce_gap_s` after the flash (an extra rising and falling edge): TIM-TM2 then reports the bounce's
   falling edge and `count` jumps by 2.
@@ -35,12 +39,13 @@ class FaultOptions:
     seed: int = 0
     corrupt_byte_rate: float = 0.0
     drop_epoch_rate: float = 0.0
+    drop_flash_mark_rate: float = 0.0
     bounce_prob: float = 0.0
     bounce_gap_s: float = 0.0006
     unplug_windows_s: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
-        for name in ("corrupt_byte_rate", "drop_epoch_rate", "bounce_prob"):
+        for name in ("corrupt_byte_rate", "drop_epoch_rate", "drop_flash_mark_rate", "bounce_prob"):
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:
                 raise ValueError(f"{name} must be a probability in [0, 1], got {v}")
@@ -57,6 +62,7 @@ class FaultState:
         self._rng = np.random.default_rng(options.seed)
         self.bytes_corrupted = 0
         self.epochs_dropped = 0
+        self.flash_marks_dropped = 0
         self.bounces = 0
 
     def corrupt(self, data: bytes) -> bytes:
@@ -78,6 +84,15 @@ class FaultState:
             return False
         if self._rng.random() < self.options.drop_epoch_rate:
             self.epochs_dropped += 1
+            return True
+        return False
+
+    def drop_flash_mark(self) -> bool:
+        """True when this TIM-TM2 report of the flash line is to be withheld."""
+        if self.options.drop_flash_mark_rate <= 0.0:
+            return False
+        if self._rng.random() < self.options.drop_flash_mark_rate:
+            self.flash_marks_dropped += 1
             return True
         return False
 

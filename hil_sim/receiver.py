@@ -190,6 +190,7 @@ class ReceiverStats:
     messages_dropped_budget: int = 0
     subframes_out: int = 0
     marks_out: int = 0
+    marks_dropped_fault: int = 0
     edges_lost: int = 0
     pulses_suppressed: int = 0
 
@@ -326,6 +327,8 @@ class ReceiverCore:
         self._tracked: list[int] = []
         self._ephs: list[Ephemeris] | None = None
         self._rng = np.random.default_rng(options.faults.seed + 17)
+        self.dropped_flash_reports: list[enc.TimeMarkReport] = []
+        """TIM-TM2 flash-line reports withheld by the `drop_flash_mark_rate` fault (truth for tests)."""
         end = getattr(world, "end", None)
         self.t_end: GpsTime | None = end if isinstance(end, GpsTime) else None
         self._ended_logged = False
@@ -621,7 +624,12 @@ class ReceiverCore:
                         self.stats.epochs_dropped_budget += 1
             for ch in (0, 1):
                 rep = self.marks[ch].report(valid, self.options.acc_est_ns)
-                if rep is not None and due(TIM_TM2) and self._send(out, enc.tim_tm2(rep)):
+                if rep is None or not due(TIM_TM2):
+                    continue
+                if ch == 0 and self.faults.drop_flash_mark():
+                    self.stats.marks_dropped_fault += 1
+                    self.dropped_flash_reports.append(rep)
+                elif self._send(out, enc.tim_tm2(rep)):
                     self.stats.marks_out += 1
             self.stats.edges_lost = self.marks[0].edges_lost + self.marks[1].edges_lost
             if due(TIM_TP):

@@ -215,3 +215,67 @@ def test_silent_receiver_every_byte_recorded_status_names_the_problem(tmp_path: 
     assert recorded.count(b"$GNGGA") + recorded.count(b"$GPGGA") >= 3  # the factory NMEA is all there
     st = status(status_path)
     assert st["state"] == "stopped" and st["config_state"] == "failed" and st["bytes_recorded"] == len(recorded)
+
+
+def test_lost_flash_reports_flagged_as_missed_flashes_end_to_end(tmp_path: Path) -> None:
+    """The emulator loses some EXTINT0 TIM-TM2 reports (`drop_flash_mark_rate`: the flash was taken, its mark
+    never arrived). The real daemon must flag that image `pulse_without_flash` and charge the `count` jump
+    to the next flash (`missed_flash`, `lost_edges` = reports lost in a row); every other image is clean
+    with the simulator's delay to ±1 µs."""
+    scenario = hil_scenario.Scenario.default(model="m8t", camera=hil_scenario.CameraPlan(valid_after_s=VALID_AFTER_S))
+    world = World(scenario)
+    emu = ReceiverEmulator(
+        "m8t",
+        ReceiverOptions(trigger_extint=True, time_valid_after_s=VALID_AFTER_S,
+                        faults=FaultOptions(seed=5, drop_flash_mark_rate=0.25)),
+        world, speed=SPEED, t_start=scenario.start,
+    )
+    port = emu.start()
+    proc, data_dir, status_path = start_daemon(tmp_path, port)
+    try:
+        wait_until(lambda: status(status_path).get("config_state") == "verified", timeout_s=60, what="configuration")
+        configured_at = emu.sim_time()
+        wait_until(lambda: emu.sim_time().diff_s(configured_at) > 36.0, timeout_s=60, what="recording")
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=30)
+        assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
+        end = emu.sim_time()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        emu.stop()
+    assert emu.error is None
+    flight = next(data_dir.glob("flight-*"))
+    _marks, pairings, _ = parse_records(read_events(flight / "events.jsonl").records)
+    with_pulse = sorted((p for p in pairings if p.pulse_time is not None),
+                        key=lambda p: p.pulse_time.total_ns)  # type: ignore[union-attr]
+    first, last = with_pulse[0].pulse_time, with_pulse[-1].pulse_time
+    assert first is not None and last is not None
+    truth = [ev for ev in world.camera_events(scenario.start, end)
+             if first.total_ns - 1_000_000 <= ev.pulse_time.total_ns <= last.total_ns + 1_000_000]
+    assert len(truth) == len(with_pulse) >= 12
+    lost_falls = [r.falling for r in emu.core.dropped_flash_reports if r.new_falling and r.falling is not None]
+    assert lost_falls, "the seeded fault lost no flash report in the recorded window"
+
+    def was_lost(ev: object) -> bool:
+        return any(abs(t.diff_ns(ev.flash_time)) < 1_000 for t in lost_falls)  # type: ignore[attr-defined]
+
+    lost_in_a_row = 0
+    seen = {"lost": 0, "missed_flash": 0, "clean": 0}
+    for ev, p in zip(truth, with_pulse, strict=True):
+        assert abs(p.pulse_time.diff_ns(ev.pulse_time)) <= 1_000  # type: ignore[union-attr]
+        if was_lost(ev):
+            assert PULSE_WITHOUT_FLASH in p.flags and p.flash_time is None, p
+            lost_in_a_row += 1
+            seen["lost"] += 1
+            continue
+        assert p.delay_ns is not None and abs(p.delay_ns - round(ev.delay_s * 1e9)) <= 1_000, (p, ev)
+        if lost_in_a_row and p is not with_pulse[0]:
+            assert p.flags == (MISSED_FLASH,) and p.lost_edges == lost_in_a_row, p
+            seen["missed_flash"] += 1
+        else:
+            assert p.flags == () and p.lost_edges == 0, p
+            seen["clean"] += 1
+        lost_in_a_row = 0
+    assert seen["lost"] >= 1 and seen["missed_flash"] >= 1 and seen["clean"] >= 6, seen

@@ -258,6 +258,24 @@ def test_bounce_fault_from_fault_options(standin_world) -> None:
     assert [m.count for m in tm2(run(core, 8.0), 0)] == [2, 4, 6]
 
 
+def test_lost_flash_report_fault_leaves_a_count_jump(standin_world) -> None:
+    """`drop_flash_mark_rate` withholds whole EXTINT0 TIM-TM2 reports (flash and contact opening together):
+    the trigger line (EXTINT1) still reports every pulse, and the next flash report's count jumps by 2."""
+    t0 = standin_world.start
+    for k in range(4):
+        standin_world.add_event(t0.add_s(2.1 + 2 * k), t0.add_s(2.164 + 2 * k))
+    core = flash_core(standin_world, trigger_extint=True,
+                      faults=FaultOptions(seed=3, drop_flash_mark_rate=0.5))
+    out = run(core, 10.0)
+    flashes, pulses = tm2(out, 0), tm2(out, 1)
+    dropped = core.dropped_flash_reports
+    assert [m.count for m in pulses] == [1, 2, 3, 4]
+    assert 0 < len(dropped) < 4 and core.stats.marks_dropped_fault == core.faults.flash_marks_dropped == len(dropped)
+    assert len(flashes) + len(dropped) == 4
+    assert sorted([m.count for m in flashes] + [r.count for r in dropped]) == [1, 2, 3, 4]
+    assert core.stats.edges_lost == 0  # nothing overwritten inside the receiver: the reports were lost on the way
+
+
 def test_camera_timepulse_inactive_means_no_photos(standin_world) -> None:
     t0 = standin_world.start
     standin_world.add_event(t0.add_s(3.1), t0.add_s(3.164))
