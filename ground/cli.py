@@ -287,42 +287,75 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m ground", description="directgeo ground app")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = p.add_subparsers(dest="command", required=True)
-    a = sub.add_parser("adjust", help="final adjustment: similarity + lever arm + shutter delay")
-    a.add_argument("--trajectory", required=True, type=Path, help="RTKLIB .pos (xyz or llh, GPST)")
-    a.add_argument("--events", required=True, type=Path, help="events.jsonl (onboard) or CSV image,week,tow")
+    a = sub.add_parser(
+        "adjust", help="final adjustment: similarity + lever arm + shutter delay",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Camera positions in your CRS from the RTK trajectory, the camera events and the bundle "
+                    "adjustment's\norientations: estimates the similarity (relative frame → local ENU), the lever "
+                    "arm and the\nshutter delay; GCPs enter the adjustment, check points never do.",
+        epilog="lever arm and delay: a value alone is fixed; a value with its σ is a prior (estimated, pulled to "
+               "the value);\n--estimate without a value leaves it free; with neither, both are free (a free lever "
+               "arm needs ≥ 1 GCP).\n\nexample:\n  python -m ground adjust --trajectory SOL.pos --events "
+               "events.jsonl --images photos/ \\\n    --orientations reconstruction.json --gcp gcp.csv "
+               "--lever-arm 0.04,-0.11,-0.09 --lever-arm-sigma 0.005 \\\n    --estimate delay --crs EPSG:2154 "
+               "-o out/\n\nwrites out/results.json, out/report.html and out/exports/ (geo.txt, Pix4D, Metashape, "
+               "OPK CSV, MicMac).\nexit codes: 0 done, 2 bad input, 3 refused (the message says what to add)")
+    a.add_argument("--trajectory", required=True, type=Path, help="antenna trajectory: RTKLIB .pos (xyz or llh, GPST week/tow or calendar, "
+                   "velocity columns optional)")
+    a.add_argument("--events", required=True, type=Path, help="camera events: the onboard events.jsonl, or a CSV "
+                   "image,week,tow (GPS week, seconds of week)")
     a.add_argument("--events-kind", choices=("trigger", "flash"), default="trigger",
-                   help="what the CSV times are (default trigger pulse)")
+                   help="what the CSV times are: trigger pulses (t_d ≈ shutter lag) or flash marks "
+                   "(t_d ≈ 0) (default: %(default)s)")
     a.add_argument("--capture-times", type=Path, help="CSV/JSON image→capture time (to match events.jsonl)")
     a.add_argument("--images", type=Path, help="folder of the photos: EXIF capture times to match events.jsonl")
     a.add_argument("--orientations", required=True, type=Path,
-                   help="OpenSfM .json, COLMAP images.txt, MicMac Ori-* folder, Metashape .xml or OPK .csv")
+                   help="bundle adjustment: OpenSfM/ODM reconstruction.json, COLMAP images.txt, MicMac "
+                   "Ori-* folder, Metashape camera .xml or OPK .csv (image,X,Y,Z,omega,phi,kappa; degrees)")
     a.add_argument("--gcp", type=Path, help="GCP CSV name,role,x_rel,y_rel,z_rel,X,Y,Z, ODM gcp_list.txt or "
                    "MicMac XML (then --gcp-rel)")
     a.add_argument("--gcp-rel", type=Path, help="CSV name,x_rel,y_rel,z_rel[,role] for ODM/MicMac GCP files")
-    a.add_argument("--gcp-crs", default=crsmod.WGS84_ECEF, help="CRS of GCP ground coordinates (EPSG:4978)")
-    a.add_argument("--lever-arm", type=_triple, help="X,Y,Z camera frame (m), antenna − optical centre")
-    a.add_argument("--lever-arm-sigma", type=float, help="σ (m) making --lever-arm a prior")
-    a.add_argument("--delay", type=float, help="event → exposure delay (s)")
+    a.add_argument("--gcp-crs", default=crsmod.WGS84_ECEF, help="CRS of the GCP ground coordinates, EPSG:n or EPSG:h+v "
+                   "(default: %(default)s, ECEF metres)")
+    a.add_argument("--lever-arm", type=_triple, help="lever arm X,Y,Z (m): antenna phase centre − optical "
+                   "centre in the camera frame (x right, y down, z forward), e.g. from `calibrate`")
+    a.add_argument("--lever-arm-sigma", type=float, help="σ (m, each axis) making --lever-arm a prior")
+    a.add_argument("--delay", type=float, help="shutter delay t_d (s): event time → exposure, e.g. 0.064")
     a.add_argument("--delay-sigma", type=float, help="σ (s) making --delay a prior")
-    a.add_argument("--estimate", default="", help="comma list of lever-arm,delay to leave free")
-    a.add_argument("--relative-control", action="store_true", help="differenced aerial control (needs a GCP)")
-    a.add_argument("--crs", default="EPSG:4979", help="export CRS (EPSG:n or EPSG:h+v; default EPSG:4979)")
+    a.add_argument("--estimate", default="", help="leave these free: lever-arm, delay or "
+                   "lever-arm,delay")
+    a.add_argument("--relative-control", action="store_true", help="differenced aerial control between consecutive "
+                   "images (float RTK or a GNSS bias; needs ≥ 1 GCP)")
+    a.add_argument("--crs", default="EPSG:4979", help="CRS of the exports, EPSG:n or EPSG:h+v with "
+                   "a geoid (its grid must be installed) (default: %(default)s, WGS 84 lat/lon/ellipsoidal h)")
     a.add_argument("--datum-tolerance-m", type=float, default=crsmod.MAX_DATUM_ERROR_M,
                    help="largest accepted error of a datum change (PROJ null shifts such as WGS 84 → RGF93 state "
                    "1 m and are refused by default)")
-    a.add_argument("-o", "--out", required=True, type=Path, help="output folder")
-    k = sub.add_parser("calibrate", help="lever arm from a ground (pseudo-materialization) acquisition")
-    k.add_argument("targets", type=Path, help="CSV target,group,x,y,z (ground.io.calibration_csv)")
+    a.add_argument("-o", "--out", required=True, type=Path, help="output folder (created)")
+    k = sub.add_parser(
+        "calibrate", help="lever arm from a ground (pseudo-materialization) acquisition",
+        description="Lever arm O (antenna phase centre − optical centre, camera frame) with σ from targets on "
+                    "the camera and on the receiver box measured in one photogrammetric acquisition of the "
+                    "drone (Daakir 2016); prints the --lever-arm/--lever-arm-sigma options for `adjust`. "
+                    "Exit codes: 0 done (stable), 1 the second acquisition differs beyond 3σ, 2 bad input.")
+    k.add_argument("targets", type=Path, help="CSV target,group,x,y,z (m); group is camera_frame (camera "
+                   "target in the calibrated camera frame), camera_acq / box_acq (the same targets in this "
+                   "acquisition), box_frame (box targets, and one row named phase_centre)")
     k.add_argument("--compare", type=Path, help="a second acquisition (e.g. after landing) to check stability")
     k.add_argument("-o", "--out", type=Path, help="write the JSON result here")
-    s = sub.add_parser("serve", help="run the ground API (FastAPI + uvicorn)")
-    s.add_argument("--host", default="127.0.0.1")
-    s.add_argument("--port", type=int, default=8600)
-    s.add_argument("--data-dir", type=Path, default=Path("ground-data"))
+    s = sub.add_parser(
+        "serve", help="run the ground API (FastAPI + uvicorn)",
+        description="Flight store and processing server: resumable checksummed uploads, RTK re-processing and "
+                    "adjustment jobs, reports. Every flight route needs 'Authorization: Bearer TOKEN'; OpenAPI "
+                    "at /docs and /openapi.json.")
+    s.add_argument("--host", default="127.0.0.1", help="address to listen on (default: %(default)s)")
+    s.add_argument("--port", type=int, default=8600, help="TCP port (default: %(default)s)")
+    s.add_argument("--data-dir", type=Path, default=Path("ground-data"),
+                   help="raw flight files and the default SQLite store (default: %(default)s)")
     s.add_argument("--token-file", type=Path, help="file holding the API token (else $DIRECTGEO_TOKEN)")
     s.add_argument("--database-url", help="SQLAlchemy URL (else $DATABASE_URL, else SQLite in the data dir)")
-    s.add_argument("--max-chunk-mib", type=float, default=16.0)
-    s.add_argument("--max-file-gib", type=float, default=8.0)
+    s.add_argument("--max-chunk-mib", type=float, default=16.0, help="largest upload chunk (default: %(default)s MiB)")
+    s.add_argument("--max-file-gib", type=float, default=8.0, help="largest uploaded file (default: %(default)s GiB)")
     return p
 
 

@@ -275,3 +275,23 @@ def test_report_says_how_each_parameter_entered_and_what_went_in(tmp_path: Path)
     assert main(_args(tmp_path, "--lever-arm", "0.05,-0.12,-0.08", "--delay", "0.065")) == 0
     page = (tmp_path / "out" / "report.html").read_text()
     assert re.search(r"<tr><td>lever arm O_y</td>.*?<td>fixed \(given\)</td></tr>", page)
+
+
+@pytest.mark.parametrize(
+    ("command", "phrases"),
+    [
+        ("adjust", ("a value alone is fixed", "value with its σ is a prior", "exit codes", "x right, y down",
+                    "(default: EPSG:4979")),
+        ("serve", ("Authorization: Bearer", "(default: 8600)", "(default: 16.0 MiB)", "/openapi.json")),
+        ("calibrate", ("camera_frame", "phase_centre", "prints the --lever-arm", "Exit codes")),
+    ],
+)
+def test_help_explains_the_rules_units_and_defaults(
+    command: str, phrases: tuple[str, ...], capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as stop:
+        main([command, "--help"])
+    assert stop.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())  # argparse wraps lines
+    for phrase in phrases:
+        assert phrase in text, phrase
