@@ -127,6 +127,8 @@ def read_base_observations(path: str | Path, reference: GpsTime | None):  # type
     from onboard.rtk_cli import ObsInput, read_observations
 
     path = Path(path)
+    if path.is_dir():  # a journal directory: the rover's radio journal (<flight>/radio) or a base flight
+        return _read_journal_dir(path, reference)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
     head = next(iter_file_bytes(path, 65536), b"")
@@ -156,3 +158,25 @@ def read_base_observations(path: str | Path, reference: GpsTime | None):  # type
                          f"{sorted(rtcm.messages) or 'none'}; GPS observation messages: {gps_msgs})")
     ephs = rtcm.ephemerides + (ubx.ephemerides if ubx is not None else [])
     return ObsInput(rtcm.epochs, ephs, pos, "rtcm3")
+
+
+def _read_journal_dir(path: Path, reference: GpsTime | None):  # type: ignore[no-untyped-def]
+    """Base input from a journal directory (segments in order, torn tail tolerated): RTCM3 or UBX inside."""
+    from onboard.convert import collect
+    from onboard.logger.journal import iter_journal_bytes
+    from onboard.rtk_cli import ObsInput
+
+    data = b"".join(iter_journal_bytes(path))
+    counts = count_protocols(data)
+    if counts.get(Protocol.RTCM3):
+        if reference is None:
+            raise InputError(f"{path}: an RTCM3 stream carries no GPS week; a rover time reference is needed")
+        rtcm = collect_rtcm([data], reference)
+        if rtcm.epochs:
+            pos = rtcm.base_position.phase_centre_ecef_m if rtcm.base_position is not None else None
+            return ObsInput(rtcm.epochs, rtcm.ephemerides, pos, "rtcm3")
+    col = collect(iter([data]))
+    if not col.epochs:
+        raise InputError(f"{path}: journal without base observations (RTCM3 1002/1004/1074/1077 or UBX RXM-RAW(X))")
+    pos = np.median(np.array(col.fixes_ecef_m), axis=0) if col.fixes_ecef_m else None
+    return ObsInput(col.epochs, col.ephemerides, pos, "ubx")

@@ -21,6 +21,7 @@ from onboard.hw.serial_port import SerialByteStream
 from onboard.logger.journal import iter_journal_bytes
 from onboard.receiver.decode import LockTrackerOptions
 from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE
+from onboard.rtk_inputs import read_base_observations
 from onboard.rtk_service import RADIO_DIR, SOLUTION_NAME, BaseStream, RtkService, RtkServiceOptions
 from tests.conftest import shared_file
 from tests.daemon.helpers import wait_until
@@ -122,8 +123,11 @@ def test_radio_gaps_degrade_without_wrong_fixes_and_fix_again_after(world, tmp_p
     assert snap["fixed"] == int(np.sum(track.q == Q_FIX)) and snap["ttff_s"] is not None
     assert snap["dropped_epochs"] == 0 and snap["errors"] == 0
     assert snap["baseline_m"] is not None and snap["baseline_m"] > 100.0  # the flight is ~1 km from the base
-    # the radio journal holds every byte the radio delivered, in order
+    # the radio journal holds every byte the radio delivered, in order, and the ground can re-process it
     assert b"".join(iter_journal_bytes(flight / RADIO_DIR)) == bytes(sent)
+    again = read_base_observations(flight / RADIO_DIR, t0)
+    assert again.kind == "rtcm3" and len(again.epochs) == DURATION_S - sum(b - a for a, b in GAPS_S)
+    np.testing.assert_allclose(again.antenna_pos_ecef_m, world.base_ecef_m, atol=1e-3)
 
 
 def test_submit_never_blocks_and_counts_drops(world, tmp_path) -> None:
@@ -170,3 +174,23 @@ def test_unplugged_radio_is_reopened_and_corrections_resume(world, tmp_path) -> 
     assert snap["base_epochs"] >= 38 and snap["radio_open"] is False
     track = read_pos(flight / SOLUTION_NAME)
     assert np.sum(track.q == Q_FLOAT) + np.sum(track.q == Q_FIX) >= 35
+
+
+def test_ubx_relay_from_the_base_decodes_to_the_base_epochs(world) -> None:
+    from hil_sim import ubx_encode as enc
+    from onboard.receiver.framing import iter_frames
+
+    core = BaseCore(BaseOptions(relay="ubx", radio_budget_bytes_s=1000.0))
+    bs = BaseStream()
+    t0 = world.scenario.start
+    sent = 0
+    for k in range(10):
+        src = world.observe("base", t0.add_s(k))
+        for frame in iter_frames(enc.rxm_rawx(src) + enc.nav_sol(src.time, world.base_ecef_m, np.zeros(3), 8, 2.0, 1.5)):
+            for _, raw in core.on_frame(frame, float(k)):  # NAV-SOL is not relayed
+                sent += len(raw)
+                bs.feed(raw, None)
+        ep = bs.epochs[-1]
+        assert ep.time == src.time and list(ep.sv_id) == list(src.gps_only().sv_id)
+        np.testing.assert_allclose(ep.pr_m, src.gps_only().pr_m, rtol=0, atol=0.01)
+    assert bs.epoch_count == 10 and core.scheduler.counts.sent == {"obs": 10}
