@@ -211,6 +211,24 @@ class _Clock:
         return EpochTiming(t_nom, tag, t, tag.diff_ns(t) / NS_PER_S, float(self.drift[i]), j)
 
 
+PLL_NOISE_BANDWIDTH_HZ = 15.0
+"""Carrier loop noise bandwidth assumed for the receiver's own phase-precision estimate (cpStdev), Hz."""
+PLL_PREDETECTION_S = 0.001
+"""Coherent integration time of the carrier loop (one C/A code period), s."""
+
+
+def pll_thermal_sigma_cyc(cn0_dbhz: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """The carrier-phase σ a receiver reports for itself (u-blox cpStdev): PLL thermal jitter from C/N0, cycles.
+
+    σ = √(B_n / (C/N0) · (1 + 1 / (2·T·C/N0))) / 2π (Kaplan & Hegarty, eq. 5.9). Receivers report their
+    tracking noise, not multipath: about 0.003 cycles at 45 dB-Hz, 0.012 at 35 dB-Hz, 0.024 at 30 dB-Hz — so
+    RTKLIB's cpStdev validity rule (≤ 0.020 cycles) drops only weak signals, as on a real M8T.
+    """
+    cn0 = 10.0 ** (np.asarray(cn0_dbhz, dtype=float) / 10.0)
+    var_rad2 = PLL_NOISE_BANDWIDTH_HZ / cn0 * (1.0 + 1.0 / (2.0 * PLL_PREDETECTION_S * cn0))
+    return np.sqrt(var_rad2) / (2.0 * np.pi)
+
+
 class World:
     """GNSS physics of one scenario (see module docstring). Pure computation after construction."""
 
@@ -550,7 +568,7 @@ class World:
         cp = (rho + clocks_m + tropo - iono + mp_phase + eps_phase) / LAMBDA_L1_M + amb + half
         dop = -(rho_dot + CLIGHT_M_S * (timing.clock_drift_s_s - dts_dot) + atmo_rate) / LAMBDA_L1_M + eps_dop
         pr_std = np.hypot(em.code_sigma_zenith_m, em.mp_code_sigma_zenith_m) / sin_el
-        cp_std = np.hypot(em.phase_sigma_zenith_m, em.mp_phase_sigma_zenith_m) / sin_el / LAMBDA_L1_M
+        cp_std = pll_thermal_sigma_cyc(cn0)
         clock_reset = timing.jumps != prev_jumps
         if update_state:
             self._last_obs[receiver] = (t.total_ns, timing.jumps)
