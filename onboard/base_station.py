@@ -39,7 +39,12 @@ from onboard.errors import LinkLost
 from onboard.gnsstime import GpsTime
 from onboard.hw.ports import ByteStream
 from onboard.receiver.framing import Frame, Protocol
-from onboard.receiver.rtcm import BasePosition, encode_base_position, encode_ephemeris, encode_gps_observations
+from onboard.receiver.rtcm import (
+    BasePosition,
+    encode_base_position,
+    encode_ephemeris,
+    encode_gps_observations,
+)
 from onboard.rtk.ephemeris import EphemerisStore, satellite_states
 from onboard.rtk.pntpos import pntpos
 from onboard.rtk.types import Ephemeris, ObsEpoch
@@ -179,8 +184,8 @@ class BaseCore:
         self.survey = SurveyIn(options.survey_in_s) if options.position_ecef_m is None else None
         self.position: BasePosition | None = None
         if options.position_ecef_m is not None:
-            self.position = BasePosition(options.station_id, tuple(map(float, options.position_ecef_m)),
-                                         options.antenna_height_m)
+            x, y, z = (float(v) for v in options.position_ecef_m)
+            self.position = BasePosition(options.station_id, (x, y, z), options.antenna_height_m)
         self._next_position_s: float | None = None
         self._next_eph_s: dict[int, float] = {}
         self.encode_errors = 0
@@ -238,7 +243,7 @@ class BaseCore:
         if self._next_position_s is None or t_s >= self._next_position_s:
             due.append(("position", encode_base_position(self.position)))
         eph_prns = []
-        for prn in sorted(set(int(s) for s in epoch.gps_only().sv_id)):
+        for prn in sorted({int(s) for s in epoch.gps_only().sv_id}):
             if t_s < self._next_eph_s.get(prn, -np.inf):
                 continue
             eph = self.store.select(prn, epoch.time)

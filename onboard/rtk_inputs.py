@@ -16,6 +16,7 @@ import logging
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -52,8 +53,8 @@ def _merge(a: ObsEpoch, b: ObsEpoch) -> ObsEpoch:
     if not keep.any():
         return a
     extra = b.select(keep)
-    cols = {f.name: np.concatenate([getattr(a, f.name), getattr(extra, f.name)])
-            for f in fields(a) if isinstance(getattr(a, f.name), np.ndarray)}
+    cols: dict[str, Any] = {f.name: np.concatenate([getattr(a, f.name), getattr(extra, f.name)])
+                            for f in fields(a) if isinstance(getattr(a, f.name), np.ndarray)}
     return replace(a, **cols)
 
 

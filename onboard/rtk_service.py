@@ -169,7 +169,7 @@ class BaseStream:
                 if frame.msg_id not in (1005, 1006):
                     return 0  # no week to resolve yet: the rover has not produced an epoch
                 reference = GpsTime(0, 0)
-            item = self.rtcm.decode(frame, reference)
+            item: Any = self.rtcm.decode(frame, reference)
         elif frame.protocol is Protocol.UBX:
             from onboard.receiver.decode import SubframeWords, decode_frame
 
@@ -396,10 +396,11 @@ class RtkService:
             while True:
                 eps = self._base.epochs
                 newest = eps[-1] if eps else None
-                # the base may send at a lower rate than the rover: wait only when its next epoch is due by t
-                interval_s = newest.time.diff_s(eps[-2].time) if len(eps) >= 2 else 0.0
-                if newest is not None and newest.time.diff_s(t) + interval_s > tol:
-                    break
+                if newest is not None:
+                    # the base may send at a lower rate than the rover: wait only if its next epoch is due by t
+                    interval_s = newest.time.diff_s(eps[-2].time) if len(eps) >= 2 else 0.0
+                    if newest.time.diff_s(t) + interval_s > tol:
+                        break
                 left = (deadline - self.clock.monotonic_ns()) / 1e9
                 if left <= 0 or self._stop.is_set():
                     break

@@ -81,7 +81,7 @@ def test_tight_budget_keeps_every_observation_and_position_sheds_ephemerides() -
 
 
 def test_corrections_decode_back_to_the_epoch_and_position() -> None:
-    epochs, nav = _base_data()
+    epochs, _nav = _base_data()
     core = BaseCore(BaseOptions(station_id=12, position_ecef_m=BASE_3040, obs_message=1002))
     frames = core.on_item(epochs[3])
     msgs = [RTCMReader.parse(f) for _, f in frames]

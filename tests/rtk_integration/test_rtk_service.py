@@ -91,7 +91,7 @@ def _run_service(world, tmp_path: Path, gaps) -> tuple[RtkService, list, Path]:
             if not any(a <= k < b for a, b in gaps):
                 os.write(master, frames[k])
                 sent += frames[k]
-            wait_until(lambda: svc._queue.qsize() < 8, 10, "engine to keep up")  # noqa: B023
+            wait_until(lambda: svc._queue.qsize() < 8, 10, "engine to keep up")
             svc.submit(world.observe("rover", t0.add_s(k)))
         wait_until(lambda: svc.snapshot()["epochs"] == DURATION_S, 30, "all epochs solved")
     finally:
