@@ -67,11 +67,21 @@ def _fmt(v: float, geographic_angle: bool) -> str:
 
 
 def write_odm_geo_txt(path: str | Path, cams: ExportedCameras) -> None:
-    """ODM `geo.txt`: first line the CRS, then `image x y z` (x = easting/longitude first)."""
+    """ODM `geo.txt`: first line the CRS, then `image x y z yaw pitch roll h_acc v_acc` (x = easting/longitude
+    first; accuracies in m, 1σ, horizontal and vertical).
+
+    The angle columns are `nan`: ODM documents yaw/pitch/roll in degrees without their axes or zero, and its
+    readers changed (older ones read omega/phi/kappa, newer ones yaw/pitch/roll that replace the EXIF angles;
+    a NaN angle is read as "no angles"). The columns must be present because the accuracies are positional
+    (columns 8–9); ODM passes them to OpenSfM as the GPS standard deviations of each image.
+    """
     g = cams.geographic
     with Path(path).open("w", encoding="utf-8") as fh:
         fh.write(cams.crs + "\n")
-        fh.writelines(f"{name} {_fmt(p[0], g)} {_fmt(p[1], g)} {p[2]:.4f}\n" for name, p in zip(cams.images, cams.xyz))
+        fh.writelines(
+            f"{name} {_fmt(p[0], g)} {_fmt(p[1], g)} {p[2]:.4f} nan nan nan {sh:.4f} {sv:.4f}\n"
+            for name, p, sh, sv in zip(cams.images, cams.xyz, cams.sigma_h_m, cams.sigma_v_m)
+        )
 
 
 def write_pix4d_csv(path: str | Path, cams: ExportedCameras) -> None:

@@ -64,3 +64,21 @@ def test_geographic_export_layouts(tmp_path: Path) -> None:
     # angles are turned to the local ENU at each camera: ≈ 200 m / 6371 km = 3e-5 rad from the origin ENU
     np.testing.assert_allclose(cams.r_cam_to_crs[0], rots[0], atol=5e-5)
     assert not np.allclose(cams.r_cam_to_crs[0], rots[0], atol=1e-6)
+
+
+def test_odm_geo_txt_carries_each_image_accuracy_and_no_guessed_angles(tmp_path: Path) -> None:
+    """geo.txt rows read the way ODM's documentation lays them out (`image x y z yaw pitch roll h_acc v_acc`):
+    the accuracies are the per-image σ in columns 8–9 (positional, so the angle columns must exist) and the
+    angles are NaN, which ODM's reader takes as "no angles" (their axes and zero are not documented)."""
+    import math
+
+    names, centres, rots, origin, _ = _enu_block()
+    sigma = np.column_stack([np.linspace(0.006, 0.012, len(names))] * 2 + [np.linspace(0.009, 0.02, len(names))])
+    cams = cameras_to_crs(names, centres, rots, origin, "EPSG:32651", sigma)
+    write_all(tmp_path, cams, centres, rots)
+    rows = [line.split() for line in (tmp_path / "geo.txt").read_text().splitlines()[1:]]
+    assert [r[0] for r in rows] == names and all(len(r) == 9 for r in rows)
+    for r, sh, sv in zip(rows, cams.sigma_h_m, cams.sigma_v_m):
+        assert all(math.isnan(float(v)) for v in r[4:7])
+        assert float(r[7]) == pytest.approx(sh, abs=1e-4) and float(r[8]) == pytest.approx(sv, abs=1e-4)
+    assert float(rows[-1][8]) > float(rows[0][8]) > 0.0
