@@ -42,6 +42,7 @@ from onboard.settings import Settings, receiver_options
 from onboard.status import SatelliteStatus, StatusSnapshot, write_status
 from onboard.timepulse.marks import (
     EVENT_FORMAT_VERSION,
+    FLASH_CHANNEL,
     TRIGGER_CHANNEL,
     PairingOptions,
     PairingRecorder,
@@ -75,8 +76,9 @@ class RecorderDeps:
     files: FileLayer = field(default_factory=OsFileLayer)
     disk_free: Callable[[Path], int] = disk_free_bytes
     notifier: SdNotifier = field(default_factory=lambda: SdNotifier({}))
-    # Edge sources named by `Edge.line`: "trigger" (camera trigger pulses) and "pps" (receiver 1 PPS), used
-    # when receiver.trigger = "gpio". Built by the composition root from gpiozero pins.
+    # Edge sources named by `Edge.line`: "trigger" (camera trigger pulses, when receiver.trigger = "gpio"),
+    # "flash" (hot-shoe input, when gpio.flash_pin is set) and "pps" (receiver 1 PPS, the time anchor).
+    # Built by the composition root from gpiozero pins.
     edge_sources: Callable[[], Sequence[EdgeSource]] | None = None
 
 
@@ -99,11 +101,12 @@ def choose_flight_dir(data_dir: Path, wall_ns: int) -> Path:
 
 
 class GpioTiming:
-    """GPIO trigger edges → GPS-timed `CameraMark`s (pure): PPS edges on another GPIO anchor the host clock.
+    """GPIO trigger/flash edges → GPS-timed `CameraMark`s (pure): PPS edges on another GPIO anchor the host
+    clock. Line "trigger" gives channel 1 (TRIGGER_CHANNEL) marks, line "flash" channel 0 (FLASH_CHANNEL:
+    the hot-shoe's falling edge is the flash); each line counts its own edges.
 
     `set_coarse(tick, time)` relates the host clock to GPS time roughly (the host tick at which an epoch's
-    bytes arrived, and its time tag); PPS ticks then snap to whole GPS seconds (`pps_anchors`). A trigger
-    edge waits until a PPS edge after it arrived, so it is interpolated between two anchors, or until
+    bytes arrived, and its time tag); PPS ticks then snap to whole GPS seconds (`pps_anchors`). An edge waits until a PPS edge after it arrived, so it is interpolated between two anchors, or until
     `wait_ns` passed (then extrapolated; without anchors it gets no time and `valid` False).
     `acc_est_ns` is what we vouch for: interrupt latency and chrony-free host clock over one second.
     """
@@ -114,7 +117,7 @@ class GpioTiming:
         self.coarse: TickAnchor | None = None
         self.pps: deque[int] = deque(maxlen=max_pps)
         self.pending: list[Edge] = []
-        self.count = 0
+        self.counts: dict[str, int] = {"trigger": 0, "flash": 0}
 
     def set_coarse(self, tick_ns: int, time: GpsTime) -> None:
         """Latest coarse host-tick ↔ GPS-time correspondence."""
@@ -125,19 +128,20 @@ class GpioTiming:
         if edge.line == "pps":
             if edge.rising:
                 self.pps.append(edge.monotonic_ns)
-        elif edge.line == "trigger":
+        elif edge.line in self.counts:
             self.pending.append(edge)
         return self.release(now_ns)
 
     def release(self, now_ns: int) -> list[tuple[CameraMark, int]]:
-        """Trigger marks whose time can be fixed now (a PPS after them, or waited long enough)."""
+        """Trigger/flash marks whose time can be fixed now (a PPS after them, or waited long enough)."""
         anchors = pps_anchors(self.pps, self.coarse) if self.coarse is not None else []
         latest_pps = self.pps[-1] if self.pps else None
         out, keep = [], []
         for e in self.pending:
             if (latest_pps is not None and latest_pps > e.monotonic_ns) or now_ns - e.monotonic_ns >= self.wait_ns:
-                self.count += 1
-                mark = gpio_mark(TRIGGER_CHANNEL, e.rising, e.monotonic_ns, self.count, anchors, self.acc_est_ns)
+                self.counts[e.line] += 1
+                channel = TRIGGER_CHANNEL if e.line == "trigger" else FLASH_CHANNEL
+                mark = gpio_mark(channel, e.rising, e.monotonic_ns, self.counts[e.line], anchors, self.acc_est_ns)
                 out.append((mark, e.monotonic_ns))
             else:
                 keep.append(e)
@@ -207,7 +211,12 @@ class Recorder:
             or (opts.trigger == "gpio" and self.deps.edge_sources is not None),
             trigger_edge="rising" if opts.pulse_rising else "falling",
             max_delay_ns=min(1_000_000_000, round(opts.camera_period_s * 1e9) // 2),
+            flash_source="gpio" if self._gpio_flash() else None,
         )
+
+    def _gpio_flash(self) -> bool:
+        """True when flashes are measured on a GPIO input (gpio.flash_pin) rather than TIM-TM2 EXTINT0."""
+        return self.settings.gpio_flash_pin >= 0 and self.deps.edge_sources is not None
 
     # -- lifecycle --------------------------------------------------------------------------------------
     def check_disk(self) -> int:
@@ -407,7 +416,8 @@ class Recorder:
 
     # -- GPIO trigger / PPS edges ----------------------------------------------------------------------
     def _start_edge_threads(self) -> list[threading.Thread]:
-        if self.deps.edge_sources is None or receiver_options(self.settings).trigger != "gpio":
+        if self.deps.edge_sources is None or not (receiver_options(self.settings).trigger == "gpio"
+                                                  or self._gpio_flash()):
             return []
         threads = []
         for source in self.deps.edge_sources():
@@ -431,8 +441,12 @@ class Recorder:
 
     def _on_gpio_mark(self, mark: CameraMark, tick_ns: int) -> None:
         self.status.time_marks += 1
+        if mark.time is not None:
+            self.status.last_mark_gpst = str(mark.time)
         for rec in self._pairer.add([mark], tick_ns):
             self._append_event(rec)
+        if self.events is not None:
+            self._sync_events()  # a GPIO mark exists only in events.jsonl: durable now, like a TIM-TM2 mark
 
     # -- loop side: port state --------------------------------------------------------------------------
     def _set_state(self, state: str, message: str) -> None:
@@ -734,8 +748,11 @@ def serial_port_opener(settings: Settings) -> Callable[[], ByteStream]:
 
 
 def gpio_edge_sources(settings: Settings) -> Callable[[], Sequence[EdgeSource]] | None:
-    """The production GPIO edge sources (trigger and PPS lines) when receiver.trigger = "gpio", else None."""
-    if receiver_options(settings).trigger != "gpio":
+    """The production GPIO edge sources: trigger (receiver.trigger = "gpio") and/or flash (gpio.flash_pin),
+    with the PPS line that times them; None when no GPIO input is configured."""
+    trigger = receiver_options(settings).trigger == "gpio"
+    flash = settings.gpio_flash_pin >= 0
+    if not (trigger or flash):
         return None
 
     def open_sources() -> Sequence[EdgeSource]:
@@ -747,10 +764,13 @@ def gpio_edge_sources(settings: Settings) -> Callable[[], Sequence[EdgeSource]] 
             factory = MockFactory()
         else:
             factory = lgpio_factory()
-        return [
-            GpioEdgeSource(settings.gpio_trigger_pin, factory, line="trigger"),
-            GpioEdgeSource(settings.gpio_pps_pin, factory, line="pps"),
-        ]
+        sources = [GpioEdgeSource(settings.gpio_pps_pin, factory, line="pps")]
+        if trigger:
+            sources.append(GpioEdgeSource(settings.gpio_trigger_pin, factory, line="trigger"))
+        if flash:
+            # the hot-shoe pulls the line low: an internal pull-up holds it high between flashes
+            sources.append(GpioEdgeSource(settings.gpio_flash_pin, factory, line="flash", pull_up=True))
+        return sources
 
     return open_sources
 

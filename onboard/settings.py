@@ -47,6 +47,7 @@ class Settings:
     watchdog_writer_stall_s: float = 10.0
     gpio_trigger_pin: int = -1
     gpio_pps_pin: int = -1
+    gpio_flash_pin: int = -1
     gpio_pin_factory: str = "lgpio"
 
 
@@ -71,6 +72,7 @@ KEYS: Mapping[str, str] = MappingProxyType(
         "watchdog.writer_stall_s": "watchdog_writer_stall_s",
         "gpio.trigger_pin": "gpio_trigger_pin",
         "gpio.pps_pin": "gpio_pps_pin",
+        "gpio.flash_pin": "gpio_flash_pin",
         "gpio.pin_factory": "gpio_pin_factory",
     }
 )
@@ -224,6 +226,12 @@ def validate(s: Settings) -> None:
         raise ConfigFileError(f"receiver: {exc}") from exc
     if opts.trigger == "gpio" and (s.gpio_trigger_pin < 0 or s.gpio_pps_pin < 0):
         raise ConfigFileError("receiver.trigger = \"gpio\" needs gpio.trigger_pin and gpio.pps_pin (BCM numbers)")
+    if s.gpio_flash_pin >= 0 and s.gpio_pps_pin < 0:
+        raise ConfigFileError("gpio.flash_pin needs gpio.pps_pin (BCM number): GPIO edges are timed through PPS")
+    used = [p for p in (s.gpio_trigger_pin if opts.trigger == "gpio" else -1, s.gpio_pps_pin, s.gpio_flash_pin)
+            if p >= 0]
+    if len(used) != len(set(used)):
+        raise ConfigFileError(f"gpio: trigger_pin, pps_pin and flash_pin must be different pins, got {used}")
 
 
 def receiver_options(s: Settings) -> Any:

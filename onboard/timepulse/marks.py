@@ -69,12 +69,14 @@ class PairingOptions:
     `trigger_measured` False when no trigger line is wired (every image then carries NO_TRIGGER_MEASUREMENT);
     `trigger_edge` the pulse's active edge (the TimePulse polarity); `max_delay_ns` the longest trigger→flash
     delay accepted (must be below the camera period); `bounce_window_ns` edges closer than this to the
-    previous one on the same line are contact bounce.
+    previous one on the same line are contact bounce; `flash_source` when set ("tim-tm2" or "gpio") takes
+    flashes from that source only (a GPIO flash input replaces TIM-TM2 EXTINT0 even if both are wired).
     """
 
     trigger_measured: bool = True
     flash_channel: int = FLASH_CHANNEL
     flash_edge: str = "falling"
+    flash_source: str | None = None
     trigger_channel: int = TRIGGER_CHANNEL
     trigger_edge: str = "rising"
     max_delay_ns: int = 1_000_000_000
@@ -128,6 +130,8 @@ def _lost_edges(all_marks: list[CameraMark], flashes: list[CameraMark], options:
     reports are compared (less exact: a contact opening in the epoch after its flash shifts one count).
     """
     lost = [0] * len(flashes)
+    if options.flash_source not in (None, "tim-tm2"):
+        return lost  # only the TIM-TM2 counter reveals lost edges; a GPIO input sees every edge
     rising = sorted((m for m in all_marks if m.source == "tim-tm2" and m.channel == options.flash_channel
                      and m.edge != options.flash_edge and m.valid and m.time is not None),
                     key=lambda m: m.time)  # type: ignore[arg-type, return-value]
@@ -157,7 +161,8 @@ def pair_marks(marks: Iterable[CameraMark], options: PairingOptions = PairingOpt
     first unclaimed flash in [pulse, min(pulse + max_delay_ns, next pulse)).
     """
     all_marks = list(marks)
-    flashes = sorted((m for m in all_marks if _usable(m, options.flash_channel, options.flash_edge)),
+    flashes = sorted((m for m in all_marks if _usable(m, options.flash_channel, options.flash_edge)
+                      and options.flash_source in (None, m.source)),
                      key=lambda m: m.time)  # type: ignore[arg-type, return-value]
     flashes, flash_bounced = _debounce(flashes, options.bounce_window_ns)
     lost = _lost_edges(all_marks, flashes, options)

@@ -100,3 +100,71 @@ def test_recorder_times_gpio_trigger_pulses(tmp_path: Path) -> None:
     assert 0.25 < offset_s < 0.6
     pairings = [r for r in records if r["kind"] == "pairing"]
     assert pairings and pairings[0]["pulse_source"] == "gpio" and "pulse_without_flash" in pairings[0]["flags"]
+
+
+@pytest.mark.timeout(60)
+def test_gpio_flash_edge_paired_with_gpio_trigger_and_fsynced_at_once(tmp_path: Path) -> None:
+    """gpio.flash_pin: a hot-shoe falling edge on a pulled-up MockFactory pin becomes a GPS-timed flash mark
+    (channel 0, source gpio), is fsynced to events.jsonl at once (the manual clock never lets the periodic
+    sync run), and is paired with the GPIO trigger pulse before it: the image's delay is the two edges'
+    tick difference mapped through the PPS anchors."""
+    pytest.importorskip("hil_sim.ubx_encode")
+    from gpiozero.pins.mock import MockFactory
+
+    from onboard.hw.fake import ManualClock
+    from onboard.hw.gpio_edges import GpioEdgeSource
+    from onboard.logger.files import RecordingFileLayer
+
+    factory = MockFactory()
+    stream = FakeByteStream()
+    clock = ManualClock(monotonic_ns=time.monotonic_ns())
+    files = RecordingFileLayer()
+    sources = [GpioEdgeSource(23, factory, line="trigger"), GpioEdgeSource(24, factory, line="pps"),
+               GpioEdgeSource(25, factory, line="flash", pull_up=True)]
+    settings = make_settings(
+        tmp_path, receiver_configure=False, gpio_trigger_pin=23, gpio_pps_pin=24, gpio_flash_pin=25,
+        journal_sync_interval_s=1.0, receiver_options=MappingProxyType({"trigger": "gpio"}),
+    )
+    run = RunningRecorder(settings, RecorderDeps(open_port=lambda: stream, clock=clock, files=files,
+                                                 edge_sources=lambda: sources))
+    try:
+        wait_until(lambda: status(settings.status_path).get("port_open"), what="port open")
+        pps, trig, flash = factory.pin(24), factory.pin(23), factory.pin(25)
+        clock.advance_ns(time.monotonic_ns() - clock.monotonic_ns())  # the epoch's bytes arrive "now"
+        stream.feed(_epoch_frame(T0.add_s(-0.05)))
+        wait_until(lambda: status(settings.status_path).get("epochs") == 1, what="epoch decoded")
+        pps_s = [time.monotonic()]
+        pps.drive_high()
+        pps_s[0] = (pps_s[0] + time.monotonic()) / 2  # the edge's tick, to the bracket's width
+        pps.drive_low()
+        time.sleep(0.3)
+        trig.drive_high()
+        time.sleep(0.06)
+        flash.drive_low()  # the flash: the hot shoe pulls the line low
+        time.sleep(0.004)
+        flash.drive_high()
+        trig.drive_low()
+        time.sleep(0.6)
+        pps_s.append(time.monotonic())
+        pps.drive_high()
+        pps_s[1] = (pps_s[1] + time.monotonic()) / 2
+        pps.drive_low()
+        wait_until(lambda: status(settings.status_path).get("time_marks", 0) >= 4, what="trigger and flash marks")
+        events_path = next(settings.data_dir.glob("flight-*")) / "events.jsonl"
+        assert files.synced_bytes.get(events_path) == events_path.stat().st_size  # no mark waits for a sync
+        assert run.stop() == 0
+    finally:
+        factory.reset()
+    records = read_events(events_path).records
+    marks = [r for r in records if r["kind"] == "mark"]
+    [flash_mark] = [m for m in marks if m["channel"] == 0 and m["edge"] == "falling"]
+    [pulse_mark] = [m for m in marks if m["channel"] == 1 and m["edge"] == "rising"]
+    assert flash_mark["source"] == pulse_mark["source"] == "gpio" and flash_mark["valid"] and flash_mark["count"] == 1
+    [pairing] = [r for r in records if r["kind"] == "pairing"]
+    assert pairing["flags"] == [] and pairing["pulse_source"] == "gpio"
+    assert (pairing["flash_week"], pairing["flash_tow_ns"]) == (flash_mark["week"], flash_mark["tow_ns"])
+    assert pairing["delay_ns"] == flash_mark["tow_ns"] - pulse_mark["tow_ns"]
+    tick_delay_ns = flash_mark["tick_ns"] - pulse_mark["tick_ns"]
+    assert 0.055e9 < tick_delay_ns < 0.5e9
+    # host ticks scaled by the PPS anchors' rate (the two PPS edges are one GPS second apart)
+    assert abs(pairing["delay_ns"] - tick_delay_ns / (pps_s[1] - pps_s[0])) <= 20_000

@@ -95,3 +95,12 @@ def test_gpio_trigger_needs_both_pins() -> None:
     s = load_settings(None, environ={"ONBOARD_RECEIVER_TRIGGER": "gpio", "ONBOARD_GPIO_TRIGGER_PIN": "23",
                                      "ONBOARD_GPIO_PPS_PIN": "24"})
     assert s.gpio_trigger_pin == 23 and s.gpio_pps_pin == 24
+
+
+def test_gpio_flash_pin_needs_pps_and_distinct_pins() -> None:
+    with pytest.raises(ConfigFileError, match="gpio.flash_pin needs gpio.pps_pin"):
+        load_settings(None, environ={"ONBOARD_GPIO_FLASH_PIN": "25"})
+    with pytest.raises(ConfigFileError, match="must be different pins"):
+        load_settings(None, environ={"ONBOARD_GPIO_FLASH_PIN": "24", "ONBOARD_GPIO_PPS_PIN": "24"})
+    s = load_settings(None, environ={"ONBOARD_GPIO_FLASH_PIN": "25", "ONBOARD_GPIO_PPS_PIN": "24"})
+    assert s.gpio_flash_pin == 25 and receiver_options(s).trigger == "extint1"

@@ -65,6 +65,20 @@ def test_count_jump_flags_a_missed_flash() -> None:
     assert pairs[3].lost_edges == 1 and pairs[2].flash_time is None and pairs[2].delay_ns is None
 
 
+def test_flash_source_gpio_uses_only_gpio_flashes() -> None:
+    """With a GPIO flash input (flash_source "gpio"), TIM-TM2 EXTINT0 marks are not flashes and their count
+    jumps say nothing; each pulse pairs with its GPIO flash."""
+    tm2 = [flash(0, 6e7, 10), flash(2, 6e7, 13)]  # a TIM-TM2 line with a count jump
+    gpio = [CameraMark(0, "falling", k + 1, T0.add_ns(PHASE_NS + k * PERIOD_NS + 62_000_000), 20_000, 1, True,
+                       "gpio") for k in range(3)]
+    marks = [pulse(k) for k in range(3)] + tm2 + gpio
+    pairs = pair_marks(marks, PairingOptions(flash_source="gpio"))
+    assert [p.flags for p in pairs] == [(), (), ()] and [p.delay_ns for p in pairs] == [62_000_000] * 3
+    assert [p.flash_count for p in pairs] == [1, 2, 3]
+    mixed = pair_marks(marks)  # without the option both lines are flashes: 2 ms apart they look like bounces
+    assert any(BOUNCE in p.flags for p in mixed)
+
+
 def test_count_wraps_at_65536_without_a_false_jump() -> None:
     pairs = pair_marks([pulse(0), pulse(1), flash(0, 5e7, 65535), flash(1, 5e7, 0)])
     assert [p.flags for p in pairs] == [(), ()]
