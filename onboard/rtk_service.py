@@ -19,7 +19,8 @@ Wiring into the recorder: `RtkRecorder` is the recorder with this service attach
 hook (`Recorder._on_decoded`) and its status writes; `rtk.json` is written beside the status snapshot. The
 daemon's own wiring (a settings key for the radio device and these three calls: `start(flight_dir)` after the
 flight directory is chosen, `submit(item)` for each decoded item, `stop()` at close) is left to the daemon's
-owner; see `RtkRecorder` for the exact calls.
+owner; see `RtkRecorder` for the exact calls. The base stream comes from `onboard.hw.net_stream.open_base_stream`
+("serial:/dev/ttyUSB0@57600", "tcp://HOST:PORT" or "ntrip://USER:PASS@HOST:PORT/MOUNT").
 """
 
 from __future__ import annotations
