@@ -127,3 +127,62 @@ def test_base_station_sends_rtcm_matching_its_journal_within_budget(tmp_path: Pa
     span_s = (times[-1] - times[0]) / 1000.0 + 1.0
     assert len(got) <= BUDGET_B_S * span_s + BURST_B
     assert station.sender is not None and station.sender.frames_dropped == 0
+
+
+def test_python_m_onboard_base_end_to_end_and_sigterm(tmp_path: Path) -> None:
+    """The command itself (a subprocess): configures the emulated LEA-6T, sends 1004 + 1006, stops on SIGTERM."""
+    import signal
+    import subprocess
+    import sys
+
+    from tests.conftest import PROJECT_ROOT
+
+    shared_file("gnss/broadcast-nav-20100701/brdc1820.10n")
+    from hil_sim.pty_server import ReceiverEmulator
+    from hil_sim.receiver import ReceiverOptions
+    from hil_sim.scenario import Scenario
+    from hil_sim.world import World
+
+    world = World(Scenario.default(model="lea6t", duration_s=600.0))
+    emu = ReceiverEmulator("lea6t", ReceiverOptions(time_valid_after_s=1.0), world, speed=SPEED, receiver="base")
+    port = emu.start()
+    radio_master, radio_slave = os.openpty()
+    tty.setraw(radio_slave)
+    got = bytearray()
+    stop = threading.Event()
+    reader = threading.Thread(target=_read_all, args=(radio_master, got, stop), daemon=True)
+    reader.start()
+    cfg = tmp_path / "base.toml"
+    cfg.write_text("[receiver]\nmeas_rate_ms = 1000\n[journal]\ndisk_floor_mb = 1.0\n")
+    x, y, z = world.base_ecef_m
+    env = dict(os.environ, PYTHONPATH=str(PROJECT_ROOT))
+    env.pop("NOTIFY_SOCKET", None)
+    status_path = tmp_path / "run" / "status.json"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "onboard", "base", "--port", port, "--baud", "9600", "--radio",
+         os.ttyname(radio_slave), f"--position={x},{y},{z}", "--message", "1002", "--station-id", "7",
+         "--config", str(cfg), "--data-dir", str(tmp_path / "data"), "--status", str(status_path)],
+        cwd=PROJECT_ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        st = wait_until(lambda: (s := status(status_path)).get("config_state") in ("verified", "failed") and s,
+                        timeout_s=60, what="configuration")
+        assert st["config_state"] == "verified", st.get("config_error")
+        wait_until(lambda: got.count(b"\xd3") >= 12, timeout_s=40, what="corrections on the radio")
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        stop.set()
+        reader.join(5)
+        emu.stop()
+        os.close(radio_master)
+        os.close(radio_slave)
+    assert proc.returncode == 0, out.decode(errors="replace")[-2000:]
+    framer = StreamFramer()
+    msgs = [RTCMReader.parse(f.raw) for f in framer.feed(bytes(got)) + framer.flush()]
+    numbers = [int(m.identity) for m in msgs]
+    assert numbers.count(1002) >= 5 and 1006 in numbers
+    assert all(int(m.DF003) == 7 for m in msgs if m.identity == "1002")
+    flights = list((tmp_path / "data").iterdir())
+    assert len(flights) == 1 and (flights[0] / "radio-tx.rtcm3").read_bytes() == bytes(got)
