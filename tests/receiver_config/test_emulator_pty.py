@@ -113,6 +113,39 @@ def test_m8t_table_on_a_lea6t_falls_back_to_rxm_raw() -> None:
     assert report.result("CFG-MSG RXM-RAW every 1").status == "ok" and raw_rate == 1
 
 
+def test_receiver_that_keeps_align_to_tow_is_verified_as_sent() -> None:
+    """The other answer to the open question: a receiver that keeps alignToTow for a 3 s period. The poll-back
+    shows the bit set, the camera pulse is "ok" (not "altered") and the applied flag is recorded as 1."""
+    opts = ReceiverOptions()
+
+    async def scenario(path: str) -> Any:
+        async with pty_link(path) as pl:
+            return await apply_profile(pl.link, build_profile("m8t", opts), opts, current_baud=9600)
+
+    with emulator("m8t", align_to_tow="keep") as emu:
+        report = run(scenario(emu.path))
+    assert report.ok, [str(e) for e in report.errors]
+    cam = report.result("CFG-TP5 TIMEPULSE2 camera")
+    assert cam.status == "ok" and cam.applied["alignToTow"] == 1
+
+
+def test_u6_that_acks_rxm_rawx_but_ignores_it_is_caught_by_poll_back() -> None:
+    """The other answer to "NAK or ACK RXM-RAWX enabling on a u-blox 6": ACKed but never applied. The poll-back
+    names the message and field (rateUART1 applied 0), and the RXM-RAW fallback is still enabled."""
+    opts = ReceiverOptions()
+
+    async def scenario(path: str) -> Any:
+        async with pty_link(path) as pl:
+            return await apply_profile(pl.link, build_profile("unknown", opts), opts, current_baud=9600)
+
+    with emulator("lea6t", rawx_on_u6="ack-ignore") as emu:
+        report = run(scenario(emu.path))
+        raw_rate = emu.core.rate_of((0x02, 0x10))
+    assert report.result("CFG-MSG RXM-RAWX every 1").status == "mismatch"
+    assert any("RXM-RAWX" in str(e) and "rateUART1" in str(e) for e in report.errors)
+    assert report.result("CFG-MSG RXM-RAW every 1").status == "ok" and raw_rate == 1
+
+
 def test_emulator_factory_timepulse_is_the_real_neo_m8t_dump() -> None:
     dump = {}
     for line in shared_file("ubx/rtkbase_U-Blox_NEO-M8T_rtkbase.txt").read_text().splitlines():
