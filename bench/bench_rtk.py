@@ -15,16 +15,17 @@ process, reading excluded) in ms per epoch against the Pi budget of 200 ms/epoch
 
     demo5-driver  the same driver on demo5 (not with --quick)
 
-Run: `.venv/bin/python bench/bench_rtk.py [--quick] [--only SUBSTRING ...]` (about 1 min; `--quick`: GEONET
-0759/3040 and the M8P static with its RTCM base, about 15 s).
+Run: `.venv/bin/python bench/bench_rtk.py [--quick] [--only SUBSTRING ...]` (about 1.5 min; `--quick`: GEONET
+0759/3040 and the M8P static README pairing, about 15 s).
 
 Reproduction of the README's RTKLIB rows with these options (measured 2026-11-23): GEONET 0759/3040 2.4.3
 99.1 % (README 99 %), demo5 95.8 % (95 %); GLW1 base 98.3 % / 97.8 % (98 % / 98 %); GEONET 3034/Sept 2.4.3
-30.6 %, 3.7 cm h (31 %, 3.7 cm), demo5 0 % (0 %). M8P static with the RTCM base: 2.4.3 79.6 %, demo5 88.5 %
-(README 75.3 % / 89.3 %); with the base's RXM-RAWX RINEX instead, 73.3 % / 89.2 %: the README pairing for this
-row is not pinned down. M8P walk: 3.1 % / 2.2 % with the RTCM base (README 18 % / 16 %; demo5 with the RAWX
-base gives 17.5 %). The lead's epoch-by-epoch driver pairs each rover epoch with the nearest base epoch and
-differs from postpos on the lossy RTCM base (9.7 % vs 79.6 %); elsewhere it matches postpos.
+30.6 %, 3.7 cm h (31 %, 3.7 cm), demo5 0 % (0 %). M8P static: the README row is the base's RXM-RAWX RINEX with
+the RTCM 1005 position (its header holds only an approximate one): 2.4.3 74.3 %, first fix 285 s, 1.6 cm h,
+2.4 cm v; demo5 89.1 %, 130 s, 1.1 cm h (README 75.3 %, 277 s / 89.3 %, 128 s, 1.2-1.6 cm h, 2.3 cm v). With the
+lossy RTCM base instead: 79.6 % / 88.5 %. M8P walk (RAWX base, 1005 position): demo5 17.7 % (README 16 %),
+2.4.3 1.6 % (README 18 %: not reproduced). The lead's epoch-by-epoch driver pairs each rover epoch with the
+nearest base epoch and differs from postpos on the lossy RTCM base (9.7 % vs 79.6 %); elsewhere it matches.
 """
 
 from __future__ import annotations
@@ -92,10 +93,13 @@ DATASETS = [
             [GEO / "07590920.05n.gz"], "-3978241.958,3382840.234,3649900.853",
             _static((-3976219.1873, 3382371.6051, 3652511.1423)), "2.4.3 99 % | demo5 95 % | 6 mm h, 1.1 cm v",
             quick=True),
-    Dataset("m8p static, M8P base RTCM (0.33 m)", M8P / "rinex/rover-20181004-1237.obs.gz",
-            M8P / "rinex/base-20181004-1236.rtcm.obs.gz", [M8P / "rinex/rover-20181004-1237.nav.gz"], None,
-            _static((3774088.9931, -601661.8217, 5089321.3853)),
+    Dataset("m8p static, M8P base RAWX (0.33 m)", M8P / "rinex/rover-20181004-1237.obs.gz",
+            M8P / "rinex/base-20181004-1236.rawx.obs.gz", [M8P / "rinex/rover-20181004-1237.nav.gz"],
+            "3774089.2120,-601661.6157,5089321.2474", _static((3774088.9931, -601661.8217, 5089321.3853)),
             "2.4.3 75.3 % 1st 277 s | demo5 89.3 % 1st 128 s | 1.2-1.6 cm h, 2.3 cm v", quick=True),
+    Dataset("m8p static, M8P base lossy RTCM", M8P / "rinex/rover-20181004-1237.obs.gz",
+            M8P / "rinex/base-20181004-1236.rtcm.obs.gz", [M8P / "rinex/rover-20181004-1237.nav.gz"], None,
+            _static((3774088.9931, -601661.8217, 5089321.3853)), "(the README row above uses the RAWX base)"),
     Dataset("m8p static, GLW1 CORS base (197 m)", M8P / "rinex/rover-20181004-1237.obs.gz",
             M8P / "cors-glw1/glw1277m.18o.gz", [M8P / "rinex/rover-20181004-1237.nav.gz"], None,
             _static((3774088.6821, -601663.0350, 5089318.2304)), "2.4.3 98 % | demo5 98 % 1st 17-26 s | 7 mm h"),
@@ -103,7 +107,8 @@ DATASETS = [
             [SEPT / "SEPT2650.21P.gz"], "-3959400.631,3385704.533,3667523.111",
             _csv_ref(SEPT / "SEPT265G.ref_l1l2_GEJ_fixed.csv", 0.01), "2.4.3 31 % | demo5 0 % | 3.7 cm h"),
     Dataset("m8p walk under trees (vs M8P's RTK)", M8P / "rinex/rover-20181004-1532.obs.gz",
-            M8P / "rinex/base-20181004-1452.rtcm.obs.gz", [M8P / "rinex/rover-20181004-1532.nav.gz"], None,
+            M8P / "rinex/base-20181004-1452.rawx.obs.gz", [M8P / "rinex/rover-20181004-1532.nav.gz"],
+            "3774085.6456,-601662.5769,5089316.3970",
             _csv_ref(M8P / "ref/rover-20181004-1532.m8p_rtk_fixed.csv"), "2.4.3 18 % | demo5 16 % | no truth"),
 ]
 
