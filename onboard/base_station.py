@@ -55,6 +55,8 @@ log = logging.getLogger(__name__)
 Arr = npt.NDArray[np.float64]
 UBX_OBS = frozenset({(0x02, 0x10), (0x02, 0x15)})  # RXM-RAW, RXM-RAWX
 UBX_NAV = frozenset({(0x02, 0x11), (0x02, 0x13), (0x0B, 0x31)})  # RXM-SFRB, RXM-SFRBX, AID-EPH
+BASE_STATUS_NAME = "base.json"
+"""Written beside the recorder's status snapshot."""
 PRIORITY = {"obs": 0, "position": 1, "ephemeris": 2}
 """Lower sends first and is dropped last; observations are never dropped."""
 
@@ -381,6 +383,33 @@ class BaseStation(Recorder):
                 c = self.core.scheduler.counts
                 log.info("base: sent %d B (%s), deferred %s, radio wrote %d B, queue drops %d", c.sent_bytes,
                          c.sent, c.deferred, self.sender.bytes_written, self.sender.frames_dropped)
+
+    def base_snapshot(self) -> dict[str, Any]:
+        """What the base sends (JSON-able): position, survey-in, bytes and messages sent/deferred, radio state."""
+        c = self.core.scheduler.counts
+        pos = self.core.position
+        survey = self.core.survey
+        return {
+            "relay": self.base_options.relay,
+            "budget_bytes_s": self.base_options.radio_budget_bytes_s,
+            "position_ecef_m": None if pos is None else list(pos.arp_ecef_m),
+            "survey_in": None if survey is None else {"fixes": len(survey._positions), "spread_m": survey.spread_m,
+                                                      "duration_s": survey.duration_s},
+            "sent_bytes": c.sent_bytes, "sent": dict(c.sent), "deferred": dict(c.deferred),
+            "radio_open": self.sender is not None and self.sender.radio_open,
+            "radio_bytes_written": 0 if self.sender is None else self.sender.bytes_written,
+            "queue_drops": 0 if self.sender is None else self.sender.frames_dropped,
+            "encode_errors": self.core.encode_errors,
+        }
+
+    def _write_status(self) -> None:
+        super()._write_status()
+        from onboard.rtk_service import write_rtk_status
+
+        try:
+            write_rtk_status(self.settings.status_path.with_name(BASE_STATUS_NAME), self.base_snapshot())
+        except OSError as exc:
+            log.warning("base status not written: %s", exc)
 
     def _ensure_sender(self) -> RadioSender | None:
         if self.sender is None and self.status.flight_dir is not None:

@@ -8,6 +8,7 @@ base journal recorded, carry the base position and the ephemerides, and stay wit
 from __future__ import annotations
 
 import asyncio
+import json
 import os
 import threading
 import time
@@ -127,6 +128,9 @@ def test_base_station_sends_rtcm_matching_its_journal_within_budget(tmp_path: Pa
     span_s = (times[-1] - times[0]) / 1000.0 + 1.0
     assert len(got) <= BUDGET_B_S * span_s + BURST_B
     assert station.sender is not None and station.sender.frames_dropped == 0
+    snap = json.loads(settings.status_path.with_name("base.json").read_text())
+    assert snap["sent_bytes"] == len(got) and snap["sent"]["obs"] >= 40 and snap["queue_drops"] == 0
+    np.testing.assert_allclose(snap["position_ecef_m"], world.base_ecef_m, atol=1e-3)
 
 
 def test_python_m_onboard_base_end_to_end_and_sigterm(tmp_path: Path) -> None:
