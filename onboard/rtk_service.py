@@ -487,3 +487,14 @@ class RtkRecorder(Recorder):
             write_rtk_status(self.settings.status_path.with_name(RTK_STATUS_NAME), self.rtk.snapshot())
         except OSError as exc:
             log.warning("rtk status not written: %s", exc)
+
+
+def recorder_for(settings: Settings, deps: RecorderDeps, base_stream: str | None,
+                 options: RtkServiceOptions | None = None) -> Recorder:
+    """The composition root's one call: the plain recorder, or with real-time RTK when a base stream is named
+    (`serial:DEV[@BAUD]`, `tcp://HOST:PORT`, `ntrip://[USER:PASS@]HOST[:PORT]/MOUNT`; ValueError if malformed)."""
+    if not base_stream:
+        return Recorder(settings, deps)
+    from onboard.hw.net_stream import open_base_stream
+
+    return RtkRecorder(settings, deps, options or RtkServiceOptions(), open_base_stream(base_stream))

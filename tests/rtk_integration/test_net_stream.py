@@ -89,3 +89,16 @@ def test_malformed_specs_are_refused() -> None:
         with pytest.raises(ValueError, match="expected"):
             open_base_stream(spec)
     assert callable(open_base_stream("serial:/dev/ttyUSB0@115200"))
+
+
+def test_recorder_for_adds_rtk_only_when_a_base_stream_is_named(tmp_path) -> None:
+    from onboard.daemon import Recorder, RecorderDeps
+    from onboard.hw.fake import FakeByteStream
+    from onboard.rtk_service import RtkRecorder, recorder_for
+    from tests.daemon.helpers import make_settings
+
+    settings, deps = make_settings(tmp_path), RecorderDeps(open_port=FakeByteStream)
+    assert type(recorder_for(settings, deps, None)) is Recorder
+    assert isinstance(recorder_for(settings, deps, "ntrip://u:p@127.0.0.1:2101/BASE"), RtkRecorder)
+    with pytest.raises(ValueError, match="base stream"):
+        recorder_for(settings, deps, "radio0")
