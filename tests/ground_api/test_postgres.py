@@ -1,0 +1,125 @@
+"""The flight store on a real PostgreSQL server (DATABASE_URL), not only SQLite.
+
+A throw-away PostgreSQL cluster is created with the machine's `initdb`/`pg_ctl` in tmp_path (run as the
+unprivileged `nobody` user when the tests run as root, since PostgreSQL refuses root), listening on 127.0.0.1
+on a free port; the API and the uploader then run exactly as with SQLite. Skips, with the reason, when the
+PostgreSQL server binaries or the psycopg driver are absent.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import pytest
+
+from ground.api.settings import ApiSettings
+from onboard.uploader import Uploader, UploaderOptions, UploadError
+from tests.ground_api.conftest import TOKEN, start_server
+from tests.ground_api.test_api import _create, _flight_folder, _put, _sha, _Unplug
+
+pytestmark = pytest.mark.timeout(180)
+
+
+def _tool(name: str) -> str | None:
+    found = shutil.which(name)
+    if found:
+        return found
+    for d in sorted(Path("/usr/lib/postgresql").glob("*/bin"), reverse=True):
+        if (d / name).exists():
+            return str(d / name)
+    return None
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture
+def postgres_url() -> Iterator[str]:
+    """A running PostgreSQL cluster in tmp_path; yields its SQLAlchemy URL; stopped afterwards."""
+    pytest.importorskip("psycopg", reason="psycopg (PostgreSQL driver) not installed: PostgreSQL test skipped")
+    initdb, pg_ctl = _tool("initdb"), _tool("pg_ctl")
+    if not initdb or not pg_ctl:
+        pytest.skip("PostgreSQL server binaries (initdb, pg_ctl) not installed: PostgreSQL test skipped")
+    as_user: list[str] = []
+    # not under tmp_path: pytest's base directory is private to the current user, the server runs as nobody
+    root = Path(tempfile.mkdtemp(prefix="directgeo-pg-"))
+    if os.geteuid() == 0:  # postgres will not run as root
+        runuser = shutil.which("runuser")
+        if not runuser:
+            shutil.rmtree(root)
+            pytest.skip("running as root without runuser: cannot start PostgreSQL as an unprivileged user")
+        as_user = [runuser, "-u", "nobody", "--"]
+        shutil.chown(root, "nobody")
+    data = root / "data"
+    port = _free_port()
+    env = {"PATH": os.environ.get("PATH", ""), "LC_ALL": "C"}
+    subprocess.run([*as_user, initdb, "-D", str(data), "-U", "directgeo", "--auth=trust", "-E", "UTF8"],
+                   check=True, capture_output=True, env=env, timeout=60)
+    opts = f"-h 127.0.0.1 -p {port} -k {root}"
+    subprocess.run([*as_user, pg_ctl, "-D", str(data), "-o", opts, "-l", str(root / "log"), "-w", "start"],
+                   check=True, capture_output=True, env=env, timeout=60)
+    try:
+        yield f"postgresql+psycopg://directgeo@127.0.0.1:{port}/postgres"
+    finally:
+        subprocess.run([*as_user, pg_ctl, "-D", str(data), "-m", "fast", "-w", "stop"], capture_output=True,
+                       env=env, timeout=60)
+        shutil.rmtree(root, ignore_errors=True)
+
+
+def test_interrupted_upload_resumes_on_postgresql(postgres_url: str, tmp_path: Path) -> None:
+    """Same protocol as on SQLite: link lost after 3 chunks, server restarted on the same database, the next run
+    sends only the rest and the files are byte-identical; a corrupted chunk is refused; the rows are in
+    PostgreSQL (read back with psycopg, not through our code)."""
+    import psycopg
+
+    settings = ApiSettings(data_dir=tmp_path / "data", token=TOKEN, database_url=postgres_url,
+                           max_chunk_bytes=64 * 1024, max_file_bytes=4 * 1024 * 1024,
+                           max_flight_bytes=16 * 1024 * 1024)
+    folder = _flight_folder(tmp_path / "onboard")
+    opts = UploaderOptions(chunk_bytes=50_000, max_retries=2, backoff_initial_s=0.0)
+    srv = start_server(settings)
+    try:
+        client = httpx.Client(base_url=srv.url, transport=_Unplug(3), timeout=30)
+        up = Uploader(srv.url, TOKEN, opts, client=client, sleep=lambda s: None)
+        with pytest.raises(UploadError, match="failed after 3 attempts"):
+            up.upload_flight(folder)
+        up.close()
+    finally:
+        srv.stop()
+    srv = start_server(settings)
+    try:
+        with srv.client() as c:
+            assert c.get("/flights").json()[0]["bytes_received"] == 64 + 100_000
+        up = Uploader(srv.url, TOKEN, opts, sleep=lambda s: None)
+        rep = up.upload_flight(folder)
+        up.close()
+        total = sum(p.stat().st_size for p in folder.iterdir())
+        assert rep.bytes_sent == total - 100_064
+        for p in folder.iterdir():
+            assert (settings.flights_dir / rep.flight_id / p.name).read_bytes() == p.read_bytes(), p.name
+        with srv.client() as c:  # a corrupted chunk: 422, not stored, the offset stays
+            data = os.urandom(30_000)
+            fid = _create(c, {"b.ubx": data}, name="flight-corrupt")["id"]
+            damaged = bytearray(data[:20_000])
+            damaged[7] ^= 0x01
+            assert _put(c, fid, "b.ubx", 0, bytes(damaged), sha=_sha(data[:20_000])).status_code == 422
+            assert c.head(f"/flights/{fid}/files/b.ubx").headers["Upload-Offset"] == "0"
+        with srv.client(token=None) as c:
+            assert c.get("/flights").status_code == 401
+    finally:
+        srv.stop()
+    with psycopg.connect(postgres_url.replace("postgresql+psycopg", "postgresql")) as db:
+        rows = db.execute("select received, size, status from flight_files where flight_id = %s",
+                          (rep.flight_id,)).fetchall()
+        assert len(rows) == 6 and all(r[0] == r[1] and r[2] == "complete" for r in rows)
+        assert not (tmp_path / "data" / "directgeo.sqlite3").exists()  # nothing went to a SQLite fallback
