@@ -27,7 +27,7 @@ import queue
 import sys
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +47,7 @@ from onboard.receiver.rtcm import (
 )
 from onboard.rtk.ephemeris import EphemerisStore, satellite_states
 from onboard.rtk.pntpos import pntpos
-from onboard.rtk.types import Ephemeris, ObsEpoch
+from onboard.rtk.types import LLI_SLIP, Ephemeris, ObsEpoch
 from onboard.settings import Settings
 
 log = logging.getLogger(__name__)
@@ -55,6 +55,8 @@ log = logging.getLogger(__name__)
 Arr = npt.NDArray[np.float64]
 UBX_OBS = frozenset({(0x02, 0x10), (0x02, 0x15)})  # RXM-RAW, RXM-RAWX
 UBX_NAV = frozenset({(0x02, 0x11), (0x02, 0x13), (0x0B, 0x31)})  # RXM-SFRB, RXM-SFRBX, AID-EPH
+LOCK_GAP_S = 5.0
+"""A satellite unseen for longer than this restarts its synthetic lock time (RXM-RAW)."""
 BASE_STATUS_NAME = "base.json"
 """Written beside the recorder's status snapshot."""
 PRIORITY = {"obs": 0, "position": 1, "ephemeris": 2}
@@ -191,6 +193,7 @@ class BaseCore:
         self._next_position_s: float | None = None
         self._next_eph_s: dict[int, float] = {}
         self.encode_errors = 0
+        self._lock_track: dict[int, tuple[GpsTime, GpsTime]] = {}
 
     def _add_ephemeris(self, eph: Ephemeris) -> None:
         if self.store.add(eph):
@@ -235,6 +238,7 @@ class BaseCore:
         o = self.options
         assert self.position is not None
         t_s = epoch.time.total_ns / 1e9
+        epoch = self._with_lock_times(epoch)
         due: list[tuple[str, bytes]] = []
         try:
             due.append(("obs", encode_gps_observations(epoch, o.station_id, o.obs_message)))
@@ -263,6 +267,25 @@ class BaseCore:
             if id(frame) in sent_frames:
                 self._next_eph_s[prn] = t_s + o.ephemeris_interval_s
         return sent
+
+    def _with_lock_times(self, epoch: ObsEpoch) -> ObsEpoch:
+        """The GPS part of `epoch` with a lock time for every satellite (RTCM conveys slips only that way).
+
+        RXM-RAW (LEA-6T) reports no lock time, only the LLI slip bit: count the time since the satellite was
+        first seen, since its last slip or since a gap longer than `LOCK_GAP_S`, so a slip at the base reaches
+        the rover as a lock-time reset. Receiver lock times (RXM-RAWX) are passed on as they are.
+        """
+        gps = epoch.gps_only()
+        lock = gps.lock_ms.copy()
+        t = epoch.time
+        for i, prn in enumerate(gps.sv_id.tolist()):
+            start, last = self._lock_track.get(prn, (t, t))
+            if prn not in self._lock_track or (gps.lli[i] & LLI_SLIP) or t.diff_s(last) > LOCK_GAP_S:
+                start = t
+            self._lock_track[prn] = (start, t)
+            if not np.isfinite(lock[i]):
+                lock[i] = t.diff_s(start) * 1e3
+        return replace(gps, lock_ms=lock)
 
     def on_frame(self, frame: Frame, t_s: float) -> list[tuple[str, bytes]]:
         """UBX relay: raw observation frames always, navigation frames within the budget."""

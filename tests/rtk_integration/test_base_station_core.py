@@ -134,3 +134,29 @@ def test_cli_registers_base_and_refuses_a_missing_or_bad_position(capsys) -> Non
         main(["base", "--port", "x", "--radio", "y", "--position", "1,2"])
     assert main(["base", "--port", "x", "--radio", "y", "--survey-in", "0"]) == 2
     assert "survey-in" in capsys.readouterr().err
+
+
+def test_a_slip_at_an_rxm_raw_base_reaches_the_rover_as_a_lock_time_reset() -> None:
+    from onboard.receiver.framing import StreamFramer
+    from onboard.receiver.rtcm import RtcmDecoder
+    from onboard.rtk.types import LLI_SLIP
+
+    epochs, _ = _base_data()
+    ep0 = epochs[0]
+    prn = int(ep0.sv_id[2])
+    core = BaseCore(BaseOptions(position_ecef_m=BASE_3040))
+    dec = RtcmDecoder()
+    slips: list[int] = []
+    for k in range(40):  # 1 Hz, no lock times (as RXM-RAW); the receiver flags a slip on `prn` at k = 25
+        lli = np.zeros(len(ep0), np.uint8)
+        if k == 25:
+            lli[2] = LLI_SLIP
+        ep = replace(ep0, time=ep0.time.add_s(k), lock_ms=np.full(len(ep0), np.nan), lli=lli)
+        for f in StreamFramer().feed(b"".join(f for _, f in core.on_item(ep))):
+            out = dec.decode(f, ep0.time)
+            if out is not None and hasattr(out, "sv_id"):
+                j = int(np.flatnonzero(out.sv_id == prn)[0])
+                if out.lli[j] & LLI_SLIP:
+                    slips.append(k)
+                assert np.all(out.lli[np.arange(len(out)) != j] & LLI_SLIP == 0)
+    assert slips == [25]
