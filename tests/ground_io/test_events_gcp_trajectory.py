@@ -229,3 +229,43 @@ def test_trajectory_xyz_and_llh_agree(tmp_path: Path) -> None:
     (tmp_path / "bad.pos").write_text("hello\n")
     with pytest.raises(FormatError):
         read_trajectory(str(tmp_path / "bad.pos"))
+
+
+@pytest.mark.parametrize(("posf", "timef", "outvel"), [(1, 0, 1), (1, 1, 0), (0, 0, 1), (0, 1, 1)])
+def test_trajectory_written_by_rtklib_itself(tmp_path: Path, posf: int, timef: int, outvel: int) -> None:
+    """.pos files formatted by RTKLIB's own writer (outsolheads/outsols through pyrtklib, CRLF line ends) in
+    xyz (posf 1) or llh (posf 0), GPST week/tow (timef 0) or calendar (timef 1), with or without velocities,
+    read back to the trajectory they were written from."""
+    rtk = pytest.importorskip("pyrtklib", reason="pyrtklib (RTKLIB bindings) not installed")
+    write_synthetic_flight(tmp_path, n_lines=1)
+    ours = read_trajectory(str(tmp_path / "SOL.pos"))
+    opt = rtk.solopt_default
+    opt.posf, opt.timef, opt.outvel, opt.times, opt.outhead, opt.timeu = posf, timef, outvel, 0, 1, 3
+    buf = getattr(rtk, "Arr1Dunsigned char")(4096)
+    ref = rtk.Arr1Ddouble(6)
+    out = bytearray(bytes(buf[i] for i in range(rtk.outsolheads(buf, opt))))
+    for k in range(len(ours.t_ns)):
+        sol = rtk.sol_t()
+        week, tow_ns = divmod(int(ours.t_ns[k]), 604_800 * 10**9)
+        sol.time = rtk.gpst2time(week, tow_ns / 1e9)
+        rr, qr = sol.rr, sol.qr
+        vel = ours.vel_ecef_m_s[k] if ours.vel_ecef_m_s is not None else np.zeros(3)
+        for i, v in enumerate([*ours.pos_ecef_m[k], *vel]):
+            rr[i] = float(v)
+        for i in range(3):
+            qr[i] = float(ours.sd_m[k, i] ** 2)
+        sol.stat, sol.ns, sol.ratio, sol.age = int(ours.q[k]), 12, 5.0, 1.0
+        out += bytes(buf[i] for i in range(rtk.outsols(buf, sol, ref, opt)))
+    assert b"\r\n" in out
+    (tmp_path / "rtklib.pos").write_bytes(bytes(out))
+    got = read_trajectory(str(tmp_path / "rtklib.pos"))
+    np.testing.assert_array_equal(got.t_ns, ours.t_ns)
+    np.testing.assert_array_equal(got.q, ours.q)
+    np.testing.assert_allclose(ecef_to_enu(got.pos_ecef_m, ORIGIN_ECEF), ecef_to_enu(ours.pos_ecef_m, ORIGIN_ECEF),
+                               atol=1e-3)
+    if outvel:
+        assert got.vel_ecef_m_s is not None
+        np.testing.assert_allclose(got.vel_ecef_m_s, ours.vel_ecef_m_s, atol=1e-4)
+    else:
+        assert got.vel_ecef_m_s is None
+    np.testing.assert_allclose(np.linalg.norm(got.sd_m, axis=1), np.linalg.norm(ours.sd_m, axis=1), rtol=0.01)
