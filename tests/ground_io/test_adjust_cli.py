@@ -50,7 +50,12 @@ def test_adjust_free_recovers_truth_and_exports_utm(tmp_path: Path) -> None:
     np.testing.assert_allclose(res["lever_arm_m"], truth.lever_arm_m, atol=4 * max(res["lever_arm_sigma_m"]) + 0.002)
     assert res["delay_s"] == pytest.approx(truth.delay_s, abs=4 * res["delay_sigma_s"] + 0.001)
     assert res["n_images"] == truth.n_images and res["inputs"]["lever_arm"]["mode"] == "free"
-    assert {"correlations", "residuals", "checkpoints", "sigma0"} <= set(res)
+    issue_keys = {"lever_arm_m", "lever_arm_sigma_m", "delay_s", "delay_sigma_s", "scale", "rotation",
+                  "translation_m", "sigma0", "correlations", "warnings", "outliers", "checkpoints",
+                  "checkpoint_rms_m"}  # the list of issue 4, build item 6
+    assert issue_keys <= set(res) and {"names", "matrix"} <= set(res["correlations"])
+    assert all({"name", "de_m", "dn_m", "du_m", "abs_m", "sigma_m"} <= set(c) for c in res["checkpoints"])
+    assert set(res["checkpoint_rms_m"]) == {"e", "n", "u", "3d"} and np.array(res["rotation"]).shape == (3, 3)
     assert len(res["checkpoints"]) == 2 and max(abs(c["abs_m"]) for c in res["checkpoints"]) < 0.05
     # exports: OPK CSV in UTM 30N; its centres, taken back to ENU, are the antenna minus the lever arm
     opk = read_opk_csv(tmp_path / "out" / "exports" / "opk.csv")
