@@ -130,7 +130,7 @@ def trajectory_figure(traj: Trajectory, origin_ecef_m: np.ndarray, cams_enu: np.
     ax.set_aspect("equal")
     ax.set_xlabel("East (m)")
     ax.set_ylabel("North (m)")
-    ax.legend(loc="best", fontsize=8)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8)  # outside: never over the track
     ax.set_title("antenna trajectory by fix status")
     return fig
 
@@ -255,7 +255,7 @@ def render_report(res: dict[str, Any], problem: AdjustmentProblem | None = None,
                                                                               for s in res["skipped"]], "skipped"))
     style = ("body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}"
              "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:2px 8px;"
-             "text-align:right}td:first-child,#parameters td:last-child{text-align:left}th{background:#eee}img{max-width:100%}figcaption{font-size:small;color:#555}")
+             "text-align:right}td:first-child,th:first-child,#parameters td:last-child,#parameters th:last-child{text-align:left}th{background:#eee}img{max-width:100%}figcaption{font-size:small;color:#555}")
     title = f"directgeo adjustment report — {res['n_images']} images"
     return (f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
             f"<style>{style}</style></head><body><h1>{html.escape(title)}</h1>{''.join(parts)}</body></html>")
