@@ -180,8 +180,8 @@ def _summary(res: dict[str, Any]) -> str:
     n_chk = len(res.get("checkpoints") or [])
     rms = (res.get("checkpoint_rms_m") or {}).get("3d")
     items = [
-        f"{res['n_images']} images adjusted, {len(res['outliers'])} flagged as outliers (left out of the final "
-        f"pass), {len(res.get('skipped') or [])} left out while matching",
+        (f"{res['n_images']} images adjusted, {len(res['outliers'])} flagged as outliers (left out of the final "
+         f"pass), {len(res.get('skipped') or [])} left out while matching"),
         f"{n_gcp} GCP(s) in the adjustment; {n_chk} check point(s) kept out of it"
         + (f": 3D RMS {_v(rms, 100, '.1f')} cm" if n_chk else ""),
         "aerial control: " + ("relative (differenced between consecutive images)" if res.get("relative_control")

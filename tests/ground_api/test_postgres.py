@@ -71,7 +71,8 @@ def postgres_url() -> Iterator[str]:
     try:
         yield f"postgresql+psycopg://directgeo@127.0.0.1:{port}/postgres"
     finally:
-        subprocess.run([*as_user, pg_ctl, "-D", str(data), "-m", "fast", "-w", "stop"], capture_output=True,
+        subprocess.run([*as_user, pg_ctl, "-D", str(data), "-m", "fast", "-w", "stop"], check=False,
+                       capture_output=True,
                        env=env, timeout=60)
         shutil.rmtree(root, ignore_errors=True)
 
