@@ -19,7 +19,6 @@ from onboard.formats.pos import read_pos
 from onboard.hw.fake import FakeByteStream
 from onboard.hw.serial_port import SerialByteStream
 from onboard.logger.journal import iter_journal_bytes
-from onboard.receiver.decode import LockTrackerOptions
 from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE
 from onboard.rtk_inputs import read_base_observations
 from onboard.rtk_service import RADIO_DIR, SOLUTION_NAME, BaseStream, RtkService, RtkServiceOptions
@@ -29,10 +28,6 @@ from tests.daemon.helpers import wait_until
 pytestmark = [pytest.mark.timeout(120)]
 GAPS_S = [(70, 85), (150, 170)]  # radio dropouts (s after start): 15 s and 20 s
 DURATION_S = 240
-# hil_sim's carrier-phase σ (cpStdev up to 0.036 cyc = code 9 at 44 dB-Hz) is above RTKLIB's Gen8 validity
-# threshold (code 5): with RTKLIB's rule half the simulated satellites lose their phase and nothing fixes
-# (and with code 12, the few phases left let the engine fix 5 m off after the second gap: reported to E).
-SIM_LOCK_RULES = LockTrackerOptions(max_cp_std_code=15)
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +71,7 @@ def _run_service(world, tmp_path: Path, gaps) -> tuple[RtkService, list, Path]:
     master, slave = os.openpty()
     tty.setraw(slave)
     radio_path = os.ttyname(slave)
-    options = RtkServiceOptions(base_wait_s=0.3, max_base_age_s=5.0, lock_rules=SIM_LOCK_RULES)
+    options = RtkServiceOptions(base_wait_s=0.3, max_base_age_s=5.0)
     svc = RtkService(options, lambda: SerialByteStream(radio_path, 57600, 0.02))
     flight = tmp_path / "flight"
     flight.mkdir()
@@ -152,7 +147,7 @@ def test_unplugged_radio_is_reopened_and_corrections_resume(world, tmp_path) -> 
         streams.append(FakeByteStream(0.02))
         return streams[-1]
 
-    svc = RtkService(RtkServiceOptions(base_wait_s=0.3, radio_reopen_s=0.05, lock_rules=SIM_LOCK_RULES), open_radio)
+    svc = RtkService(RtkServiceOptions(base_wait_s=0.3, radio_reopen_s=0.05), open_radio)
     flight = tmp_path / "f"
     flight.mkdir()
     svc.start(flight)
