@@ -222,6 +222,8 @@ class BaseCore:
             self._survey(item)
             if self.position is None:
                 return []
+        if self.options.relay == "ubx":
+            return []  # the raw frames go out through on_frame
         return self._corrections(item)
 
     def _survey(self, epoch: ObsEpoch) -> None:
@@ -288,12 +290,19 @@ class BaseCore:
         return replace(gps, lock_ms=lock)
 
     def on_frame(self, frame: Frame, t_s: float) -> list[tuple[str, bytes]]:
-        """UBX relay: raw observation frames always, navigation frames within the budget."""
+        """UBX relay: raw observation frames always, RTCM 1006 (once the position is known) every
+        `position_interval_s` and navigation frames within the budget; `t_s` any monotonic time (s)."""
         if frame.protocol is not Protocol.UBX:
             return []
         key = (frame.msg_class, frame.msg_id)
         if key in UBX_OBS:
-            return self.scheduler.offer(t_s, [("obs", frame.raw)])
+            due = [("obs", frame.raw)]
+            if self.position is not None and (self._next_position_s is None or t_s >= self._next_position_s):
+                due.append(("position", encode_base_position(self.position)))
+            sent = self.scheduler.offer(t_s, due)
+            if any(kind == "position" for kind, _ in sent):
+                self._next_position_s = t_s + self.options.position_interval_s
+            return sent
         if key in UBX_NAV:
             return self.scheduler.offer(t_s, [("ephemeris", frame.raw)])
         return []
@@ -455,12 +464,12 @@ class BaseStation(Recorder):
 
     def _on_decoded(self, item: Any) -> None:
         super()._on_decoded(item)
-        if self.base_options.relay == "rtcm":
-            # Best effort like all parsing: a bug here must never reach the recording path.
-            try:
-                self._send(self.core.on_item(item))
-            except (ValueError, ArithmeticError, IndexError) as exc:
-                log.error("base corrections: %s", exc)
+        # Best effort like all parsing: a bug here must never reach the recording path. (In relay mode this
+        # only surveys and collects ephemerides; the frames go out from _on_frame.)
+        try:
+            self._send(self.core.on_item(item))
+        except (ValueError, ArithmeticError, IndexError) as exc:
+            log.error("base corrections: %s", exc)
 
 
 # --- CLI -----------------------------------------------------------------------------------------------

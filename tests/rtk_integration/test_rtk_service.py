@@ -175,7 +175,8 @@ def test_ubx_relay_from_the_base_decodes_to_the_base_epochs(world) -> None:
     from hil_sim import ubx_encode as enc
     from onboard.receiver.framing import iter_frames
 
-    core = BaseCore(BaseOptions(relay="ubx", radio_budget_bytes_s=1000.0))
+    core = BaseCore(BaseOptions(relay="ubx", radio_budget_bytes_s=1000.0, position_ecef_m=tuple(world.base_ecef_m),
+                                position_interval_s=5.0))
     bs = BaseStream()
     t0 = world.scenario.start
     sent = 0
@@ -188,4 +189,7 @@ def test_ubx_relay_from_the_base_decodes_to_the_base_epochs(world) -> None:
         ep = bs.epochs[-1]
         assert ep.time == src.time and list(ep.sv_id) == list(src.gps_only().sv_id)
         np.testing.assert_allclose(ep.pr_m, src.gps_only().pr_m, rtol=0, atol=0.01)
-    assert bs.epoch_count == 10 and core.scheduler.counts.sent == {"obs": 10}
+        assert core.on_item(src) == []  # decoded items only survey / collect ephemerides in relay mode
+    assert bs.epoch_count == 10 and core.scheduler.counts.sent == {"obs": 10, "position": 2}  # 1006 at 0 and 5 s
+    assert bs.position is not None
+    np.testing.assert_allclose(bs.position.phase_centre_ecef_m, world.base_ecef_m, atol=1e-3)
