@@ -115,7 +115,7 @@ COMMANDS: tuple[str, ...] = (
     "onboard.__main__:add_check_parser",
     "onboard.convert:add_convert_parser",
     "onboard.rtk_cli:add_rtk_parser",
-    "onboard.base_station:add_base_parser",
+    "onboard.base_cli:add_base_parser",
     "onboard.web.app:add_web_parser",
 )
 

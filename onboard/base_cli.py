@@ -1,0 +1,79 @@
+"""`python -m onboard base`: command-line shell of base-station mode (see `onboard.base_station`).
+
+Kept apart from `onboard.base_station` so that registering the command imports nothing heavy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def _xyz(text: str) -> tuple[float, float, float]:
+    vals = [float(v) for v in text.replace(" ", ",").split(",") if v]
+    if len(vals) != 3:
+        raise argparse.ArgumentTypeError(f"expected X,Y,Z (ECEF m), got {text!r}")
+    return (vals[0], vals[1], vals[2])
+
+
+def add_base_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:  # type: ignore[type-arg]
+    """Register `base` (base-station mode)."""
+    p = subparsers.add_parser("base", help="base station: record the base receiver and send RTCM3 by radio",
+                              description="Record the base receiver's raw journal and send RTCM3 1004/1002, "
+                                          "1006 and 1019 (or a raw UBX relay) over the telemetry radio within "
+                                          "a byte budget.")
+    p.add_argument("--port", required=True, help="base receiver serial device")
+    p.add_argument("--radio", required=True, help="telemetry radio serial device")
+    p.add_argument("--radio-baud", type=int, default=57600)
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--position", type=_xyz, metavar="X,Y,Z", help="base antenna ECEF m (use --position=...)")
+    where.add_argument("--survey-in", type=float, metavar="SECONDS", help="mean of single-point fixes over S s")
+    p.add_argument("--antenna-height", type=float, default=0.0, help="ARP to phase centre, m (sent in 1006)")
+    p.add_argument("--station-id", type=int, default=0)
+    p.add_argument("--message", type=int, choices=(1002, 1004), default=1004)
+    p.add_argument("--budget", type=float, default=600.0, help="radio byte budget, B/s (default 600)")
+    p.add_argument("--relay", choices=("rtcm", "ubx"), default="rtcm", help="RTCM3 (default) or raw UBX relay")
+    p.add_argument("--config", type=Path, help="TOML configuration file (as for `run`)")
+    p.add_argument("--baud", type=int, help="receiver line rate to open at (overrides port.baud)")
+    p.add_argument("--data-dir", type=Path, help="where the base journal is recorded")
+    p.add_argument("--status", type=Path, help="status snapshot JSON path")
+    p.add_argument("--no-configure", action="store_true", help="record only; never configure the receiver")
+    p.set_defaults(func=base_main)
+    return p
+
+
+def base_main(args: argparse.Namespace) -> int:
+    """Run the base station; returns the exit code."""
+    import asyncio
+
+    from onboard.base_station import BaseOptions, BaseStation
+    from onboard.daemon import RecorderDeps, serial_port_opener
+    from onboard.errors import ConfigFileError
+    from onboard.hw.ports import ByteStream
+    from onboard.hw.serial_port import SerialByteStream
+    from onboard.sdnotify import SdNotifier
+    from onboard.settings import load_settings
+
+    overrides = {
+        "port.device": args.port,
+        "port.baud": args.baud,
+        "journal.data_dir": str(args.data_dir) if args.data_dir else None,
+        "status.path": str(args.status) if args.status else None,
+        "receiver.configure": False if args.no_configure else None,
+    }
+    try:
+        settings = load_settings(args.config, overrides=overrides)
+        options = BaseOptions(station_id=args.station_id, obs_message=args.message,
+                              radio_budget_bytes_s=args.budget, relay=args.relay, position_ecef_m=args.position,
+                              antenna_height_m=args.antenna_height, survey_in_s=args.survey_in or 0.0)
+    except (ConfigFileError, ValueError) as exc:
+        print(f"onboard base: error: {exc}", file=sys.stderr)
+        return 2
+    deps = RecorderDeps(open_port=serial_port_opener(settings), notifier=SdNotifier())
+
+    def open_radio() -> ByteStream:
+        return SerialByteStream(args.radio, args.radio_baud, 0.1)
+
+    station = BaseStation(settings, deps, options, open_radio)
+    return asyncio.run(station.run())
