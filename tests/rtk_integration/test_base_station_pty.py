@@ -14,6 +14,7 @@ import threading
 import time
 import tty
 from pathlib import Path
+from types import MappingProxyType
 
 import numpy as np
 import pytest
@@ -21,6 +22,7 @@ from pyrtcm import RTCMReader
 
 from onboard.base_station import BaseOptions, BaseStation
 from onboard.daemon import RecorderDeps
+from onboard.hw.fake import FakeByteStream
 from onboard.hw.serial_port import SerialByteStream
 from onboard.receiver.decode import iter_journal
 from onboard.receiver.framing import Protocol, StreamFramer
@@ -190,3 +192,44 @@ def test_python_m_onboard_base_end_to_end_and_sigterm(tmp_path: Path) -> None:
     assert all(int(m.DF003) == 7 for m in msgs if m.identity == "1002")
     flights = list((tmp_path / "data").iterdir())
     assert len(flights) == 1 and (flights[0] / "radio-tx.rtcm3").read_bytes() == bytes(got)
+
+
+def test_survey_in_over_the_emulated_base_gates_corrections_and_lands_near_the_antenna(tmp_path: Path) -> None:
+    shared_file("gnss/broadcast-nav-20100701/brdc1820.10n")
+    from hil_sim.pty_server import ReceiverEmulator
+    from hil_sim.receiver import ReceiverOptions
+    from hil_sim.scenario import Scenario
+    from hil_sim.world import World
+
+    world = World(Scenario.default(model="m8t", duration_s=600.0))
+    emu = ReceiverEmulator("m8t", ReceiverOptions(time_valid_after_s=1.0), world, speed=8.0, receiver="base")
+    port = emu.start()
+    radio = FakeByteStream()
+    settings = make_settings(tmp_path, port_device=port, port_baud=9600, receiver_options=MappingProxyType(
+        {"ack_timeout_s": 0.5, "retries": 1, "meas_rate_ms": 1000}))
+    station = BaseStation(settings, RecorderDeps(open_port=lambda: SerialByteStream(port, 9600, 0.05)),
+                          BaseOptions(survey_in_s=20.0), lambda: radio)
+    result: dict[str, int] = {}
+    thread = threading.Thread(target=lambda: result.setdefault("rc", asyncio.run(station.run())), daemon=True)
+    thread.start()
+    try:
+        wait_until(lambda: station.core.scheduler.counts.sent.get("obs", 0) >= 5, timeout_s=60,
+                   what="survey-in done and corrections flowing")
+    finally:
+        loop = station._loop
+        if loop is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(station.request_stop, "test stop", 0)
+        thread.join(20)
+        emu.stop()
+    assert result.get("rc") == 0
+    survey = station.core.survey
+    assert survey is not None and survey.result_ecef_m is not None
+    assert np.linalg.norm(survey.result_ecef_m - world.base_ecef_m) < 5.0  # mean of SPP over 20 s
+    framer = StreamFramer()
+    msgs = [RTCMReader.parse(f.raw) for f in framer.feed(bytes(radio.written))]
+    pos = next(m for m in msgs if m.identity == "1006")
+    np.testing.assert_allclose([pos.DF025, pos.DF026, pos.DF027], survey.result_ecef_m, atol=1e-3)
+    first_obs_ms = min(int(m.DF004) for m in msgs if m.identity == "1004")
+    journal = [e.time for e in iter_journal(Path(station.status.flight_dir or "")) if isinstance(e, ObsEpoch)]
+    # nothing was sent during the survey: the first 1004 is at least 20 s after the first fix of the survey
+    assert first_obs_ms / 1000.0 - journal[0].tow_s >= 20.0
