@@ -310,7 +310,7 @@ class RadioSender:
     """Writes frames to the radio from its own thread (bounded queue: drops and counts when full).
 
     `open_radio` is called (again after LinkLost, with backoff) to get the ByteStream. Every frame handed
-    over is appended to `tx_log` first (what the base meant to send), then written.
+    queued is appended to `tx_log` (what the base sent to the radio), then written.
     """
 
     def __init__(self, open_radio: Callable[[], ByteStream], tx_log: Path | None = None, max_queue: int = 256,
@@ -335,24 +335,26 @@ class RadioSender:
         self._thread.start()
 
     def send(self, frame: bytes) -> bool:
-        """Queue one frame; False (counted) when the queue is full."""
+        """Queue one frame (and log it as sent); False (counted, not logged) when the queue is full."""
+        try:
+            self._queue.put_nowait(frame)
+        except queue.Full:
+            self.frames_dropped += 1
+            return False
         if self._log_file is not None:
             try:
                 self._log_file.write(frame)
                 self._log_file.flush()
             except OSError as exc:
                 log.warning("radio tx log: %s", exc)
-        try:
-            self._queue.put_nowait(frame)
-            return True
-        except queue.Full:
-            self.frames_dropped += 1
-            return False
+        return True
 
     def _run(self) -> None:
         port: ByteStream | None = None
-        while not self._stop.is_set():
+        while True:
             if port is None:
+                if self._stop.is_set():
+                    break  # no radio to flush to
                 try:
                     port = self._open()
                     self.radio_open = True
@@ -363,6 +365,8 @@ class RadioSender:
             try:
                 frame = self._queue.get(timeout=0.2)
             except queue.Empty:
+                if self._stop.is_set():
+                    break
                 continue
             if frame is None:
                 break

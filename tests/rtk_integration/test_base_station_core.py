@@ -160,3 +160,47 @@ def test_a_slip_at_an_rxm_raw_base_reaches_the_rover_as_a_lock_time_reset() -> N
                     slips.append(k)
                 assert np.all(out.lli[np.arange(len(out)) != j] & LLI_SLIP == 0)
     assert slips == [25]
+
+
+def test_radio_sender_drops_when_the_radio_is_stuck_and_logs_only_what_it_queued(tmp_path) -> None:
+    import threading
+
+    from onboard.base_station import RadioSender
+    from onboard.errors import LinkLost
+    from tests.daemon.helpers import wait_until
+
+    gate = threading.Event()
+
+    class StuckRadio:
+        def __init__(self) -> None:
+            self.written = bytearray()
+
+        def read(self, max_bytes: int) -> bytes:
+            return b""
+
+        def write(self, data: bytes) -> int:
+            gate.wait(5)  # a radio whose buffer is full: writes block
+            self.written += data
+            return len(data)
+
+        def close(self) -> None:
+            pass
+
+    radio = StuckRadio()
+    opens = {"n": 0}
+
+    def open_radio() -> StuckRadio:
+        opens["n"] += 1
+        if opens["n"] == 1:
+            raise LinkLost("not plugged yet")
+        return radio
+
+    sender = RadioSender(open_radio, tmp_path / "tx.rtcm3", max_queue=4, reopen_s=0.01)
+    sender.start()
+    results = [sender.send(bytes([k]) * 10) for k in range(20)]  # never blocks the caller
+    wait_until(lambda: sender.radio_open, 5, "radio open")
+    gate.set()
+    sender.stop()
+    assert results.count(False) == sender.frames_dropped > 0
+    logged = (tmp_path / "tx.rtcm3").read_bytes()
+    assert len(logged) == 10 * results.count(True) and bytes(radio.written) == logged
