@@ -86,6 +86,7 @@ class Dataset:
     ref: Callable[[np.ndarray], np.ndarray]
     readme: str
     quick: bool = False
+    rtcm_stream: Path | None = None
 
 
 DATASETS = [
@@ -99,7 +100,8 @@ DATASETS = [
             "2.4.3 75.3 % 1st 277 s | demo5 89.3 % 1st 128 s | 1.2-1.6 cm h, 2.3 cm v", quick=True),
     Dataset("m8p static, M8P base lossy RTCM", M8P / "rinex/rover-20181004-1237.obs.gz",
             M8P / "rinex/base-20181004-1236.rtcm.obs.gz", [M8P / "rinex/rover-20181004-1237.nav.gz"], None,
-            _static((3774088.9931, -601661.8217, 5089321.3853)), "(the README row above uses the RAWX base)"),
+            _static((3774088.9931, -601661.8217, 5089321.3853)), "(the README row above uses the RAWX base)",
+            rtcm_stream=M8P / "rtcm3/base-20181004-1236.rtcm3.gz"),
     Dataset("m8p static, GLW1 CORS base (197 m)", M8P / "rinex/rover-20181004-1237.obs.gz",
             M8P / "cors-glw1/glw1277m.18o.gz", [M8P / "rinex/rover-20181004-1237.nav.gz"], None,
             _static((3774088.6821, -601663.0350, 5089318.2304)), "2.4.3 98 % | demo5 98 % 1st 17-26 s | 7 mm h"),
@@ -225,6 +227,26 @@ def score(sol: np.ndarray, ref: Callable[[np.ndarray], np.ndarray]) -> dict[str,
     }
 
 
+def rtcm_stream_run(ds: Dataset) -> dict[str, float]:
+    """Ours with the base read from the raw RTCM3 stream (the path `onboard rtk` gets with the rtk_inputs hook)."""
+    from dataclasses import replace
+
+    from onboard.rtk.options import RtkOptions
+    from onboard.rtk.postpro import postprocess
+    from onboard.rtk_cli import read_navigation, read_observations
+    from onboard.rtk_inputs import read_base_observations
+
+    assert ds.rtcm_stream is not None
+    rover = read_observations(ds.rover)
+    base = read_base_observations(ds.rtcm_stream, rover.epochs[0].time)
+    nav = read_navigation([str(n) for n in ds.navs])
+    rov = [e for e in rover.epochs if len(e.gps_only())]
+    sols, _ = postprocess(rov, base.epochs, nav, base.antenna_pos_ecef_m, replace(RtkOptions(), elmask_deg=15.0),
+                          "forward")
+    rows = np.array([(s.time.week, s.time.tow_s, *s.pos_ecef_m, s.q) for s in sols]).reshape(-1, 6)
+    return score(rows, ds.ref)
+
+
 def engine_alone_ms(ds: Dataset) -> tuple[float, int]:
     """Our filter's CPU ms per epoch in this process (inputs read first, not timed)."""
     from dataclasses import replace
@@ -280,6 +302,11 @@ def main() -> int:
                 fix_ratio = ours["fix"] / r["fix"] if r["fix"] else float("nan")
                 parts.append(f"{peer}: fix x{fix_ratio:.2f}, CPU x{cpu_ours / cpu:.2f}")
             print("   ours/RTKLIB  " + "; ".join(parts))
+            if ds.rtcm_stream is not None:
+                r = rtcm_stream_run(ds)
+                print(f"   ours on the raw RTCM3 stream ({ds.rtcm_stream.name}, decoded by onboard.rtk_inputs, "
+                      f"in process): {r['epochs']} epochs, fix {r['fix']:.1f} %, 1st fix {r['ttff']:.0f} s, "
+                      f"h {r['h']:.1f} cm, v {r['v']:.1f} cm, >10 cm {r['wrong']}")
         ms, n = engine_alone_ms(ds)
         engine_ms.append((ds.name, ms, n))
     print("\nengine alone (onboard.rtk forward filter, this process, reading excluded):")
