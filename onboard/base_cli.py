@@ -33,6 +33,7 @@ def add_base_parser(subparsers: argparse._SubParsersAction) -> argparse.Argument
     p.add_argument("--station-id", type=int, default=0)
     p.add_argument("--message", type=int, choices=(1002, 1004), default=1004)
     p.add_argument("--budget", type=float, default=600.0, help="radio byte budget, B/s (default 600)")
+    p.add_argument("--obs-interval", type=float, default=1.0, help="send observations every S s (default 1)")
     p.add_argument("--relay", choices=("rtcm", "ubx"), default="rtcm", help="RTCM3 (default) or raw UBX relay")
     p.add_argument("--config", type=Path, help="TOML configuration file (as for `run`)")
     p.add_argument("--baud", type=int, help="receiver line rate to open at (overrides port.baud)")
@@ -65,7 +66,8 @@ def base_main(args: argparse.Namespace) -> int:
     try:
         settings = load_settings(args.config, overrides=overrides)
         options = BaseOptions(station_id=args.station_id, obs_message=args.message,
-                              radio_budget_bytes_s=args.budget, relay=args.relay, position_ecef_m=args.position,
+                              radio_budget_bytes_s=args.budget, relay=args.relay,
+                              obs_interval_s=args.obs_interval, position_ecef_m=args.position,
                               antenna_height_m=args.antenna_height, survey_in_s=args.survey_in or 0.0)
     except (ConfigFileError, ValueError) as exc:
         print(f"onboard base: error: {exc}", file=sys.stderr)

@@ -67,6 +67,8 @@ class BaseOptions:
 
     station_id: int = 0
     obs_message: int = 1004
+    obs_interval_s: float = 1.0
+    """Observations are sent at most this often (the receiver may measure at 5 Hz for the rover profile)."""
     position_interval_s: float = 10.0
     ephemeris_interval_s: float = 30.0
     radio_budget_bytes_s: float = 600.0
@@ -84,8 +86,8 @@ class BaseOptions:
             raise ValueError(f"relay must be 'rtcm' or 'ubx', not {self.relay!r}")
         if self.position_ecef_m is None and self.survey_in_s <= 0 and self.relay == "rtcm":
             raise ValueError("give the base position or a survey-in duration > 0 s")
-        if self.radio_budget_bytes_s <= 0 or self.radio_burst_bytes <= 0:
-            raise ValueError("radio budget and burst must be > 0")
+        if self.radio_budget_bytes_s <= 0 or self.radio_burst_bytes <= 0 or self.obs_interval_s < 0:
+            raise ValueError("radio budget and burst must be > 0, obs_interval_s ≥ 0")
 
 
 @dataclass
@@ -189,6 +191,8 @@ class BaseCore:
             x, y, z = (float(v) for v in options.position_ecef_m)
             self.position = BasePosition(options.station_id, (x, y, z), options.antenna_height_m)
         self._next_position_s: float | None = None
+        self._last_obs_s: float | None = None
+        self.over_budget = False
         self._next_eph_s: dict[int, float] = {}
         self.encode_errors = 0
         self._lock_track: dict[int, tuple[GpsTime, GpsTime]] = {}
@@ -238,7 +242,11 @@ class BaseCore:
         o = self.options
         assert self.position is not None
         t_s = epoch.time.total_ns / 1e9
-        epoch = self._with_lock_times(epoch)
+        epoch = self._with_lock_times(epoch)  # every epoch: a slip in a decimated one still resets the lock time
+        last = self._last_obs_s
+        if last is not None and t_s - last < 0.9 * o.obs_interval_s:
+            return []  # decimated: the radio carries one epoch per obs_interval_s
+        self._last_obs_s = t_s
         due: list[tuple[str, bytes]] = []
         try:
             due.append(("obs", encode_gps_observations(epoch, o.station_id, o.obs_message)))
@@ -257,6 +265,11 @@ class BaseCore:
                 due.append(("ephemeris", encode_ephemeris(eph)))
                 eph_prns.append(prn)
         sent = self.scheduler.offer(t_s, due)
+        obs_rate = len(due[0][1]) / max(o.obs_interval_s, t_s - last) if last is not None and t_s > last else 0.0
+        if obs_rate > o.radio_budget_bytes_s and not self.over_budget:
+            self.over_budget = True  # 1006/1019 can never be sent: the rover gets no base position this way
+            log.warning("observations alone need %.0f B/s, over the radio budget of %.0f B/s: raise the budget "
+                        "or obs_interval_s, or use 1002", obs_rate, o.radio_budget_bytes_s)
         sent_frames = {id(f) for _, f in sent}
         for kind, frame in due:
             if id(frame) not in sent_frames:
@@ -434,6 +447,7 @@ class BaseStation(Recorder):
             "radio_bytes_written": 0 if self.sender is None else self.sender.bytes_written,
             "queue_drops": 0 if self.sender is None else self.sender.frames_dropped,
             "encode_errors": self.core.encode_errors,
+            "over_budget": self.core.over_budget,
         }
 
     def _write_status(self) -> None:

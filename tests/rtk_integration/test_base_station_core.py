@@ -204,3 +204,17 @@ def test_radio_sender_drops_when_the_radio_is_stuck_and_logs_only_what_it_queued
     assert results.count(False) == sender.frames_dropped > 0
     logged = (tmp_path / "tx.rtcm3").read_bytes()
     assert len(logged) == 10 * results.count(True) and bytes(radio.written) == logged
+
+
+def test_a_5_hz_base_is_decimated_to_1_hz_and_an_impossible_budget_is_flagged(caplog) -> None:
+    epochs, _nav = _base_data()
+    ep0 = epochs[0]
+    core = BaseCore(BaseOptions(position_ecef_m=BASE_3040, radio_budget_bytes_s=300.0))
+    sent = [core.on_item(replace(ep0, time=ep0.time.add_s(k * 0.2))) for k in range(50)]  # 10 s at 5 Hz
+    obs_at = [k for k, frames in enumerate(sent) if any(kind == "obs" for kind, _ in frames)]
+    assert obs_at == list(range(0, 50, 5)) and not core.over_budget
+    assert sum(1 for frames in sent for kind, _ in frames if kind == "position") == 1
+    tight = BaseCore(BaseOptions(position_ecef_m=BASE_3040, radio_budget_bytes_s=50.0, obs_interval_s=0.0))
+    for k in range(5):
+        tight.on_item(replace(ep0, time=ep0.time.add_s(k)))
+    assert tight.over_budget and "over the radio budget" in caplog.text
