@@ -9,6 +9,9 @@ One process, one asyncio loop, one reader/writer thread:
                     ~1 s; disk floor; sd_notify READY / STATUS / WATCHDOG.
 
 Parsing and configuration are best effort: an exception there is logged and counted, never stops the reader.
+Threads hand work to the loop through one ordered queue with at most one pending loop wake-up (`_post`): a
+wake-up per serial read filled asyncio's self-pipe when the loop lagged behind a burst, and a full self-pipe
+drops the SIGTERM wake-up (CPython writes signals to the same socket), so the daemon ignored `systemctl stop`.
 Exit codes: 0 clean stop (SIGTERM/SIGINT), 1 journal I/O failure, 3 disk below the floor (at start: nothing
 recorded; while recording: the flight is closed cleanly first).
 """
@@ -176,6 +179,10 @@ class Recorder:
         self._stopped: asyncio.Event | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._journal_lock = threading.Lock()
+        self._posted: deque[tuple[Callable[..., Any], tuple[Any, ...]]] = deque()
+        self._post_lock = threading.Lock()
+        self._post_scheduled = False
+        self._mark_sync = threading.Event()  # set by the loop on a TIM-TM2: the reader thread fsyncs at once
         self._port: ByteStream | None = None
         self._reopen_request: tuple[int, asyncio.Future[None]] | None = None
         self._framer = StreamFramer()
@@ -369,7 +376,7 @@ class Recorder:
                 if not self._journal_op(functools.partial(self.journal.append, data, mono, wall)):
                     return
                 self._post(self._on_bytes, data, mono)
-            if not self._journal_op(self.journal.maybe_sync):
+            if not self._sync_for_marks() or not self._journal_op(self.journal.maybe_sync):
                 return
             request = self._reopen_request
             if request is not None:
@@ -388,7 +395,16 @@ class Recorder:
 
     def _idle_sync(self) -> None:
         assert self.journal is not None
-        self._journal_op(self.journal.maybe_sync)
+        if self._sync_for_marks():
+            self._journal_op(self.journal.maybe_sync)
+
+    def _sync_for_marks(self) -> bool:
+        """fsync now if the loop saw a time mark since the last call (reader thread); False if that failed."""
+        if not self._mark_sync.is_set():
+            return True
+        self._mark_sync.clear()
+        assert self.journal is not None
+        return self._journal_op(self.journal.sync_now)
 
     def _journal_op(self, op: Callable[[], Any]) -> bool:
         """Run a journal write/sync; on an OS error stop the recorder (ENOSPC → disk full). False if failed."""
@@ -407,12 +423,30 @@ class Recorder:
             return False
 
     def _post(self, fn: Callable[..., Any], *args: Any) -> None:
+        """Run `fn(*args)` on the loop, in posting order; at most one loop wake-up is pending at a time."""
         loop = self._loop
-        if loop is not None and not loop.is_closed():
-            try:
-                loop.call_soon_threadsafe(fn, *args)
-            except RuntimeError:  # loop closing at shutdown
-                pass
+        if loop is None or loop.is_closed():
+            return
+        with self._post_lock:
+            self._posted.append((fn, args))
+            if self._post_scheduled:
+                return
+            self._post_scheduled = True
+        try:
+            loop.call_soon_threadsafe(self._run_posted)
+        except RuntimeError:  # loop closing at shutdown
+            pass
+
+    def _run_posted(self) -> None:
+        """Loop side of `_post`: schedule everything queued, in order, each as its own callback (an exception in
+        one is logged by asyncio and does not drop the others)."""
+        assert self._loop is not None
+        with self._post_lock:
+            items = list(self._posted)
+            self._posted.clear()
+            self._post_scheduled = False
+        for fn, args in items:
+            self._loop.call_soon(fn, *args)
 
     # -- GPIO trigger / PPS edges ----------------------------------------------------------------------
     def _start_edge_threads(self) -> list[threading.Thread]:
@@ -600,18 +634,15 @@ class Recorder:
         if self._link is not None:
             self._link.feed(frame)
         if (frame.msg_class, frame.msg_id) == TIM_TM2:
-            # The time mark is already in the journal: make it durable now, off the loop thread.
-            asyncio.get_running_loop().run_in_executor(None, self._sync_for_mark)
+            # The time mark is already in the journal: the reader thread fsyncs it after its current read
+            # (≤ port.read_timeout_s), with no executor callback waking the loop per mark.
+            self._mark_sync.set()
         if self._decode is None:
             return
         item = self._decode(frame, self._decode_stats)  # never raises on content (decode.py contract)
         self.status.decode_failures = self._decode_stats.failures
         if item is not None:
             self._on_decoded(item)
-
-    def _sync_for_mark(self) -> None:
-        assert self.journal is not None
-        self._journal_op(self.journal.sync_now)
 
     def _on_decoded(self, item: Any) -> None:
         from onboard.receiver.decode import TimeMarks
