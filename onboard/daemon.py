@@ -195,6 +195,9 @@ class Recorder:
         self._pairer = PairingRecorder(self._pairing_options())
         self._gpio = GpioTiming()
         self._last_rx_mono_ns = 0
+        self._aid_eph_poll_s = float(receiver_options(settings).aid_eph_poll_s)
+        self._aid_eph_due_ns: int | None = None  # None: poll at the next fix
+        self._aid_eph_task: asyncio.Task[None] | None = None  # held: the loop keeps only weak references
 
     def _resume_pairing(self, events_path: Path) -> None:
         """After a crash, seed the pairer with the marks already logged so pairing indices continue."""
@@ -513,6 +516,7 @@ class Recorder:
             self.status.message = None
         self._framer = StreamFramer()  # bytes of the old connection never complete a frame of the new one
         self._frames_this_connection = 0
+        self._aid_eph_due_ns = None  # the receiver may have been power-cycled: poll again at its next fix
         self._link = FrameQueueLink(self._link_write, self._link_reopen)
         if self.settings.receiver_configure:
             self._config_task = asyncio.create_task(self._configure(self._link))
@@ -645,7 +649,7 @@ class Recorder:
             self._on_decoded(item)
 
     def _on_decoded(self, item: Any) -> None:
-        from onboard.receiver.decode import TimeMarks
+        from onboard.receiver.decode import NavFix, TimeMarks
         from onboard.rtk.types import ObsEpoch
 
         st = self.status
@@ -669,6 +673,31 @@ class Recorder:
                 self._append_event(rec)
             if self.events is not None:
                 self._sync_events()
+        elif isinstance(item, NavFix) and item.fix_type in (2, 3, 4):
+            self._maybe_poll_aid_eph()
+
+    def _maybe_poll_aid_eph(self) -> None:
+        """Backup ephemeris path (ublox.md): RXM-SFRB(X) are logged continuously; AID-EPH is polled after the
+        first fix and every `aid_eph_poll_s`, so a flight whose subframes were damaged still has orbits. Only
+        when we configure the receiver, and never while configuration owns the link."""
+        if self._aid_eph_poll_s <= 0 or not self.settings.receiver_configure or self._link is None:
+            return
+        if self._config_task is not None and not self._config_task.done():
+            return
+        now = self.clock.monotonic_ns()
+        if self._aid_eph_due_ns is not None and now < self._aid_eph_due_ns:
+            return
+        self._aid_eph_due_ns = now + round(self._aid_eph_poll_s * 1e9)
+        self._aid_eph_task = asyncio.get_running_loop().create_task(self._poll_aid_eph())
+
+    async def _poll_aid_eph(self) -> None:
+        from onboard.receiver.ubx_tables import poll_frame
+
+        try:
+            await self._link_write(poll_frame("AID-EPH"))
+            self.status.aid_eph_polls += 1
+        except (LinkLost, OSError) as exc:
+            log.warning("AID-EPH poll not sent: %s", exc)
 
     def _append_event(self, record: dict[str, Any]) -> None:
         if self.events is None:

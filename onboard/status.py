@@ -35,7 +35,8 @@ class StatusSnapshot:
     `state` one of STATES; `message` why (e.g. the port error, "disk full"); `receiver_*` from MON-VER;
     `config_state` one of CONFIG_STATES with `config_error` naming the failing message and field;
     counters since start; `last_epoch_gpst` "week:tow_s" text of the last raw epoch; `satellites` of that
-    epoch; `time_marks` TIM-TM2 edges seen; `disk_free_bytes` of the data directory.
+    epoch; `time_marks` TIM-TM2 edges seen; `aid_eph_polls` backup AID-EPH polls sent; `disk_free_bytes` of
+    the data directory.
     """
 
     schema: str = STATUS_SCHEMA
@@ -69,6 +70,7 @@ class StatusSnapshot:
     satellites: list[SatelliteStatus] = field(default_factory=list)
     time_marks: int = 0
     last_mark_gpst: str | None = None
+    aid_eph_polls: int = 0
     events: int = 0
     journal_syncs: int = 0
     disk_free_bytes: int | None = None

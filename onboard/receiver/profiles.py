@@ -66,7 +66,8 @@ class ReceiverOptions:
     epochs (0 off); `ant_cable_delay_ns` CFG-TP5 antenna cable delay; `save_to_bbr` end with CFG-CFG save;
     `ack_timeout_s` ACK/NAK and poll-answer wait; `retries` extra attempts after silence; `baud_settle_s` wait
     between sending a baud-changing CFG-PRT and reopening at the new rate (the frame must have left and been
-    read at the old rate; the ACK may then be missed, the poll-back confirms).
+    read at the old rate; the ACK may then be missed, the poll-back confirms). `aid_eph_poll_s` the recorder's
+    backup ephemeris path: poll AID-EPH (all SVs) after the first fix and then this often (0 = never).
     """
 
     port_id: int = 1
@@ -86,6 +87,7 @@ class ReceiverOptions:
     ack_timeout_s: float = 1.0
     retries: int = 2
     baud_settle_s: float = 0.1
+    aid_eph_poll_s: float = 1800.0
 
     def __post_init__(self) -> None:
         if self.port_id not in PORT_RATE_FIELD:
@@ -101,6 +103,8 @@ class ReceiverOptions:
                 raise ValueError(f"{name} must be within 0–255, got {getattr(self, name)}")
         if self.ack_timeout_s <= 0 or self.retries < 0 or not 0 <= self.baud_settle_s <= 2:
             raise ValueError("ack_timeout_s must be > 0, retries ≥ 0 and baud_settle_s within 0–2 s")
+        if self.aid_eph_poll_s < 0:
+            raise ValueError(f"aid_eph_poll_s must be ≥ 0 (0 = never), got {self.aid_eph_poll_s}")
         camera_pulse_spec(self.camera_period_s, self.pulse_len_ms, self.pulse_rising)  # validates both
 
 

@@ -145,6 +145,7 @@ POLL_KEYS: Mapping[str, str] = {
     "CFG-TP": "",
     "CFG-TP5": "B",  # tpIdx: built by hand, pyubx2 prints a debug line for it
     "MON-VER": "",
+    "AID-EPH": "",  # empty: all 32 GPS SVs (a one-byte svid polls one; pyubx2's keyword forms poll all)
 }
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from onboard.logger.events import read_events
-from onboard.logger.journal import iter_journal_bytes, read_manifest
+from onboard.logger.journal import iter_journal_bytes, iter_journal_frames, read_manifest
 from onboard.receiver.decode import iter_journal
 from onboard.rtk.types import ObsEpoch
 from onboard.timepulse.marks import BOUNCE, MISSED_FLASH, PULSE_WITHOUT_FLASH, parse_records
@@ -41,7 +41,7 @@ pytestmark = [pytest.mark.timeout(180), pytest.mark.slow]
 def start_daemon(tmp_path: Path, port: str | Path) -> tuple[subprocess.Popen[bytes], Path, Path]:
     cfg = tmp_path / "recorder.toml"
     cfg.write_text(
-        "[receiver]\ncamera_period_s = 2.0\ntrigger = \"extint1\"\nmeas_rate_ms = 500\n"
+        "[receiver]\ncamera_period_s = 2.0\ntrigger = \"extint1\"\nmeas_rate_ms = 500\naid_eph_poll_s = 5.0\n"
         "[journal]\ndisk_floor_mb = 1.0\n"
     )
     data_dir, status_path = tmp_path / "data", tmp_path / "run" / "status.json"
@@ -103,6 +103,12 @@ def test_daemon_against_emulator(tmp_path: Path, model: str) -> None:
     assert len(epochs) >= 0.8 * RECORD_SIM_S * 2
     assert st["epochs"] == len(epochs)
     assert all(len(e.sv_id) >= 4 for e in epochs)
+
+    # --- the AID-EPH backup path: polled after the fix and every 5 s (host time), answered with ephemerides
+    # once the emulated receiver has seen subframes 1-3 (every 30 s of simulated time)
+    assert st["aid_eph_polls"] >= 3
+    aid = [f for f in iter_journal_frames(flight) if (f.msg_class, f.msg_id) == (0x0B, 0x31)]
+    assert sum(len(f.payload) == 104 for f in aid) >= 4  # full ephemerides, not only "none" replies
 
     # --- every camera event in the recorded window paired or flagged, delays to ±1 µs
     marks, pairings, other = parse_records(read_events(flight / "events.jsonl").records)

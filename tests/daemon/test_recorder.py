@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import json
 from pathlib import Path
+from types import MappingProxyType
 
 import pytest
 
@@ -194,3 +195,44 @@ def test_unwritable_data_dir_is_a_clear_error(tmp_path: Path) -> None:
     assert run.join() == EXIT_IO_ERROR
     st = status(settings.status_path)
     assert st["state"] == "error" and "Read-only file system" in st["message"]
+
+
+def test_aid_eph_backup_poll_after_the_first_fix_then_every_interval(tmp_path: Path) -> None:
+    """After configuration is over (here: failed, the fake never answers) the first NAV-SOL with a 3D fix makes
+    the recorder poll AID-EPH for all SVs once; further fixes do not, until `aid_eph_poll_s` has passed."""
+    from hil_sim.ubx_encode import nav_sol
+    from onboard.gnsstime import GpsTime
+    from onboard.hw.fake import ManualClock
+
+    clock = ManualClock()
+    stream = FakeByteStream()
+    settings = make_settings(tmp_path, receiver_options=MappingProxyType(
+        {"ack_timeout_s": 0.1, "retries": 0, "aid_eph_poll_s": 60.0}))
+    run = RunningRecorder(settings, RecorderDeps(open_port=lambda: stream, clock=clock))
+    poll = poll_frame("AID-EPH")
+    assert poll == bytes.fromhex("b5620b3100003cbf")
+    t = GpsTime.from_week_tow_s(2300, 1000.0)
+
+    def fix(dt_s: float, with_fix: bool = True) -> bytes:
+        return nav_sol(t.add_s(dt_s), (3.9e6, 3.0e5, 5.0e6) if with_fix else None, (0.0, 0.0, 0.0), 8, 2.5, 1.6)
+
+    try:
+        wait_until(lambda: status(settings.status_path).get("config_state") == "failed", timeout_s=20,
+                   what="configuration over")
+        stream.feed(fix(0.0, with_fix=False))  # no fix yet: no poll
+        wait_until(lambda: status(settings.status_path).get("frames", 0) >= 1, what="frame seen")
+        assert bytes(stream.written).count(poll) == 0
+        stream.feed(fix(1.0))
+        wait_until(lambda: bytes(stream.written).count(poll) == 1, what="first AID-EPH poll")
+        stream.feed(fix(2.0) + fix(3.0))
+        wait_until(lambda: status(settings.status_path).get("frames", 0) >= 4, what="more fixes")
+        clock.advance_s(59.0)
+        stream.feed(fix(4.0))
+        wait_until(lambda: status(settings.status_path).get("frames", 0) >= 5, what="fix before the interval")
+        assert bytes(stream.written).count(poll) == 1
+        clock.advance_s(2.0)
+        stream.feed(fix(5.0))
+        wait_until(lambda: bytes(stream.written).count(poll) == 2, what="AID-EPH poll after the interval")
+        wait_until(lambda: status(settings.status_path).get("aid_eph_polls") == 2, what="status counter")
+    finally:
+        assert run.stop() == 0
