@@ -23,6 +23,7 @@ from onboard.logger.journal import iter_journal_bytes, iter_journal_frames, read
 from onboard.receiver.decode import iter_journal
 from onboard.rtk.types import ObsEpoch
 from onboard.timepulse.marks import BOUNCE, MISSED_FLASH, PULSE_WITHOUT_FLASH, parse_records
+from tests.conftest import shared_file
 from tests.daemon.helpers import status, wait_until
 
 hil_scenario = pytest.importorskip("hil_sim.scenario")
@@ -32,6 +33,14 @@ from hil_sim.receiver import ReceiverOptions
 from hil_sim.world import World
 
 PROJECT = Path(__file__).resolve().parents[2]
+NAV = "gnss/broadcast-nav-20100701/brdc1820.10n"  # the World's real broadcast orbits (Scenario.default)
+
+
+@pytest.fixture(autouse=True)
+def _needs_broadcast_orbits() -> None:
+    """Every test here simulates the default scenario: skip with the reason when ../shared is absent."""
+    shared_file(NAV)
+
 SPEED = 4.0  # simulated seconds per real second
 VALID_AFTER_S = 4.0  # simulated time to the first fix (no camera pulses before)
 RECORD_SIM_S = 48.0  # simulated seconds recorded after configuration: ~24 camera pulses at 2 s
