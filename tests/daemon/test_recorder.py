@@ -217,11 +217,10 @@ def test_aid_eph_backup_poll_after_the_first_fix_then_every_interval(tmp_path: P
         return nav_sol(t.add_s(dt_s), (3.9e6, 3.0e5, 5.0e6) if with_fix else None, (0.0, 0.0, 0.0), 8, 2.5, 1.6)
 
     try:
+        stream.feed(fix(0.0, with_fix=False))  # a valid frame (no baud probe needed), no fix yet: no poll
         wait_until(lambda: status(settings.status_path).get("config_state") == "failed", timeout_s=20,
                    what="configuration over")
-        stream.feed(fix(0.0, with_fix=False))  # no fix yet: no poll
-        wait_until(lambda: status(settings.status_path).get("frames", 0) >= 1, what="frame seen")
-        assert bytes(stream.written).count(poll) == 0
+        assert status(settings.status_path)["frames"] == 1 and bytes(stream.written).count(poll) == 0
         stream.feed(fix(1.0))
         wait_until(lambda: bytes(stream.written).count(poll) == 1, what="first AID-EPH poll")
         stream.feed(fix(2.0) + fix(3.0))
