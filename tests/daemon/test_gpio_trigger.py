@@ -168,3 +168,30 @@ def test_gpio_flash_edge_paired_with_gpio_trigger_and_fsynced_at_once(tmp_path: 
     assert 0.055e9 < tick_delay_ns < 0.5e9
     # host ticks scaled by the PPS anchors' rate (the two PPS edges are one GPS second apart)
     assert abs(pairing["delay_ns"] - tick_delay_ns / (pps_s[1] - pps_s[0])) <= 20_000
+
+
+def test_production_edge_sources_follow_the_settings(tmp_path: Path) -> None:
+    """The composition root opens PPS + flash (pulled up: the hot shoe pulls the line low) for gpio.flash_pin,
+    PPS + trigger for receiver.trigger = "gpio", and no GPIO at all otherwise."""
+    from onboard.daemon import gpio_edge_sources
+
+    assert gpio_edge_sources(make_settings(tmp_path)) is None
+    flash_only = make_settings(tmp_path, gpio_pps_pin=24, gpio_flash_pin=25, gpio_pin_factory="mock")
+    opener = gpio_edge_sources(flash_only)
+    assert opener is not None
+    sources = opener()
+    try:
+        assert [s.line for s in sources] == ["pps", "flash"]  # type: ignore[attr-defined]
+        flash_device = sources[1]._device  # type: ignore[attr-defined]
+        assert flash_device.pull_up is True and flash_device.pin.state == 1  # idle high until a flash
+    finally:
+        for s in sources:
+            s.close()
+    both = make_settings(tmp_path, gpio_trigger_pin=23, gpio_pps_pin=24, gpio_flash_pin=25,
+                         gpio_pin_factory="mock", receiver_options=MappingProxyType({"trigger": "gpio"}))
+    sources = gpio_edge_sources(both)()  # type: ignore[misc]
+    try:
+        assert [s.line for s in sources] == ["pps", "trigger", "flash"]  # type: ignore[attr-defined]
+    finally:
+        for s in sources:
+            s.close()
