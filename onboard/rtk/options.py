@@ -25,8 +25,20 @@ class RtkOptions:
     ratio_threshold: float = 3.0
     min_success_rate: float = 0.99
     """Bootstrapped ILS success rate a fix needs besides the ratio test (rejects fixes of ambiguities the
-    float solution has not yet determined, e.g. single-epoch code-only geometry)."""
-    min_lock_epochs: int = 0
+    float solution has not yet determined, e.g. single-epoch code-only geometry); see consistent_fix_span_s."""
+    consistent_fix_span_s: float = 60.0
+    """Below min_success_rate a fix is still accepted when the same integer set has passed the ratio test at
+    every epoch over this span (s). GEONET 0759/3040 (30 s epochs): the bootstrapped rate, a lower bound, stays
+    under 0.99 for 510 s while RTKLIB's ratio test is right from the second epoch; hil_sim at 1 Hz: a ratio
+    of 3 on a float metres off (correlated code) after 7 s is wrong. Geometry needs time, not epochs."""
+    min_success_rate_minimal_set: float = 0.999
+    """Success rate a fix resting on the bare minimum of double differences (`min_amb_dd`, nothing held)
+    needs, besides twice the ratio."""
+    min_lock_epochs: int = 1
+    """A satellite joins AR once its phase has been tracked for more than this many epochs: a fix needs the
+    float to have seen the phase at least twice, never a single epoch of code (the Septentrio rover of
+    GEONET 3034 and RTKLIB 2.4.3 fix wrongly, 1.1 m off, at the first epoch with ratio 3.1). The known
+    take-off point start is exempt (its ambiguities come from the surveyed position, not the code)."""
     min_fix_sats: int = 4
     min_hold_epochs: int = 5
     min_amb_dd: int = 4

@@ -83,11 +83,15 @@ class RtkState:
     prev_cp_r: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
     prev_dop_r: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
     prev_time_r: GpsTime | None = None
+    prev_phase_r: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
+    """Slots with rover phase at the previous rover epoch (a gap without a Doppler bridge is a slip)."""
     last_t_r: list[GpsTime | None] = field(default_factory=lambda: [None] * NSAT)
     prev_zb: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
     prev_time_b: GpsTime | None = None
     fix_count: int = 0
     held_prns: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
+    known_amb: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
+    """Ambiguities seeded from the surveyed take-off point (exempt from the lock wait before AR)."""
     static: bool = False
     init_pos_ecef_m: Arr | None = None
     fail_count: int = 0
@@ -95,6 +99,8 @@ class RtkState:
     base_cache: tuple[GpsTime, _Receiver] | None = None
     last_ratio: float = 0.0
     clock_bias_m: float = 0.0
+    pending_fix: tuple[tuple, GpsTime] | None = None
+    """Integer set (ref, slots, DD integers) winning the ratio test below the success rate, and since when."""
 
 
 def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkState:
@@ -162,6 +168,7 @@ def _reset_amb(st: RtkState, k: npt.NDArray[np.int64]) -> None:
     st.p[:, j] = 0.0
     st.lock[k] = 0
     st.held_prns[k] = False
+    st.known_amb[k] = False
 
 
 def _process_noise(st: RtkState, dt: float, pos: Arr) -> Arr:
@@ -226,6 +233,7 @@ def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t
     slip = ((rov.lli & LLI_SLIP) != 0) | ((base.lli & LLI_SLIP) != 0)
     slip &= common
     # Doppler-predicted phase on the rover, from each satellite's last phase (across short gaps)
+    bridged = np.zeros(NSAT, bool)  # phase continuity checked against the Doppler
     if st.prev_time_r is not None:
         dt_all = np.array([t_r.diff_s(t) if t is not None else np.nan for t in st.last_t_r])
         if np.any(np.isfinite(dt_all)):
@@ -236,10 +244,20 @@ def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t
             if ok.sum() >= 2:
                 # the receiver-clock part is common to all satellites: take it from those not flagged,
                 # a burst of flagged slips would otherwise corrupt it
+                # the clock part grows with the time since each satellite's last phase (a drift the
+                # Doppler holds and the phase does not): removed as a rate, so a satellite back from a gap
+                # is compared over its own interval
                 clean = ok & ~slip
-                d = d - np.median(d[clean] if clean.sum() >= 2 else d[ok])
+                rate = d / np.where(ok, dt_all, 1.0)
+                d = d - np.median(rate[clean] if clean.sum() >= 2 else rate[ok]) * dt_all
                 thr = o.slip_threshold_cyc * np.maximum(1.0, np.abs(np.nan_to_num(dt_all, nan=1.0)))
                 slip |= ok & (np.abs(d) > thr)
+                bridged = ok
+        # a phase gap the Doppler could not bridge: receivers do not always flag a loss of lock inside the
+        # gap (the Septentrio rover of GEONET 3034 comes back a whole cycle off with LLI 0), so the continuity
+        # of such phase is unknown and its ambiguity starts afresh
+        amb_on = st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0
+        slip |= common & ~st.prev_phase_r & amb_on & ~bridged
     # base: phase − geometric range (known static base), differenced in time
     if st.prev_time_b is not None and t_b != st.prev_time_b:
         dtb = abs(t_b.diff_s(st.prev_time_b))
@@ -275,6 +293,7 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
         if st.init_pos_ecef_m is not None and st.fix_count == 0 and st.p[0, 0] <= (2 * o.init_pos_sigma_m) ** 2:
             sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b)) / LAMBDA_L1_M
             var = (0.05 + o.init_pos_sigma_m / LAMBDA_L1_M) ** 2
+            st.known_amb[new] = True
         else:
             sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rov.pr_m - base.pr_m)) / LAMBDA_L1_M
             var = o.initial_bias_sigma_cyc**2
@@ -409,12 +428,13 @@ class _Fix:
 
 
 def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el: Arr,
-                   min_dd: int) -> _Fix | None:
+                   min_dd: int, t: GpsTime) -> _Fix | None:
     """Integer ambiguity resolution on the DD ambiguities of `cand` slots (RTKLIB resamb_LAMBDA) with
     partial fixing: drop the lowest satellite and retry while the ratio test fails."""
     o = st.options
     idx = np.flatnonzero(cand)
     best_ratio = 0.0
+    seen_candidate = False
     for _drop in range(o.max_partial_drop + 1 if o.partial_ar else 1):
         if idx.size < min_dd + 1:
             break
@@ -435,8 +455,19 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         # nearly certain: a stricter success rate and twice the ratio
         strict = idx.size - 1 <= o.min_amb_dd and not st.held_prns.any()
         need_ratio = o.ratio_threshold * (2.0 if strict else 1.0)
-        need_sr = 1.0 - (1.0 - o.min_success_rate) * (0.1 if strict else 1.0)
-        if ratio >= need_ratio and res.success_rate >= need_sr:
+        need_sr = max(o.min_success_rate, o.min_success_rate_minimal_set) if strict else o.min_success_rate
+        confirmed = False
+        if ratio >= need_ratio and res.success_rate < need_sr and not strict and not seen_candidate:
+            # below the success rate, the ratio test alone is trusted once the same integer set has won it
+            # at every epoch over consistent_fix_span_s: satellite motion over that span separates
+            # position from ambiguities, which a float built on (correlated) code cannot do in seconds
+            seen_candidate = True
+            key = (ref, tuple(others.tolist()), tuple(np.rint(res.fixed[:, 0]).astype(int).tolist()))
+            if st.pending_fix is not None and st.pending_fix[0] == key:
+                confirmed = t.diff_s(st.pending_fix[1]) >= o.consistent_fix_span_s
+            else:
+                st.pending_fix = (key, t)
+        if ratio >= need_ratio and (res.success_rate >= need_sr or confirmed):
             ints = res.fixed[:, 0]
             try:
                 gain = np.linalg.solve(qa, qba.T).T
@@ -449,6 +480,8 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         # partial: drop the lowest-elevation non-reference satellite
         idx = idx[idx != others[np.argmin(el[others])]]
     st.last_ratio = best_ratio
+    if not seen_candidate:
+        st.pending_fix = None
     return None
 
 
@@ -540,6 +573,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     for k in np.flatnonzero(have):
         st.last_t_r[k] = rover.time
     st.prev_time_r = rover.time
+    st.prev_phase_r = np.isfinite(rov.cp_cyc)
     if st.prev_time_b != base.time:
         st.prev_zb = base_zb_cyc
         st.prev_time_b = base.time
@@ -618,8 +652,10 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     fix = None
     if o.ar_mode != "off":
         amb_var = st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)]
-        cand = use_phase & (el >= np.radians(o.ar_elmask_deg)) & ~half & (st.lock > o.min_lock_epochs) & (amb_var > 0)
-        fix = _resamb_lambda(st, st.x, st.p, cand, el, o.min_amb_dd)
+        # ambiguities seeded from a surveyed take-off point are known, not guessed from the code: no lock wait
+        locked = (st.lock > o.min_lock_epochs) | st.known_amb
+        cand = use_phase & (el >= np.radians(o.ar_elmask_deg)) & ~half & locked & (amb_var > 0)
+        fix = _resamb_lambda(st, st.x, st.p, cand, el, o.min_amb_dd, rover.time)
         if fix is not None:
             # validate: float-fix consistency and post-fit residuals of the fixed solution
             dpos = fix.pos - st.x[:3]

@@ -174,3 +174,32 @@ def test_stale_base_data_falls_back_to_single(nav):
     rov = observe(nav.store, SimReceiver(), start, np.zeros(3), T0.add_s(10.0))
     sol = rtk_pos(st, rov, bas, nav, BASE_ECEF_M)
     assert sol.q == Q_SINGLE and sol.age_s == pytest.approx(10.0)
+
+
+def _gap_tamper(prn: int, gap: range, cycles: float, doppler: bool):
+    """Rover phase of `prn` missing over `gap`, back `cycles` off with LLI 0; Doppler removed unless `doppler`."""
+    def tamper(k: int, rov: ObsEpoch, bas: ObsEpoch):
+        if not doppler:
+            rov.dop_hz[:] = np.nan
+        i = np.flatnonzero(rov.sv_id == prn)
+        if k in gap:
+            rov.cp_cyc[i] = np.nan
+        elif k > gap.start:
+            rov.cp_cyc[i] += cycles
+        return rov, bas
+    return tamper
+
+
+@pytest.mark.parametrize(
+    "cycles, doppler, slips",
+    [(1.0, False, 1),  # nothing bridges the gap: the ambiguity starts afresh (the GEONET 3034 Septentrio case)
+     (0.0, True, 0),   # the Doppler bridges the gap (clock drift removed as a rate) and finds the phase
+                       # continuous: the ambiguity is kept
+     (12.0, True, 1)],  # the Doppler bridge sees the jump (beyond its 2 cycles/s × 4 s threshold)
+)
+def test_phase_gap_without_lli_is_a_slip_unless_the_doppler_bridges_it(nav, cycles, doppler, slips):
+    """A receiver may lose lock inside a phase gap and come back whole cycles off without setting LLI; still
+    floating (no hold to catch it through the residuals), the filter would absorb the jump into the position."""
+    prn = _visible_prns(nav)[1]
+    _, _, st = _run(nav, 8, RtkOptions(ar_mode="off"), noise=True, tamper=_gap_tamper(prn, range(3, 6), cycles, doppler))
+    assert st.slips == slips
