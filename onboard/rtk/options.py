@@ -26,6 +26,9 @@ class RtkOptions:
     min_success_rate: float = 0.99
     """Bootstrapped ILS success rate a fix needs besides the ratio test (rejects fixes of ambiguities the
     float solution has not yet determined, e.g. single-epoch code-only geometry); see consistent_fix_span_s."""
+    confirm_fix_span_s: float = 5.0
+    """A first fix (nothing held, no known start) needs the same integer set winning the ratio test for this
+    long (s): hil_sim's real-time chain fixed a float 4 m off (correlated code, ratio 3.0) for 1.5 s."""
     consistent_fix_span_s: float = 60.0
     """Below min_success_rate a fix is still accepted when the same integer set has passed the ratio test at
     every epoch over this span (s). GEONET 0759/3040 (30 s epochs): the bootstrapped rate, a lower bound, stays

@@ -456,18 +456,26 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         strict = idx.size - 1 <= o.min_amb_dd and not st.held_prns.any()
         need_ratio = o.ratio_threshold * (2.0 if strict else 1.0)
         need_sr = max(o.min_success_rate, o.min_success_rate_minimal_set) if strict else o.min_success_rate
-        confirmed = False
-        if ratio >= need_ratio and res.success_rate < need_sr and not strict and not seen_candidate:
-            # below the success rate, the ratio test alone is trusted once the same integer set has won it
-            # at every epoch over consistent_fix_span_s: satellite motion over that span separates
-            # position from ambiguities, which a float built on (correlated) code cannot do in seconds
+        accept = False
+        if ratio >= need_ratio and not seen_candidate:
+            # the integer set winning the ratio test must keep winning for a while before a first fix (nothing
+            # held, no known start): a float biased by correlated code (hil_sim at 2 Hz: 4 m off, ratio 3.0)
+            # gives a wrong set that satellite motion breaks within seconds. Below the success rate, it must
+            # win over consistent_fix_span_s: satellite motion over that span separates position from
+            # ambiguities, which a float built on code cannot do in a few epochs.
             seen_candidate = True
             key = (ref, tuple(others.tolist()), tuple(np.rint(res.fixed[:, 0]).astype(int).tolist()))
-            if st.pending_fix is not None and st.pending_fix[0] == key:
-                confirmed = t.diff_s(st.pending_fix[1]) >= o.consistent_fix_span_s
-            else:
+            if st.pending_fix is None or st.pending_fix[0] != key:
                 st.pending_fix = (key, t)
-        if ratio >= need_ratio and (res.success_rate >= need_sr or confirmed):
+            span = t.diff_s(st.pending_fix[1])
+            trusted = bool(st.held_prns.any() or st.known_amb[idx].all())
+            if res.success_rate >= need_sr:
+                accept = trusted or abs(span) >= o.confirm_fix_span_s
+            elif not strict:
+                accept = abs(span) >= o.consistent_fix_span_s
+        elif ratio >= need_ratio:
+            accept = res.success_rate >= need_sr and bool(st.held_prns.any() or st.known_amb[idx].all())
+        if accept:
             ints = res.fixed[:, 0]
             try:
                 gain = np.linalg.solve(qa, qba.T).T

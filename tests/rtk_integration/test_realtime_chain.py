@@ -149,9 +149,6 @@ def test_real_time_rtk_through_a_radio_dropout(chain: ChainRun) -> None:
     assert radio.channel.bytes_lost_dropout > 0 and radio.channel.bytes_lost_budget == 0
 
 
-@pytest.mark.xfail(strict=True, reason="engine (onboard/rtk, E): 36 s after start, 9 satellites, the float "
-                   "converges 4 m off and a ratio-3.0 fix is accepted (3 epochs); replaying the recorded rover + "
-                   "radio journals offline reproduces it. Remove this marker when the engine rejects it.")
 def test_real_time_rtk_never_fixes_wrong(chain: ChainRun) -> None:
     fixed = chain.track.q == Q_FIX
     bad = [(str(t), round(float(e), 3)) for t, e, f in zip(chain.track.time, chain.err_m, fixed) if f and e > 0.10]
