@@ -28,7 +28,10 @@ class RtkOptions:
     float solution has not yet determined, e.g. single-epoch code-only geometry); see consistent_fix_span_s."""
     confirm_fix_span_s: float = 5.0
     """A first fix (nothing held, no known start) needs the same integer set winning the ratio test for this
-    long (s): hil_sim's real-time chain fixed a float 4 m off (correlated code, ratio 3.0) for 1.5 s."""
+    long (s). Floats built on correlated code multipath are metres off with σ ≈ 1 m in their first seconds:
+    hil_sim's real-time chain fixed one 4 m off (ratio 3.0) for 1.5 s. 10 s would also reject the M8P/GLW1
+    backward pass's set 3.4 m off that wins 5 s, but then the real-time service no longer fixes within 20 s
+    after a 20 s radio gap (tests/rtk_integration): a known defect, see tests/rtk/test_backward_real_data.py."""
     consistent_fix_span_s: float = 60.0
     """Below min_success_rate a fix is still accepted when the same integer set has passed the ratio test at
     every epoch over this span (s). GEONET 0759/3040 (30 s epochs): the bootstrapped rate, a lower bound, stays
