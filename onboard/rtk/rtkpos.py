@@ -100,6 +100,8 @@ class RtkState:
     last_ratio: float = 0.0
     clock_bias_m: float = 0.0
     pending_fix: tuple[tuple, GpsTime] | None = None
+    pending_slip: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
+    """Rover slips detected while no base data was usable, applied at the next relative epoch."""
     """Integer set (ref, slots, DD integers) winning the ratio test below the success rate, and since when."""
 
 
@@ -229,9 +231,25 @@ def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t
     """Cycle-slip flags per slot: LLI (RTKLIB detslp_ll), Doppler-predicted rover phase (detslp_dop,
     clock-common part removed), and the base's geometry residual (static known base: phase − range
     jumps between its epochs, clock-common part removed)."""
+    slip = _rover_slips(st, rov, t_r, common) | (((base.lli & LLI_SLIP) != 0) & common)
+    # base: phase − geometric range (known static base), differenced in time
+    if st.prev_time_b is not None and t_b != st.prev_time_b:
+        dtb = abs(t_b.diff_s(st.prev_time_b))
+        if dtb <= 30.0:
+            d = base_zb - st.prev_zb
+            ok = np.isfinite(d) & common
+            if ok.sum() >= 3:
+                d = d - np.median(d[ok])
+                thr = 1.0 + 0.05 * dtb  # cycles: atmosphere/orbit changes grow with the gap
+                slip |= ok & (np.abs(d) > thr)
+    return slip
+
+
+def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+    """Rover-side slip flags among `common` slots: LLI, Doppler-predicted phase from each satellite's last
+    phase, and phase gaps the Doppler cannot bridge. Needs no base data (also run while the base is missing)."""
     o = st.options
-    slip = ((rov.lli & LLI_SLIP) != 0) | ((base.lli & LLI_SLIP) != 0)
-    slip &= common
+    slip = ((rov.lli & LLI_SLIP) != 0) & common
     # Doppler-predicted phase on the rover, from each satellite's last phase (across short gaps)
     bridged = np.zeros(NSAT, bool)  # phase continuity checked against the Doppler
     if st.prev_time_r is not None:
@@ -258,17 +276,18 @@ def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t
         # of such phase is unknown and its ambiguity starts afresh
         amb_on = st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0
         slip |= common & ~st.prev_phase_r & amb_on & ~bridged
-    # base: phase − geometric range (known static base), differenced in time
-    if st.prev_time_b is not None and t_b != st.prev_time_b:
-        dtb = abs(t_b.diff_s(st.prev_time_b))
-        if dtb <= 30.0:
-            d = base_zb - st.prev_zb
-            ok = np.isfinite(d) & common
-            if ok.sum() >= 3:
-                d = d - np.median(d[ok])
-                thr = 1.0 + 0.05 * dtb  # cycles: atmosphere/orbit changes grow with the gap
-                slip |= ok & (np.abs(d) > thr)
     return slip
+
+
+def _remember_rover(st: RtkState, rov: _Receiver, t_r: GpsTime) -> None:
+    """Keep this rover epoch's phase/Doppler for the next epoch's slip tests."""
+    have = np.isfinite(rov.cp_cyc) & np.isfinite(rov.dop_hz)
+    st.prev_cp_r[have] = rov.cp_cyc[have]
+    st.prev_dop_r[have] = rov.dop_hz[have]
+    for k in np.flatnonzero(have):
+        st.last_t_r[k] = t_r
+    st.prev_time_r = t_r
+    st.prev_phase_r = np.isfinite(rov.cp_cyc)
 
 
 def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Arr,
@@ -546,11 +565,16 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         log.info("%s: take-off detected (%.2f m/s), leaving static mode", rover.time, np.linalg.norm(spp.vel_ecef_m_s))
         st.static = False
         st.p[3:6, 3:6] = np.eye(3) * o.initial_vel_sigma_m_s**2
-    if base is None or base_pos_ecef_m is None:
-        return single(0.0)
+    if base is None or base_pos_ecef_m is None or abs(rover.time.diff_s(base.time)) > o.max_age_s:
+        # no usable base: keep watching the rover's phase, so that a radio gap neither hides a rover slip nor
+        # (judged later over the whole gap by a Doppler integration that ignores the manoeuvres) fakes slips
+        # on every satellite
+        if st.initialized:
+            rover_ok = rov.has & np.isfinite(rov.cp_cyc)
+            st.pending_slip |= _rover_slips(st, rov, rover.time, rover_ok)
+            _remember_rover(st, rov, rover.time)
+        return single(0.0 if base is None or base_pos_ecef_m is None else rover.time.diff_s(base.time))
     age = rover.time.diff_s(base.time)
-    if abs(age) > o.max_age_s:
-        return single(age)
     if st.base_cache is not None and st.base_cache[0] == base.time:
         bas = st.base_cache[1]
     else:
@@ -572,16 +596,17 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     base_zb = LAMBDA_L1_M * bas.cp_cyc - rng_b
     base_zb_cyc = base_zb / LAMBDA_L1_M
     slip = _detect_slips(st, rov, bas, base_zb_cyc, rover.time, base.time, phase_ok)
+    if st.pending_slip.any():  # rover slips seen while the base was missing
+        gone = np.flatnonzero(st.pending_slip & ~phase_ok & (st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0))
+        if gone.size:
+            _reset_amb(st, gone)
+            st.slips += int(gone.size)
+        slip |= st.pending_slip & phase_ok
+        st.pending_slip[:] = False
     _udbias(st, rov, bas, rng_r, rng_b, phase_ok, slip)
 
     # remember raw data for next epoch's slip tests
-    have = np.isfinite(rov.cp_cyc) & np.isfinite(rov.dop_hz)
-    st.prev_cp_r[have] = rov.cp_cyc[have]
-    st.prev_dop_r[have] = rov.dop_hz[have]
-    for k in np.flatnonzero(have):
-        st.last_t_r[k] = rover.time
-    st.prev_time_r = rover.time
-    st.prev_phase_r = np.isfinite(rov.cp_cyc)
+    _remember_rover(st, rov, rover.time)
     if st.prev_time_b != base.time:
         st.prev_zb = base_zb_cyc
         st.prev_time_b = base.time
