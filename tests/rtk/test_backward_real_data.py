@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from onboard.formats.rinex_nav import read_rinex_nav
 from onboard.formats.rinex_obs import read_rinex_obs
@@ -17,9 +16,6 @@ from tests.conftest import shared_file
 ROVER_REF_ECEF_M = np.array([3774088.6821, -601663.0350, 5089318.2304])  # dataset README, GLW1-based
 
 
-@pytest.mark.xfail(strict=True, reason="engine: processed backward from the end of the M8P/GLW1 run, a float "
-                   "3.4 m off (code multipath, σ ≈ 1 m) lets a wrong integer set win the ratio test for 5 s: Q=1 "
-                   "3.4 m off for 4 epochs. confirm_fix_span_s=10 rejects it but delays re-fixes after radio gaps.")
 def test_backward_pass_from_the_end_of_the_m8p_glw1_run_never_fixes_wrong():
     """Processed backward, the last minute starts on a float 3.4 m off (correlated code multipath, σ ≈ 1 m):
     an integer set winning the ratio test for 5 s is wrong (3.4 m, 4 epochs); 10 s of confirmation rejects
