@@ -116,7 +116,7 @@ COMMANDS: tuple[str, ...] = (
     "onboard.convert:add_convert_parser",
     "onboard.rtk_cli:add_rtk_parser",
     "onboard.base_cli:add_base_parser",
-    "onboard.web.app:add_web_parser",
+    "onboard.web.cli:add_web_parser",
 )
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import logging
 import os
 import time
@@ -28,14 +27,15 @@ def _load(status_path: Path) -> tuple[dict[str, Any] | None, str | None]:
         return None, str(exc)
 
 
-DEFAULT_STATUS_PATH = Path("/run/directgeo/status.json")
+from onboard.web.cli import DEFAULT_STATUS_PATH
 
 
-def create_app(status_path: Path | None = None, options: PreflightOptions = PreflightOptions()) -> FastAPI:
+def create_app(status_path: Path | None = None, options: PreflightOptions | None = None) -> FastAPI:
     """The status web app for the snapshot at `status_path` (default: `$ONBOARD_STATUS_PATH`, else the
     recorder's default /run/directgeo/status.json), so `uvicorn --factory onboard.web.app:create_app` works."""
     if status_path is None:
         status_path = Path(os.environ.get("ONBOARD_STATUS_PATH", str(DEFAULT_STATUS_PATH)))
+    options = options or PreflightOptions()
     app = FastAPI(title="directgeo pre-flight check", version="1")
     page = resources.files("onboard.web").joinpath("preflight.html").read_text(encoding="utf-8")
 
@@ -58,19 +58,3 @@ def create_app(status_path: Path | None = None, options: PreflightOptions = Pref
         return snap if snap is not None else {"error": error}
 
     return app
-
-
-def add_web_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    """Register `python -m onboard web` (the pre-flight check page)."""
-    p = subparsers.add_parser("web", help="serve the pre-flight check page (reads the recorder's status snapshot)")
-    p.add_argument("--status", type=Path, default=DEFAULT_STATUS_PATH, help="status snapshot path")
-    p.add_argument("--host", default="0.0.0.0", help="listen address (default all: the field laptop joins the Pi's Wi-Fi)")
-    p.add_argument("--port", type=int, default=8080)
-    p.set_defaults(func=_serve)
-
-
-def _serve(args: argparse.Namespace) -> int:
-    import uvicorn
-
-    uvicorn.run(create_app(args.status), host=args.host, port=args.port, log_level="info")
-    return 0

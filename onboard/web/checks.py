@@ -28,8 +28,11 @@ class Check:
     detail: str
 
 
-def preflight_checks(status: dict[str, Any] | None, now_wall_ns: int, options: PreflightOptions = PreflightOptions()) -> list[Check]:
+def preflight_checks(
+    status: dict[str, Any] | None, now_wall_ns: int, options: PreflightOptions | None = None
+) -> list[Check]:
     """Evaluate a status snapshot (as read from JSON) at wall time `now_wall_ns`; None = no snapshot at all."""
+    options = options or PreflightOptions()
     if status is None:
         return [Check("recorder", FAIL, "no status snapshot: is the recorder running?")]
     checks: list[Check] = []

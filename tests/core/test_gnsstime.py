@@ -22,7 +22,7 @@ def test_tim_tm2_ms_plus_subms_keeps_nanoseconds() -> None:
 
 
 def test_utc_round_trip_with_leap_seconds() -> None:
-    utc = dt.datetime(2018, 10, 4, 12, 37, 0, tzinfo=dt.timezone.utc)
+    utc = dt.datetime(2018, 10, 4, 12, 37, 0, tzinfo=dt.UTC)
     t = GpsTime.from_utc(utc)
     assert t.week == 2021
     # 2018: GPS − UTC = 18 s

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gzip
+import itertools
 import math
 
 import numpy as np
@@ -140,7 +141,7 @@ def test_m8p_lossy_base_stream_decodes_every_gps_epoch() -> None:
     assert len(epochs) == sum(f.msg_id == 1077 for f in frames) == 607
     assert decoder.errors == 0
     np.testing.assert_allclose(positions[0].arp_ecef_m, (3774089.2120, -601661.6157, 5089321.2474), atol=1e-4)
-    assert all(b.time > a.time for a, b in zip(epochs, epochs[1:]))
+    assert all(b.time > a.time for a, b in itertools.pairwise(epochs))
     # the M8P base tags its RTCM epochs on the second or at …999 ms (receiver time): never in between
     assert {e.time.tow_ns % 1_000_000_000 for e in epochs} == {0, 999_000_000}
     assert all(len(e) >= 4 for e in epochs)
@@ -151,7 +152,7 @@ def test_lock_time_tables() -> None:
     assert lock_ms_from_df013(127) == 937_000
     assert [lock_ms_from_df407(i) for i in (0, 63, 64, 95, 96, 128)] == [0, 63, 64, 126, 128, 256]
     values = [lock_ms_from_df407(i) for i in range(705)]
-    assert all(b > a for a, b in zip(values, values[1:]))
+    assert all(b > a for a, b in itertools.pairwise(values))
 
 
 def test_corrupt_and_foreign_frames_do_not_raise() -> None:
