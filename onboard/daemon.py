@@ -839,4 +839,6 @@ def run_recorder(settings: Settings, deps: RecorderDeps | None = None) -> int:
     """Run the recorder to completion in a fresh event loop; returns the exit code."""
     if deps is None:
         deps = RecorderDeps(open_port=serial_port_opener(settings), notifier=SdNotifier())
-    return asyncio.run(Recorder(settings, deps).run())
+    from onboard.rtk_service import recorder_for  # the RTK service extends Recorder: import it late
+
+    return asyncio.run(recorder_for(settings, deps, settings.rtk_base_stream or None).run())

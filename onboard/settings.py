@@ -49,6 +49,7 @@ class Settings:
     gpio_pps_pin: int = -1
     gpio_flash_pin: int = -1
     gpio_pin_factory: str = "lgpio"
+    rtk_base_stream: str = ""
 
 
 # TOML key -> Settings field. `receiver.<ReceiverOptions field>` keys are handled separately.
@@ -74,6 +75,7 @@ KEYS: Mapping[str, str] = MappingProxyType(
         "gpio.pps_pin": "gpio_pps_pin",
         "gpio.flash_pin": "gpio_flash_pin",
         "gpio.pin_factory": "gpio_pin_factory",
+        "rtk.base_stream": "rtk_base_stream",
     }
 )
 MODELS = ("auto", "lea6t", "m8t")
@@ -228,6 +230,9 @@ def validate(s: Settings) -> None:
         raise ConfigFileError("receiver.trigger = \"gpio\" needs gpio.trigger_pin and gpio.pps_pin (BCM numbers)")
     if s.gpio_flash_pin >= 0 and s.gpio_pps_pin < 0:
         raise ConfigFileError("gpio.flash_pin needs gpio.pps_pin (BCM number): GPIO edges are timed through PPS")
+    if s.rtk_base_stream and not s.rtk_base_stream.startswith(("serial:", "tcp://", "ntrip://")):
+        raise ConfigFileError(f"rtk.base_stream: expected serial:DEV[@BAUD], tcp://HOST:PORT or "
+                              f"ntrip://[USER:PASS@]HOST[:PORT]/MOUNT, got {s.rtk_base_stream!r}")
     used = [p for p in (s.gpio_trigger_pin if opts.trigger == "gpio" else -1, s.gpio_pps_pin, s.gpio_flash_pin)
             if p >= 0]
     if len(used) != len(set(used)):

@@ -69,6 +69,7 @@ def test_layering_file_env_cli(tmp_path: Path) -> None:
         ("[receiver]\nmodel = 'zed'\n", "receiver.model"),
         ("[receiver]\nmeas_rate_ms = 5\n", "receiver: meas_rate_ms"),
         ("[port\n", "not valid TOML"),
+        ("[rtk]\nbase_stream = '/dev/ttyUSB0'\n", "rtk.base_stream: expected serial:DEV"),
     ],
 )
 def test_bad_files_name_the_key(tmp_path: Path, text: str, match: str) -> None:
@@ -104,3 +105,24 @@ def test_gpio_flash_pin_needs_pps_and_distinct_pins() -> None:
         load_settings(None, environ={"ONBOARD_GPIO_FLASH_PIN": "24", "ONBOARD_GPIO_PPS_PIN": "24"})
     s = load_settings(None, environ={"ONBOARD_GPIO_FLASH_PIN": "25", "ONBOARD_GPIO_PPS_PIN": "24"})
     assert s.gpio_flash_pin == 25 and receiver_options(s).trigger == "extint1"
+
+
+def test_rtk_base_stream_selects_the_real_time_rtk_recorder(tmp_path: Path) -> None:
+    """`rtk.base_stream` (file or ONBOARD_RTK_BASE_STREAM) is what makes the composition root add the RTK service."""
+    import socket
+
+    from onboard.daemon import Recorder, RecorderDeps
+    from onboard.rtk_service import RtkRecorder, recorder_for
+
+    cfg = tmp_path / "r.toml"
+    cfg.write_text("[rtk]\nbase_stream = 'serial:/dev/ttyUSB0@57600'\n")
+    assert load_settings(cfg, environ={}).rtk_base_stream == "serial:/dev/ttyUSB0@57600"
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen(1)
+        stream = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+        s = load_settings(None, environ={"ONBOARD_RTK_BASE_STREAM": stream, "ONBOARD_JOURNAL_DATA_DIR": str(tmp_path)})
+        deps = RecorderDeps(open_port=lambda: None)  # type: ignore[arg-type,return-value]
+        assert type(recorder_for(s, deps, s.rtk_base_stream or None)) is RtkRecorder
+    plain = load_settings(None, environ={"ONBOARD_JOURNAL_DATA_DIR": str(tmp_path)})
+    assert type(recorder_for(plain, deps, plain.rtk_base_stream or None)) is Recorder
