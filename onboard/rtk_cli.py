@@ -93,7 +93,8 @@ def add_rtk_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
     p = subparsers.add_parser("rtk", help="post-process rover + base observations (GPS L1 RTK) into a .pos file",
                               description=__doc__)
     p.add_argument("--rover", required=True, help="rover observations: RINEX 2.11/3.0x obs (gzip ok) or UBX log")
-    p.add_argument("--base", required=True, help="base observations: RINEX obs or UBX log")
+    p.add_argument("--base", required=True,
+                   help="base observations: RINEX obs, UBX log, RTCM3 stream (gzip ok) or a journal folder")
     p.add_argument("--nav", action="append", default=[], help="RINEX navigation file (repeatable)")
     p.add_argument("--base-pos", nargs="+", metavar="X,Y,Z",
                    help="base antenna L1 phase centre, ECEF m: X,Y,Z or X Y Z (use --base-pos=X,Y,Z when X < 0)")
@@ -130,8 +131,11 @@ def rtk_main(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from onboard.rtk_inputs import read_base_observations
+
     rover = read_observations(args.rover)
-    base = read_observations(args.base)
+    # the base may also be an RTCM3 stream or a journal folder (e.g. the rover's radio/ journal)
+    base = read_base_observations(args.base, rover.epochs[0].time if rover.epochs else None)
     nav = read_navigation(args.nav, rover.ephemerides + base.ephemerides)
     if len(nav.store) == 0:
         raise InputError("no GPS ephemeris: give --nav FILE (RINEX navigation) or logs with RXM-SFRB(X)/AID-EPH")
