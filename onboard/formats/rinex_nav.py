@@ -5,12 +5,12 @@ Only GPS records are decoded; other systems' records are skipped by their line c
 
 from __future__ import annotations
 
-import gzip
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from onboard.errors import InputError
+from onboard.formats.textfile import read_text_lines
 from onboard.gnsstime import GpsTime, gpst_from_calendar
 from onboard.rtk.types import Ephemeris
 
@@ -35,19 +35,6 @@ def _num(text: str) -> float:
 
 def _fields(line: str, start: int, count: int = 4, width: int = 19) -> list[float]:
     return [_num(line[start + k * width : start + (k + 1) * width]) for k in range(count)]
-
-
-def _open_text(path: Path) -> list[str]:
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read navigation file {path}: {exc}") from exc
-    if raw[:2] == b"\x1f\x8b":
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError) as exc:
-            raise InputError(f"{path}: corrupt gzip data: {exc}") from exc
-    return raw.decode("ascii", errors="replace").splitlines()
 
 
 def _ephemeris_from_values(prn: int, toc: GpsTime, v: list[float]) -> Ephemeris:
@@ -88,7 +75,7 @@ def ura_index_from_m(sva_m: float) -> int:
 def read_rinex_nav(path: str | Path) -> NavFile:
     """Read a RINEX 2.x (GPS `N`) or 3.x (any, GPS records kept) navigation file, gzip accepted."""
     path = Path(path)
-    lines = _open_text(path)
+    lines = read_text_lines(path, "navigation file")
     if not lines or "RINEX VERSION" not in lines[0]:
         raise InputError(f"{path}: not a RINEX file (no 'RINEX VERSION / TYPE' header line)")
     version = _num(lines[0][:9])

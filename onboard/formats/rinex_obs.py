@@ -9,7 +9,6 @@ are skipped; power-failure epochs (flag 1) are read with every phase flagged as 
 
 from __future__ import annotations
 
-import gzip
 import logging
 import math
 from collections.abc import Iterator
@@ -19,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from onboard.errors import InputError
+from onboard.formats.textfile import read_text_lines
 from onboard.gnsstime import GpsTime, gpst_from_calendar
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.types import (
@@ -87,19 +87,6 @@ class RinexObsFile:
 
     header: RinexObsHeader
     epochs: list[ObsEpoch]
-
-
-def _open_lines(path: Path) -> list[str]:
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read observation file {path}: {exc}") from exc
-    if raw[:2] == b"\x1f\x8b":
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError) as exc:
-            raise InputError(f"{path}: corrupt gzip data: {exc}") from exc
-    return raw.decode("ascii", errors="replace").splitlines()
 
 
 def _float(text: str) -> float:
@@ -314,7 +301,7 @@ def read_rinex_obs(path: str | Path) -> RinexObsFile:
     Raises `InputError` naming the file and line for anything unreadable.
     """
     path = Path(path)
-    lines = _open_lines(path)
+    lines = read_text_lines(path, "observation file")
     hdr, start = _parse_header(path, lines)
     if hdr.version >= 3.0:
         epochs = list(_iter_v3(path, lines, start, hdr))
