@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from onboard.errors import ConfigFileError
+from onboard.settings import add_recorder_arguments
 
 log = logging.getLogger("onboard")
 
@@ -24,12 +25,8 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
     p = subparsers.add_parser("run", help="record: the onboard recorder daemon",
                               description="Record every byte from the receiver into a crash-safe journal, "
                                           "configure and monitor the receiver, write a status snapshot.")
-    p.add_argument("--config", type=Path, help="TOML configuration file (see onboard/default_config.toml)")
     p.add_argument("--port", help="receiver serial device (overrides port.device)")
-    p.add_argument("--baud", type=int, help="line rate to open the port at (overrides port.baud)")
-    p.add_argument("--data-dir", type=Path, help="where flights are recorded (overrides journal.data_dir)")
-    p.add_argument("--status", type=Path, help="status snapshot JSON path (overrides status.path)")
-    p.add_argument("--no-configure", action="store_true", help="record only; never configure the receiver")
+    add_recorder_arguments(p)
     p.set_defaults(func=_run)
     return p
 

@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
+
+from onboard.settings import add_recorder_arguments
 
 
 def _xyz(text: str) -> tuple[float, float, float]:
@@ -35,11 +36,7 @@ def add_base_parser(subparsers: argparse._SubParsersAction) -> argparse.Argument
     p.add_argument("--budget", type=float, default=600.0, help="radio byte budget, B/s (default 600)")
     p.add_argument("--obs-interval", type=float, default=1.0, help="send observations every S s (default 1)")
     p.add_argument("--relay", choices=("rtcm", "ubx"), default="rtcm", help="RTCM3 (default) or raw UBX relay")
-    p.add_argument("--config", type=Path, help="TOML configuration file (as for `run`)")
-    p.add_argument("--baud", type=int, help="receiver line rate to open at (overrides port.baud)")
-    p.add_argument("--data-dir", type=Path, help="where the base journal is recorded")
-    p.add_argument("--status", type=Path, help="status snapshot JSON path")
-    p.add_argument("--no-configure", action="store_true", help="record only; never configure the receiver")
+    add_recorder_arguments(p)
     p.set_defaults(func=base_main)
     return p
 

@@ -246,3 +246,13 @@ def receiver_options(s: Settings) -> Any:
     opts = dict(s.receiver_options)
     opts.setdefault("baud", s.port_baud)
     return ReceiverOptions(**opts)
+
+
+def add_recorder_arguments(parser: Any) -> None:
+    """The command-line overrides shared by every recorder command (`run`, `base`): config file, line rate,
+    data folder, status path, and recording without configuring the receiver."""
+    parser.add_argument("--config", type=Path, help="TOML configuration file (see onboard/default_config.toml)")
+    parser.add_argument("--baud", type=int, help="line rate to open the port at (overrides port.baud)")
+    parser.add_argument("--data-dir", type=Path, help="where flights are recorded (overrides journal.data_dir)")
+    parser.add_argument("--status", type=Path, help="status snapshot JSON path (overrides status.path)")
+    parser.add_argument("--no-configure", action="store_true", help="record only; never configure the receiver")
