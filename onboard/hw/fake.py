@@ -5,11 +5,11 @@ They ship in the package (not in tests) so every area and the simulator can pass
 
 from __future__ import annotations
 
-import collections
 import threading
 import time
 
 from onboard.errors import LinkLost
+from onboard.hw.edge_queue import EdgeQueue
 from onboard.hw.ports import Edge
 
 
@@ -105,29 +105,21 @@ class FakeEdgeSource:
     """An EdgeSource fed by the test (`push`)."""
 
     def __init__(self) -> None:
-        self._edges: collections.deque[Edge] = collections.deque()
-        self._cond = threading.Condition()
-        self.closed = False
+        self._queue = EdgeQueue()
+
+    @property
+    def closed(self) -> bool:
+        """True after `close`."""
+        return self._queue.closed
 
     def push(self, edge: Edge) -> None:
         """Queue an edge."""
-        with self._cond:
-            self._edges.append(edge)
-            self._cond.notify_all()
+        self._queue.put(edge)
 
     def get(self, timeout_s: float) -> Edge | None:
         """The next queued edge, waiting up to `timeout_s`; None on timeout or after close."""
-        deadline = time.monotonic() + timeout_s
-        with self._cond:
-            while not self._edges:
-                left = deadline - time.monotonic()
-                if left <= 0 or self.closed:
-                    return None
-                self._cond.wait(left)
-            return self._edges.popleft()
+        return self._queue.get(timeout_s)
 
     def close(self) -> None:
         """Stop delivering edges."""
-        with self._cond:
-            self.closed = True
-            self._cond.notify_all()
+        self._queue.close()

@@ -7,14 +7,12 @@ the device's last-change tick inside the callback, because gpiozero callbacks ge
 
 from __future__ import annotations
 
-import collections
 import logging
-import threading
-import time
 from typing import Any
 
 from gpiozero import DigitalInputDevice
 
+from onboard.hw.edge_queue import EdgeQueue
 from onboard.hw.ports import Edge
 
 log = logging.getLogger(__name__)
@@ -53,11 +51,7 @@ class GpioEdgeSource:
         # gpiozero reports "active" = low when the internal pull-up is on; edges are about the level.
         self._active_high = pull_up is not True
         self._device = DigitalInputDevice(pin, pull_up=pull_up, active_state=active_state, pin_factory=pin_factory)
-        self._edges: collections.deque[Edge] = collections.deque()
-        self._max_queue = max_queue
-        self._cond = threading.Condition()
-        self.dropped = 0
-        self.closed = False
+        self._queue = EdgeQueue(max_queue)
         self._device.when_activated = lambda: self._on_edge(True)
         self._device.when_deactivated = lambda: self._on_edge(False)
 
@@ -65,28 +59,23 @@ class GpioEdgeSource:
         # `_last_changed` is set by gpiozero to the event's tick just before this callback fires.
         ticks_s = float(self._device._last_changed)
         rising = active if self._active_high else not active
-        edge = Edge(self.line, rising, round(ticks_s * 1e9))
-        with self._cond:
-            if len(self._edges) >= self._max_queue:
-                self._edges.popleft()
-                self.dropped += 1
-            self._edges.append(edge)
-            self._cond.notify_all()
+        self._queue.put(Edge(self.line, rising, round(ticks_s * 1e9)))
+
+    @property
+    def dropped(self) -> int:
+        """Edges dropped because nobody read them (the queue was full)."""
+        return self._queue.dropped
+
+    @property
+    def closed(self) -> bool:
+        """True after `close`."""
+        return self._queue.closed
 
     def get(self, timeout_s: float) -> Edge | None:
         """The next edge in order, waiting up to `timeout_s`; None on timeout or after close."""
-        deadline = time.monotonic() + timeout_s
-        with self._cond:
-            while not self._edges:
-                left = deadline - time.monotonic()
-                if left <= 0 or self.closed:
-                    return None
-                self._cond.wait(left)
-            return self._edges.popleft()
+        return self._queue.get(timeout_s)
 
     def close(self) -> None:
         """Release the pin and wake any waiting reader."""
         self._device.close()
-        with self._cond:
-            self.closed = True
-            self._cond.notify_all()
+        self._queue.close()
