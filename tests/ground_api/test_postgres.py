@@ -16,13 +16,11 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-import httpx
 import pytest
 
 from ground.api.settings import ApiSettings
-from onboard.uploader import Uploader, UploaderOptions, UploadError
 from tests.ground_api.conftest import TOKEN, start_server
-from tests.ground_api.test_api import _create, _flight_folder, _put, _sha, _Unplug
+from tests.ground_api.test_api import _create, _flight_folder, _put, _sha, interrupt_upload, resume_upload
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -87,27 +85,10 @@ def test_interrupted_upload_resumes_on_postgresql(postgres_url: str, tmp_path: P
                            max_chunk_bytes=64 * 1024, max_file_bytes=4 * 1024 * 1024,
                            max_flight_bytes=16 * 1024 * 1024)
     folder = _flight_folder(tmp_path / "onboard")
-    opts = UploaderOptions(chunk_bytes=50_000, max_retries=2, backoff_initial_s=0.0)
+    interrupt_upload(settings, folder)
     srv = start_server(settings)
     try:
-        client = httpx.Client(base_url=srv.url, transport=_Unplug(3), timeout=30)
-        up = Uploader(srv.url, TOKEN, opts, client=client, sleep=lambda s: None)
-        with pytest.raises(UploadError, match="failed after 3 attempts"):
-            up.upload_flight(folder)
-        up.close()
-    finally:
-        srv.stop()
-    srv = start_server(settings)
-    try:
-        with srv.client() as c:
-            assert c.get("/flights").json()[0]["bytes_received"] == 64 + 100_000
-        up = Uploader(srv.url, TOKEN, opts, sleep=lambda s: None)
-        rep = up.upload_flight(folder)
-        up.close()
-        total = sum(p.stat().st_size for p in folder.iterdir())
-        assert rep.bytes_sent == total - 100_064
-        for p in folder.iterdir():
-            assert (settings.flights_dir / rep.flight_id / p.name).read_bytes() == p.read_bytes(), p.name
+        rep = resume_upload(srv, settings, folder)
         with srv.client() as c:  # a corrupted chunk: 422, not stored, the offset stays
             data = os.urandom(30_000)
             fid = _create(c, {"b.ubx": data}, name="flight-corrupt")["id"]
