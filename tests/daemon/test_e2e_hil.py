@@ -64,6 +64,21 @@ def start_daemon(tmp_path: Path, port: str | Path) -> tuple[subprocess.Popen[byt
     return proc, data_dir, status_path
 
 
+def stop_cleanly(proc: subprocess.Popen[bytes]) -> None:
+    """SIGTERM the daemon and require a clean exit (0), showing its output when it is not."""
+    proc.send_signal(signal.SIGTERM)
+    out, _ = proc.communicate(timeout=30)
+    assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
+
+
+def kill_leftovers(proc: subprocess.Popen[bytes], emu: ReceiverEmulator) -> None:
+    """After a test, whatever happened: no daemon left running, the emulator stopped."""
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
+    emu.stop()
+
+
 @pytest.mark.parametrize("model", ["lea6t", "m8t"])
 def test_daemon_against_emulator(tmp_path: Path, model: str) -> None:
     scenario = hil_scenario.Scenario.default(
@@ -82,15 +97,10 @@ def test_daemon_against_emulator(tmp_path: Path, model: str) -> None:
         assert st["config_state"] == "verified", st["config_error"]
         configured_at = emu.sim_time()
         wait_until(lambda: emu.sim_time().diff_s(configured_at) > RECORD_SIM_S, timeout_s=60, what="recording")
-        proc.send_signal(signal.SIGTERM)
-        out, _ = proc.communicate(timeout=30)
-        assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
+        stop_cleanly(proc)
         end = emu.sim_time()
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        emu.stop()
+        kill_leftovers(proc, emu)
     assert emu.error is None
 
     # --- configuration verified by poll-back, receiver identified
@@ -176,14 +186,9 @@ def test_port_disappears_and_returns_configuration_reapplied(tmp_path: Path) -> 
                    and s.get("config_state") == "verified", timeout_s=60, what="reconnect and re-configuration")
         back_at = emu.sim_time()
         wait_until(lambda: emu.sim_time().diff_s(back_at) > 10.0, timeout_s=30, what="recording after return")
-        proc.send_signal(signal.SIGTERM)
-        out, _ = proc.communicate(timeout=30)
-        assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
+        stop_cleanly(proc)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        emu.stop()
+        kill_leftovers(proc, emu)
     assert emu.reopen_count >= 1
     flights = list(data_dir.glob("flight-*"))
     assert len(flights) == 1
@@ -215,14 +220,9 @@ def test_silent_receiver_every_byte_recorded_status_names_the_problem(tmp_path: 
         emu.stop()  # the receiver goes away: nothing more is sent
         wait_until(lambda: status(status_path).get("state") == "port_lost", timeout_s=30, what="port lost")
         sent_total = emu.bytes_out
-        proc.send_signal(signal.SIGTERM)
-        out, _ = proc.communicate(timeout=30)
-        assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
+        stop_cleanly(proc)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        emu.stop()
+        kill_leftovers(proc, emu)
     assert emu.port.tx_overrun_bytes == 0
     flight = next(data_dir.glob("flight-*"))
     recorded = b"".join(iter_journal_bytes(flight))
@@ -251,15 +251,10 @@ def test_lost_flash_reports_flagged_as_missed_flashes_end_to_end(tmp_path: Path)
         wait_until(lambda: status(status_path).get("config_state") == "verified", timeout_s=60, what="configuration")
         configured_at = emu.sim_time()
         wait_until(lambda: emu.sim_time().diff_s(configured_at) > 36.0, timeout_s=60, what="recording")
-        proc.send_signal(signal.SIGTERM)
-        out, _ = proc.communicate(timeout=30)
-        assert proc.returncode == 0, out.decode(errors="replace")[-3000:]
+        stop_cleanly(proc)
         end = emu.sim_time()
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        emu.stop()
+        kill_leftovers(proc, emu)
     assert emu.error is None
     flight = next(data_dir.glob("flight-*"))
     _marks, pairings, _ = parse_records(read_events(flight / "events.jsonl").records)
