@@ -39,6 +39,13 @@ class RtkOptions:
     min_success_rate_minimal_set: float = 0.999
     """Success rate a fix resting on the bare minimum of double differences (`min_amb_dd`, nothing held)
     needs, besides twice the ratio."""
+    strict_partial_drop_sats: int = 4
+    """A first fix (nothing held) found after partial AR has dropped this many satellites needs the
+    minimal-set gates too (twice the ratio, min_success_rate_minimal_set): every drop is one more integer
+    set tried on the same biased float, and the survivor rests on the satellites that happened to fit. M8P
+    processed backward (or forward from its last 150 s): float 0.78 m off (σ ≈ 0.2 m per axis, code
+    multipath), full set ratio 2.6, the set left after 4 drops won 10 s at ratio 3.5, success rate 0.994,
+    and was 0.69 m wrong. 2 or 3 here cost M8P forward 3 points."""
     min_lock_epochs: int = 1
     """A satellite joins AR once its phase has been tracked for more than this many epochs: a fix needs the
     float to have seen the phase at least twice, never a single epoch of code (the Septentrio rover of

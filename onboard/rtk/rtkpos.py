@@ -472,7 +472,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         best_ratio = max(best_ratio, ratio)
         # a fix resting on the bare minimum of double differences (no held set to lean on) must be
         # nearly certain: a stricter success rate and twice the ratio
-        strict = idx.size - 1 <= o.min_amb_dd and not st.held_prns.any()
+        strict = (idx.size - 1 <= o.min_amb_dd or _drop >= o.strict_partial_drop_sats) and not st.held_prns.any()
         need_ratio = o.ratio_threshold * (2.0 if strict else 1.0)
         need_sr = max(o.min_success_rate, o.min_success_rate_minimal_set) if strict else o.min_success_rate
         accept = False
