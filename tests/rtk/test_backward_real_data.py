@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from onboard.formats.rinex_nav import read_rinex_nav
 from onboard.formats.rinex_obs import read_rinex_obs
@@ -33,11 +32,11 @@ def test_backward_pass_from_the_end_of_the_m8p_glw1_run_never_fixes_wrong():
     assert max(err) <= 0.10, err
 
 
-@pytest.mark.xfail(strict=True, reason="engine: the M8P rover processed backward with the M8P base settles (about "
-                   "120 s in, float biased by code multipath) on an integer set 51 cm off that wins 10 s of ratio "
-                   "tests and is then held for ~450 epochs; the hold's residual check does not see it (static, slow "
-                   "geometry change). Combined mode rejects these epochs (0 wrong, but 1.7 % fixed).")
 def test_backward_pass_over_the_m8p_static_run_never_fixes_wrong():
+    """Processed backward, the M8P run starts on its hardest minutes (float 0.78 m off with σ ≈ 0.2 m per axis
+    from code multipath): the integer set left after partial AR dropped 4 of 10 satellites won 10 s of ratio
+    tests (3.5, success rate 0.994) and was 0.69 m wrong, then held for ~450 epochs. Such a first fix now needs
+    the minimal-set gates; the pass fixes right once the float has converged."""
     d = "gnss/ublox-m8p-galway-2018/"
     rover = read_rinex_obs(shared_file(d + "rinex/rover-20181004-1237.obs.gz")).epochs
     base = read_rinex_obs(shared_file(d + "rinex/base-20181004-1236.rtcm.obs.gz"))
@@ -45,5 +44,6 @@ def test_backward_pass_over_the_m8p_static_run_never_fixes_wrong():
     nav = Nav(EphemerisStore(f.ephemerides), (f.iono_alpha, f.iono_beta))
     sols, _ = postprocess(rover, base.epochs, nav, base.header.antenna_position_ecef_m(), RtkOptions(), "backward")
     ref = np.array([3774088.9931, -601661.8217, 5089321.3853])  # dataset README, M8P-base-based
-    err = [float(np.linalg.norm(s.pos_ecef_m - ref)) for s in sols if s.q == Q_FIX]
-    assert max(err, default=0.0) <= 0.10
+    err = np.array([float(np.linalg.norm(s.pos_ecef_m - ref)) for s in sols if s.q == Q_FIX])
+    assert len(err) >= 0.75 * len(sols)  # 79 % fixed
+    assert err.max() <= 0.10
