@@ -88,9 +88,11 @@ def run_filter(rover: Sequence[ObsEpoch], paired_base: Sequence[ObsEpoch | None]
                ) -> tuple[list[Solution], RunStats]:
     """One filter pass over all rover epochs (in time order, or reversed when `backward`).
 
-    Returns the solutions in time order (index-aligned with `rover`) and run statistics.
+    Returns the solutions in time order (index-aligned with `rover`) and run statistics. The known take-off
+    point and the static start describe the first epoch in time: a backward pass starts at the last one, so it
+    gets neither.
     """
-    st = rtk_init(options, None if backward else init_pos_ecef_m)
+    st = rtk_init(replace(options, static_start=False), None) if backward else rtk_init(options, init_pos_ecef_m)
     order = range(len(rover) - 1, -1, -1) if backward else range(len(rover))
     if backward:
         rover = reverse_slip_flags(rover)

@@ -108,6 +108,25 @@ def test_combined_run_on_m8p_with_the_lossy_rtcm_base_fixes_more_than_forward_an
     assert out["combined"] >= 0.97 and out["combined"] >= out["forward"] + 0.03  # 98.8 % vs 94.2 %
 
 
+def test_known_take_off_point_and_static_start_only_shape_the_forward_pass():
+    """They describe the first epoch in time; the backward pass starts at the last one."""
+    d = "gnss/geonet-0759-3040-20050402/"
+    f = read_rinex_nav(shared_file(d + "07590920.05n.gz"))
+    rov = read_rinex_obs(shared_file(d + "07590920.05o.gz")).epochs
+    bas = read_rinex_obs(shared_file(d + "30400920.05o.gz")).epochs
+    nav = Nav(EphemerisStore(f.ephemerides), (f.iono_alpha, f.iono_beta))
+    base_pos = np.array([-3978241.958, 3382840.234, 3649900.853])
+    known = np.array([-3976219.1873, 3382371.6051, 3652511.1423])
+    start = RtkOptions(static_start=True)
+    plain, _ = postprocess(rov, bas, nav, base_pos, RtkOptions(), "backward")
+    seeded, _ = postprocess(rov, bas, nav, base_pos, start, "backward", known)
+    assert all(np.array_equal(a.pos_ecef_m, b.pos_ecef_m) and a.q == b.q for a, b in zip(plain, seeded, strict=True))
+    fwd, _ = postprocess(rov, bas, nav, base_pos, start, "forward", known)
+    assert fwd[0].q == Q_FIX  # the known point fixes the first epoch
+    comb, _ = postprocess(rov, bas, nav, base_pos, start, "combined", known)
+    assert comb[0].q == Q_FIX
+
+
 def test_unknown_direction_is_refused():
     with pytest.raises(ValueError, match="direction"):
         postprocess([], [], Nav(EphemerisStore()), None, RtkOptions(), "sideways")
