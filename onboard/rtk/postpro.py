@@ -28,6 +28,7 @@ COMBINE_FIX_AGREEMENT_M = 0.05
 """Forward and backward fixes further apart than this (3D, m) are not reported as fixed. A float whose 3D σ
 is below it (a state just released from a hold) takes part in the test as a fix would."""
 
+
 def pair_epochs(rover: Sequence[ObsEpoch], base: Sequence[ObsEpoch], tolerance_s: float = 0.025,
                 max_age_s: float = 30.0) -> list[ObsEpoch | None]:
     """For each rover epoch, the latest base epoch with t_base ≤ t_rover + tolerance (None when none or
@@ -132,6 +133,7 @@ def _precise(sol: Solution) -> bool:
 
 
 def _combined(fwd: Solution, bwd: Solution, q: int, pos: Arr, cov: Arr, ratio: float) -> Solution:
+    """The epoch's combined solution: position/covariance (ECEF m, m²) and quality given, the rest from fwd."""
     return Solution(fwd.time, pos, fwd.vel_ecef_m_s, q, max(fwd.ns, bwd.ns), cov, fwd.cov_vel_m2_s2, fwd.age_s,
                     ratio)
 
