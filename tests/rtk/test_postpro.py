@@ -127,6 +127,24 @@ def test_known_take_off_point_and_static_start_only_shape_the_forward_pass():
     assert comb[0].q == Q_FIX
 
 
+def test_onboard_rtk_combined_end_to_end_on_geonet(tmp_path, capsys):
+    """`python -m onboard rtk --direction combined` writes the combined track (both passes run)."""
+    from onboard.formats.pos import read_pos
+    from onboard.rtk_cli import main
+
+    d = "gnss/geonet-0759-3040-20050402/"
+    out = tmp_path / "c.pos"
+    rc = main(["rtk", "--rover", str(shared_file(d + "07590920.05o.gz")), "--base", str(shared_file(d + "30400920.05o.gz")),
+               "--nav", str(shared_file(d + "07590920.05n.gz")), "--base-pos", "-3978241.958", "3382840.234",
+               "3649900.853", "--direction", "combined", "-o", str(out)])
+    assert rc == 0
+    assert "combined" in capsys.readouterr().out
+    track = read_pos(out)
+    assert len(track.q) == 120 and np.mean(track.q == 1) >= 0.94  # 95 %: forward alone 92.5 %
+    ref = np.array([-3976219.1873, 3382371.6051, 3652511.1423])
+    assert np.linalg.norm(track.pos_ecef_m[track.q == 1] - ref, axis=1).max() < 0.03
+
+
 def test_unknown_direction_is_refused():
     with pytest.raises(ValueError, match="direction"):
         postprocess([], [], Nav(EphemerisStore()), None, RtkOptions(), "sideways")
