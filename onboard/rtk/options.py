@@ -71,14 +71,15 @@ class RtkOptions:
     use_doppler: bool = True
     initial_bias_sigma_cyc: float = 30.0 / 0.19029367279836487
     bias_process_noise_cyc: float = 1e-4
-    bias_process_noise_cyc_per_km: float = 1.5e-3
+    bias_process_noise_cyc_per_km: float = 0.5e-3
     """Ambiguity random walk per km of baseline (cycles/√s/km), added to bias_process_noise_cyc in quadrature:
     L1 double differences drift with the differential ionosphere/troposphere, which grows with the baseline.
-    GEONET 3034/Septentrio (5.3 km): the phase at the reference trajectory wanders 0.0053 cycle/√s (0.1 cycle in
-    5 min); modelled as white noise, that drift read through the slow satellite motion put the float 0.3-0.5 m
-    off with a 4-10 cm σ (no fix in 360 epochs); 1.0e-3 gives 20 % fixed, 1.5e-3 (0.008 cycle/√s there) 57 %.
-    GEONET 0759/3040 (3.3 km, 2005) wanders only 0.0009 cycle/√s: this over-covers it (forward unchanged,
-    backward pass 92.5 → 90.8 %). At ≤ 1 km (u-blox sets, hil_sim) it stays near the floor."""
+    Measured at the reference coordinates: GEONET 3034/Septentrio (5.3 km, 2021) 0.0053 cycle/√s (1.0e-3/km),
+    GEONET 0759/3040 (3.3 km, 2005) 0.0009 (0.3e-3/km). Modelled as white noise (0 here), that drift read
+    through the slow satellite motion put the Septentrio float 0.3-0.5 m off with a 4-10 cm σ: no fix in 360
+    epochs. More is not free: it hands the float to the code, whose u-blox multipath is correlated (hil_sim at
+    5 km, main 79 % fixed: 81 % with 0.3-0.6e-3, 0 % with ≥ 1e-3/km, float 2 m off). Septentrio fixed with
+    0.3/0.4/0.5/0.6/1.0/1.5/2.0e-3: 28/21/31/30/21/57/58 % (0 wrong each; the AR gates make it lumpy)."""
     accel_h_sigma_m_s2: float = 3.0
     accel_v_sigma_m_s2: float = 1.0
     initial_pos_sigma_m: float = 30.0
