@@ -5,6 +5,8 @@ Follows RTKLIB rtkcmn.c tropmodel() / ionmodel() and rtkpos.c varerr() (vectoris
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 import numpy.typing as npt
 
@@ -65,3 +67,51 @@ def phase_variance_m2(el_rad: Arr, a_m: float, b_m: float) -> Arr:
     """Zero-difference carrier-phase variance (m²): (a² + b²/sin²el), RTKLIB varerr() without the factor 2."""
     s = np.sin(np.maximum(np.asarray(el_rad, float), np.radians(1.0)))
     return a_m * a_m + (b_m * b_m) / (s * s)
+
+
+CHI2_1DOF_MEDIAN = 0.4549
+"""Median of a χ²(1) variable: a robust mean of squared normalised Gaussian deviations is median / this."""
+
+
+@dataclass
+class CodeScatter:
+    """Running estimate of how noisy the code really is against its model, from code minus carrier.
+
+    Single-differenced (rover − base) code minus carrier, per satellite, is free of geometry, clocks and
+    troposphere: along a phase arc it is code noise and multipath plus a constant (the ambiguity) and a slow
+    ionospheric divergence. Its scatter about an exponentially weighted arc mean (`arc_time_s`), divided by
+    the modelled single-difference code variance, is averaged over satellites (median, robust to a code
+    outlier or an undetected slip) and over time (`window_s`). Pure.
+    """
+
+    arc_time_s: float = 60.0
+    window_s: float = 120.0
+    mean_m: Arr = field(default_factory=lambda: np.full(32, np.nan))
+    count: Arr = field(default_factory=lambda: np.zeros(32))
+    ratio: float = float("nan")
+    """Smoothed mean of (deviation² / modelled variance); NaN until `epochs` ≥ 1."""
+    epochs: int = 0
+
+    def update(self, cmc_m: Arr, model_var_m2: Arr, ok: npt.NDArray[np.bool_],
+               restart: npt.NDArray[np.bool_], dt_s: float) -> None:
+        """Add one epoch: `cmc_m` SD code − λ·phase per slot (m), `model_var_m2` the SD code variance the
+        filter uses, `ok` slots with both, `restart` slots whose phase arc starts afresh (slip, gap)."""
+        self.mean_m[restart | ~ok] = np.nan
+        self.count[restart | ~ok] = 0.0
+        fresh = ok & ~np.isfinite(self.mean_m)
+        self.mean_m[fresh] = cmc_m[fresh]
+        self.count[fresh] = 1.0
+        old = ok & ~fresh & (self.count >= 5)  # the arc mean has settled enough to measure against
+        w_time = min(1.0, abs(dt_s) / self.arc_time_s) if dt_s else 1.0 / self.arc_time_s
+        upd = ok & ~fresh
+        w = np.maximum(1.0 / (self.count[upd] + 1.0), w_time)
+        dev = cmc_m - self.mean_m
+        if old.sum() >= 3:
+            # deviation from a mean of n samples has variance σ²(1 + w) for weight w
+            wo = np.maximum(1.0 / (self.count[old] + 1.0), w_time)
+            r = float(np.median(dev[old] ** 2 / (model_var_m2[old] * (1.0 + wo)))) / CHI2_1DOF_MEDIAN
+            a = max(1.0 / (self.epochs + 1), min(1.0, abs(dt_s) / self.window_s) if dt_s else 0.0)
+            self.ratio = r if self.epochs == 0 else self.ratio + a * (r - self.ratio)
+            self.epochs += 1
+        self.mean_m[upd] += w * dev[upd]
+        self.count[upd] += 1.0

@@ -62,10 +62,31 @@ class RtkOptions:
     phase_sigma_a_m: float = 0.003
     phase_sigma_b_m: float = 0.003
     code_phase_ratio: float = 300.0
+    code_scatter_reference: float = 0.1
+    """Single-differenced code-minus-carrier scatter (its variance over the modelled code variance, white part)
+    at and above which code_phase_ratio holds; code scattering less gets proportionally less variance (0
+    disables). I.e. the code variance is kept at ≥ 10× the measured white scatter, for multipath correlated
+    over tens of seconds. Measured with the defaults: u-blox M8P/M8P 0.10-0.25, M8P/GLW1 0.06-0.15, hil_sim
+    0.3-0.5 (all left as they were), GEONET Trimble/Trimble 0.011, Septentrio/Trimble 0.019 (scaled to ~0.2,
+    a code/phase ratio of ~130). Septentrio fix ratio with 0.05/0.07/0.1/0.15: 19/21/57/43 %, 0 wrong."""
+    code_variance_min_scale: float = 1.0 / 9.0
+    """Floor of that variance factor: the code keeps at least (code_phase_ratio / 3) × the phase σ
+    (RTKLIB 2.4.3's ratio of 100), since its multipath is correlated in time and does not average out."""
+    code_scatter_min_epochs: int = 30
+    """Epochs of code-minus-carrier statistics before the code variance is scaled (starts as modelled)."""
     doppler_sigma_m_s: float = 0.1
     use_doppler: bool = True
     initial_bias_sigma_cyc: float = 30.0 / 0.19029367279836487
     bias_process_noise_cyc: float = 1e-4
+    bias_process_noise_cyc_per_km: float = 0.5e-3
+    """Ambiguity random walk per km of baseline (cycles/√s/km), added to bias_process_noise_cyc in quadrature:
+    L1 double differences drift with the differential ionosphere/troposphere, which grows with the baseline.
+    Measured at the reference coordinates: GEONET 3034/Septentrio (5.3 km, 2021) 0.0053 cycle/√s (1.0e-3/km),
+    GEONET 0759/3040 (3.3 km, 2005) 0.0009 (0.3e-3/km). Modelled as white noise (0 here), that drift read
+    through the slow satellite motion put the Septentrio float 0.3-0.5 m off with a 4-10 cm σ: no fix in 360
+    epochs. More is not free: it hands the float to the code, whose u-blox multipath is correlated (hil_sim at
+    5 km, main 79 % fixed: 81 % with 0.3-0.6e-3, 0 % with ≥ 1e-3/km, float 2 m off). Septentrio fixed with
+    0.3/0.4/0.5/0.6/1.0/1.5/2.0e-3: 28/21/31/30/21/57/58 % (0 wrong each; the AR gates make it lumpy)."""
     accel_h_sigma_m_s2: float = 3.0
     accel_v_sigma_m_s2: float = 1.0
     initial_pos_sigma_m: float = 30.0

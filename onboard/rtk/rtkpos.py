@@ -27,7 +27,7 @@ from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
 from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.mlambda import LambdaError, mlambda
-from onboard.rtk.models import phase_variance_m2, saastamoinen_m
+from onboard.rtk.models import CodeScatter, phase_variance_m2, saastamoinen_m
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.pntpos import pntpos, sat_az_el
 from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP, Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, ObsEpoch, Solution
@@ -102,6 +102,9 @@ class RtkState:
     pending_fix: tuple[tuple, GpsTime] | None = None
     pending_slip: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
     """Rover slips detected while no base data was usable, applied at the next relative epoch."""
+    code_scatter: CodeScatter = field(default_factory=CodeScatter)
+    code_var_scale: float = 1.0
+    """Factor on the modelled code variance from the measured code scatter (see code_variance_scale)."""
     """Integer set (ref, slots, DD integers) winning the ratio test below the success rate, and since when."""
 
 
@@ -188,8 +191,9 @@ def _process_noise(st: RtkState, dt: float, pos: Arr) -> Arr:
     return q
 
 
-def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr) -> None:
-    """Time update of position/velocity (RTKLIB udpos with dynamics) and ambiguity noise."""
+def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr | None = None) -> None:
+    """Time update of position/velocity (RTKLIB udpos with dynamics) and ambiguity noise (random walk,
+    growing with the baseline to `base_pos` ECEF m, see RtkOptions.bias_process_noise_cyc_per_km)."""
     o = st.options
     if not st.initialized:
         st.x[:] = 0.0
@@ -223,7 +227,18 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr) -> None:
         st.p[:3, :3] = np.eye(3) * o.initial_pos_sigma_m**2
     amb = np.arange(NX0, NX)
     active = st.p[amb, amb] > 0
-    st.p[amb[active], amb[active]] += o.bias_process_noise_cyc**2 * abs(dt)
+    st.p[amb[active], amb[active]] += bias_process_noise_cyc2_s(o, st.x[:3], base_pos) * abs(dt)
+
+
+def bias_process_noise_cyc2_s(o: RtkOptions, rover_pos: Arr, base_pos: Arr | None) -> float:
+    """Spectral density (cycles²/s) of the SD ambiguity random walk: a floor plus a part proportional to the
+    baseline (km), which stands for the differential ionosphere/troposphere drifting the L1 phase over minutes
+    (RTKLIB udion scales its ionosphere process noise with the baseline the same way)."""
+    q = o.bias_process_noise_cyc**2
+    if base_pos is None or o.bias_process_noise_cyc_per_km <= 0.0:
+        return q
+    bl_km = float(np.linalg.norm(np.asarray(rover_pos, float) - np.asarray(base_pos, float))) / 1000.0
+    return q + (o.bias_process_noise_cyc_per_km * bl_km) ** 2
 
 
 def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t_r: GpsTime,
@@ -324,6 +339,28 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
         st.lock[~valid_phase] = 0
 
 
+def code_variance_scale(st: RtkState, rov: _Receiver, base: _Receiver, phase_ok: npt.NDArray[np.bool_],
+                        slip: npt.NDArray[np.bool_], el: Arr, dt: float) -> float:
+    """Factor (≤ 1) on the modelled code variance, from the single-differenced code-minus-carrier scatter.
+
+    `code_phase_ratio` is set for u-blox code, whose multipath is correlated over tens of seconds; geodetic
+    receivers (GEONET Trimble, Septentrio) scatter an order of magnitude less, and weighting their code as
+    u-blox code leaves the float to the slow geometry change of the phase, which centimetres of differential
+    ionosphere or multipath bias by decimetres. Receivers scattering less than `code_scatter_reference` get
+    proportionally less code variance, never below `code_variance_min_scale`.
+    """
+    o = st.options
+    cmc = (rov.pr_m - base.pr_m) - LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc)
+    ok = phase_ok & np.isfinite(cmc)
+    var_code = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m) * o.code_phase_ratio**2
+    with np.errstate(invalid="ignore"):
+        st.code_scatter.update(np.where(ok, cmc, 0.0), var_code, ok, slip, dt)
+    cs = st.code_scatter
+    if o.code_scatter_reference <= 0.0 or cs.epochs < o.code_scatter_min_epochs or not np.isfinite(cs.ratio):
+        return 1.0
+    return float(np.clip(cs.ratio / o.code_scatter_reference, o.code_variance_min_scale, 1.0))
+
+
 def _dd_matrix(idx: npt.NDArray[np.int64], ref: int) -> Arr:
     """Rows i − ref over the slots `idx` (ref excluded): shape (len(idx)−1, len(idx))."""
     others = [j for j in range(len(idx)) if idx[j] != ref]
@@ -371,7 +408,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
             var = var_sd
         else:
             z = (rov.pr_m - base.pr_m) - (rng_r - rng_b)
-            var = var_sd * o.code_phase_ratio**2
+            var = var_sd * o.code_phase_ratio**2 * st.code_var_scale
         others = idx[idx != ref]
         v = z[others] - z[ref]
         h = np.zeros((others.size, NX))
@@ -583,7 +620,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     base_pos = np.asarray(base_pos_ecef_m, float)
 
     dt = rover.time.diff_s(st.time) if st.time is not None else 0.0
-    _udstate(st, dt, spp.pos_ecef_m, spp.vel_ecef_m_s)
+    _udstate(st, dt, spp.pos_ecef_m, spp.vel_ecef_m_s, base_pos)
 
     rng_b, _, _, _ = _model_range_m(bas, base_pos)
     rng_r, _, _, el_r = _model_range_m(rov, st.x[:3])
@@ -604,6 +641,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         slip |= st.pending_slip & phase_ok
         st.pending_slip[:] = False
     _udbias(st, rov, bas, rng_r, rng_b, phase_ok, slip)
+    st.code_var_scale = code_variance_scale(st, rov, bas, phase_ok, slip, el, dt)
 
     # remember raw data for next epoch's slip tests
     _remember_rover(st, rov, rover.time)
