@@ -467,6 +467,40 @@ def _kf_update(x: Arr, p: Arr, v: Arr, h: Arr, r: Arr) -> tuple[Arr, Arr]:
     return x, p
 
 
+def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver, bas: _Receiver, rng_b: Arr,
+                       use_phase: npt.NDArray[np.bool_], code_ok: npt.NDArray[np.bool_], el: Arr,
+                       trop_r: Arr, suspects: npt.NDArray[np.int64]) -> tuple[int, tuple[Arr, Arr]]:
+    """Fault exclusion under a hold: the one satellite whose phase, left out of the update from the prior
+    state, lets every other phase double difference fit (post-fit within validation_sigma_factor·σ).
+
+    `suspects` (the satellites whose own post-fit residual failed) are tried first: when there is one and
+    leaving it out fits, it is the one. Otherwise every held satellite is tried and the exclusion must be
+    unique. Returns (slot, (x, P) of that update), or (−1, prior) when no single exclusion fits, when more
+    than one does (ambiguous), or when fewer than `min_amb_dd` + 1 held satellites would remain.
+    """
+    o = st.options
+    found: list[tuple[int, tuple[Arr, Arr]]] = []
+    held = np.flatnonzero(use_phase & st.held_prns)
+    lone = suspects[np.isin(suspects, held)] if suspects.size == 1 else suspects[:0]
+    for c in np.concatenate([lone, held[~np.isin(held, lone)]]):
+        keep = use_phase.copy()
+        keep[c] = False
+        if int(np.count_nonzero(keep & st.held_prns)) < o.min_amb_dd + 1:
+            continue
+        dd, _ = _ddres(st, x_prior, rov, bas, rng_b, keep, code_ok, el, o.use_doppler, trop_r)
+        if dd.v.size == 0:
+            continue
+        x_c, p_c = _kf_update(x_prior, p_prior, dd.v, dd.h, dd.r)
+        post, _ = _ddres(st, x_c, rov, bas, rng_b, keep, code_ok, el, False, trop_r)
+        if np.all(_valid_residuals(post, o.validation_sigma_factor)):
+            found.append((int(c), (x_c, p_c)))
+            if lone.size and int(c) == int(lone[0]):
+                return found[0]
+            if len(found) > 1:
+                break
+    return found[0] if len(found) == 1 else (-1, (x_prior, p_prior))
+
+
 def _valid_residuals(dd: _DD, factor: float) -> npt.NDArray[np.bool_]:
     """Rows whose |residual| ≤ factor·σ (RTKLIB valpos), σ from the measurement covariance."""
     return np.abs(dd.v) <= factor * np.sqrt(np.diag(dd.r))
@@ -654,6 +688,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     code_ok = common.copy()
     use_phase = phase_ok.copy()
     x_post, p_post = st.x, st.p
+    x_prior, p_prior = st.x, st.p
     dd = None
     for _it in range(4):
         dd, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, o.use_doppler, trop_r)
@@ -666,6 +701,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         bad = norm > 6.0
         bad &= ~((dd.kind == 0) & (np.abs(dd.v) < o.max_innovation_phase_m * 0.1))
         if not bad.any():
+            x_prior, p_prior = st.x, st.p
             x_post, p_post = _kf_update(st.x, st.p, dd.v, dd.h, dd.r)
             break
         worst = int(np.argmax(np.where(bad, norm, -1)))
@@ -707,6 +743,18 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False, trop_r)
     ok_post = _valid_residuals(dd_post, o.validation_sigma_factor)
     bad_phase = dd_post.slot[(dd_post.kind == 0) & ~ok_post]
+    if bad_phase.size and st.held_prns.any():
+        # one satellite slipping under a hold spreads its error over every row through the position: find
+        # whether leaving out a single satellite makes the rest fit (fault exclusion) before releasing all
+        culprit, fitted = _exclude_one_phase(st, x_prior, p_prior, rov, bas, rng_b, use_phase, code_ok, el, trop_r,
+                                              bad_phase)
+        if culprit >= 0:
+            log.info("%s: PRN %d no longer fits the held set: its ambiguity alone restarts", rover.time, culprit + 1)
+            st.x, st.p = fitted
+            st.slips += 1
+            _reset_amb(st, np.array([culprit]))
+            use_phase[culprit] = False
+            bad_phase = bad_phase[:0]
     if bad_phase.size and st.held_prns.any():
         # the held integer set no longer fits: release it (wrong-fix protection)
         log.info("%s: held fix released (%d phase residuals out of bounds)", rover.time, bad_phase.size)
