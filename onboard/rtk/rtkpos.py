@@ -92,6 +92,10 @@ class RtkState:
     held_prns: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
     known_amb: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
     """Ambiguities seeded from the surveyed take-off point (exempt from the lock wait before AR)."""
+    validated_int: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
+    """Integer SD-ambiguity offsets (cycles, relative to one member) of the last held set, NaN off it; a slot
+    leaves it on any reset (slip, outage, outlier), so the rest stays tracked without a slip since validation.
+    Survives the release of a hold, whose misfitting satellites are reset."""
     static: bool = False
     init_pos_ecef_m: Arr | None = None
     fail_count: int = 0
@@ -171,6 +175,7 @@ def _reset_amb(st: RtkState, k: npt.NDArray[np.int64]) -> None:
     st.lock[k] = 0
     st.held_prns[k] = False
     st.known_amb[k] = False
+    st.validated_int[k] = np.nan
 
 
 def _process_noise(st: RtkState, dt: float, pos: Arr) -> Arr:
@@ -446,6 +451,16 @@ class _Fix:
     nb: int
 
 
+def _agrees_with_validated(st: RtkState, ref: int, others: npt.NDArray[np.int64], ints: Arr) -> bool:
+    """True when every satellite of a candidate set belongs to the last validated (held) set and the candidate's
+    DD integers equal that set's: a re-fix of integers already validated and tracked without a slip since (e.g.
+    after a hold released for one satellite's misfit, which that satellite's reset removed), not a new guess."""
+    m = st.validated_int
+    if not np.isfinite(m[ref]) or not np.all(np.isfinite(m[others])):
+        return False
+    return bool(np.array_equal(np.rint(ints), m[others] - m[ref]))
+
+
 def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el: Arr,
                    min_dd: int, t: GpsTime) -> _Fix | None:
     """Integer ambiguity resolution on the DD ambiguities of `cand` slots (RTKLIB resamb_LAMBDA) with
@@ -487,13 +502,14 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             if st.pending_fix is None or st.pending_fix[0] != key:
                 st.pending_fix = (key, t)
             span = t.diff_s(st.pending_fix[1])
-            trusted = bool(st.held_prns.any() or st.known_amb[idx].all())
+            trusted = bool(st.held_prns.any() or st.known_amb[idx].all()) or _agrees_with_validated(st, ref, others, res.fixed[:, 0])
             if res.success_rate >= need_sr:
                 accept = trusted or abs(span) >= o.confirm_fix_span_s
             elif not strict:
                 accept = abs(span) >= o.consistent_fix_span_s
         elif ratio >= need_ratio:
-            accept = res.success_rate >= need_sr and bool(st.held_prns.any() or st.known_amb[idx].all())
+            accept = res.success_rate >= need_sr and (bool(st.held_prns.any() or st.known_amb[idx].all())
+                                                     or _agrees_with_validated(st, ref, others, res.fixed[:, 0]))
         if accept:
             ints = res.fixed[:, 0]
             try:
@@ -504,8 +520,10 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             cov = p[:3, :3] - gain @ qba.T
             st.last_ratio = ratio
             return _Fix(pos, cov, ratio, others, ref, ints, others.size)
-        # partial: drop the lowest-elevation non-reference satellite
-        idx = idx[idx != others[np.argmin(el[others])]]
+        # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
+        # whose ambiguity is still code-level, else mostly the lowest one), not blindly the lowest satellite:
+        # one fresh ambiguity would otherwise sink the ratio of a set determined long ago
+        idx = idx[idx != others[np.argmax(np.diag(qa))]]
     st.last_ratio = best_ratio
     if not seen_candidate:
         st.pending_fix = None
@@ -533,6 +551,9 @@ def _holdamb(st: RtkState, fix: _Fix) -> None:
     st.held_prns[:] = False
     st.held_prns[fix.slots] = True
     st.held_prns[fix.ref] = True
+    st.validated_int[:] = np.nan
+    st.validated_int[fix.ref] = 0.0
+    st.validated_int[fix.slots] = np.rint(fix.ints)
 
 
 def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,

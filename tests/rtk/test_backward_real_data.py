@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from onboard.formats.rinex_nav import read_rinex_nav
 from onboard.formats.rinex_obs import read_rinex_obs
@@ -33,11 +32,11 @@ def test_backward_pass_from_the_end_of_the_m8p_glw1_run_never_fixes_wrong():
     assert max(err) <= 0.10, err
 
 
-@pytest.mark.xfail(strict=True, reason="engine: the M8P rover processed backward with the M8P base settles (about "
-                   "120 s in, float biased by code multipath) on an integer set 51 cm off that wins 10 s of ratio "
-                   "tests and is then held for ~450 epochs; the hold's residual check does not see it (static, slow "
-                   "geometry change). Combined mode rejects these epochs (0 wrong, but 1.7 % fixed).")
 def test_backward_pass_over_the_m8p_static_run_never_fixes_wrong():
+    """Processed backward with the M8P base, the float (biased by code multipath) once gave a wrong set 51-69 cm
+    off, 5 DDs on the six highest satellites left after partial AR dropped the four lowest, which won 10 s of
+    ratio tests and was then held for ~450 epochs. Partial AR now drops the least determined DD ambiguity
+    instead: the pass fixes later on a well-determined set, right, and keeps it."""
     d = "gnss/ublox-m8p-galway-2018/"
     rover = read_rinex_obs(shared_file(d + "rinex/rover-20181004-1237.obs.gz")).epochs
     base = read_rinex_obs(shared_file(d + "rinex/base-20181004-1236.rtcm.obs.gz"))
@@ -46,4 +45,5 @@ def test_backward_pass_over_the_m8p_static_run_never_fixes_wrong():
     sols, _ = postprocess(rover, base.epochs, nav, base.header.antenna_position_ecef_m(), RtkOptions(), "backward")
     ref = np.array([3774088.9931, -601661.8217, 5089321.3853])  # dataset README, M8P-base-based
     err = [float(np.linalg.norm(s.pos_ecef_m - ref)) for s in sols if s.q == Q_FIX]
-    assert max(err, default=0.0) <= 0.10
+    assert len(err) >= 0.75 * len(sols)  # 79.5 % fixed
+    assert max(err) <= 0.10
