@@ -103,10 +103,11 @@ class RtkState:
     base_cache: tuple[GpsTime, _Receiver] | None = None
     last_ratio: float = 0.0
     clock_bias_m: float = 0.0
-    pending_fix: tuple[tuple, GpsTime] | None = None
+    pending_fix: tuple[tuple, GpsTime, int] | None = None
     pending_slip: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
     """Rover slips detected while no base data was usable, applied at the next relative epoch."""
-    """Integer set (ref, slots, DD integers) winning the ratio test below the success rate, and since when."""
+    """Integer set (ref, slots, DD integers) winning the ratio test without a held set to lean on, since when,
+    and at how many consecutive epochs."""
 
 
 def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkState:
@@ -497,16 +498,28 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             # gives a wrong set that satellite motion breaks within seconds. Below the success rate, it must
             # win over consistent_fix_span_s: satellite motion over that span separates position from
             # ambiguities, which a float built on code cannot do in a few epochs.
+            #
+            # A full set (no satellite dropped) is one ratio test on every ambiguity the float carries, low
+            # satellites included; a partial set is the survivor of up to max_partial_drop + 1 tests, which
+            # inflates the chance that a code-biased float passes one of them by luck. On the real sets and the
+            # hil_sim flight every wrong candidate was partial (2 to 4 satellites dropped), no full-set candidate
+            # in 131 was wrong: a full set needs its win confirmed at full_set_confirm_epochs consecutive epochs
+            # (and, below the success rate, over confirm_fix_span_s), a partial one the wall-time spans.
             seen_candidate = True
+            full = _drop == 0
             key = (ref, tuple(others.tolist()), tuple(np.rint(res.fixed[:, 0]).astype(int).tolist()))
             if st.pending_fix is None or st.pending_fix[0] != key:
-                st.pending_fix = (key, t)
-            span = t.diff_s(st.pending_fix[1])
-            trusted = bool(st.held_prns.any() or st.known_amb[idx].all()) or _agrees_with_validated(st, ref, others, res.fixed[:, 0])
+                st.pending_fix = (key, t, 0)
+            st.pending_fix = (key, st.pending_fix[1], st.pending_fix[2] + 1)
+            span = abs(t.diff_s(st.pending_fix[1]))
+            wins = st.pending_fix[2]
+            trusted = bool(st.held_prns.any() or st.known_amb[idx].all()) \
+                or _agrees_with_validated(st, ref, others, res.fixed[:, 0])
             if res.success_rate >= need_sr:
-                accept = trusted or abs(span) >= o.confirm_fix_span_s
+                accept = trusted or span >= o.confirm_fix_span_s or (full and wins >= o.full_set_confirm_epochs)
             elif not strict:
-                accept = abs(span) >= o.consistent_fix_span_s
+                accept = span >= o.consistent_fix_span_s or (
+                    full and wins >= o.full_set_confirm_epochs and span >= o.confirm_fix_span_s)
         elif ratio >= need_ratio:
             accept = res.success_rate >= need_sr and (bool(st.held_prns.any() or st.known_amb[idx].all())
                                                      or _agrees_with_validated(st, ref, others, res.fixed[:, 0]))
