@@ -452,14 +452,19 @@ class _Fix:
     nb: int
 
 
-def _agrees_with_validated(st: RtkState, ref: int, others: npt.NDArray[np.int64], ints: Arr) -> bool:
-    """True when every satellite of a candidate set belongs to the last validated (held) set and the candidate's
-    DD integers equal that set's: a re-fix of integers already validated and tracked without a slip since (e.g.
-    after a hold released for one satellite's misfit, which that satellite's reset removed), not a new guess."""
-    m = st.validated_int
-    if not np.isfinite(m[ref]) or not np.all(np.isfinite(m[others])):
+def _agrees_with_validated(st: RtkState, ref: int, others: npt.NDArray[np.int64], ints: Arr, min_common: int) -> bool:
+    """True when at least `min_common` satellites of a candidate set belong to the last validated (held) set
+    and the candidate's integers equal that set's on all of them: a re-fix of integers already validated and
+    tracked without a slip since (e.g. after a hold released for one satellite's misfit, which that satellite's
+    reset removed), extended at most by satellites that joined since, as a held set would be."""
+    c = np.full(NSAT, np.nan)
+    c[ref] = 0.0
+    c[others] = np.rint(ints)
+    common = np.isfinite(c) & np.isfinite(st.validated_int)
+    if common.sum() < min_common:
         return False
-    return bool(np.array_equal(np.rint(ints), m[others] - m[ref]))
+    d = c[common] - st.validated_int[common]  # equal integers up to the choice of reference: a constant
+    return bool(np.all(d == d[0]))
 
 
 def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el: Arr,
@@ -514,7 +519,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             span = abs(t.diff_s(st.pending_fix[1]))
             wins = st.pending_fix[2]
             trusted = bool(st.held_prns.any() or st.known_amb[idx].all()) \
-                or _agrees_with_validated(st, ref, others, res.fixed[:, 0])
+                or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_amb_dd + 1)
             if res.success_rate >= need_sr:
                 accept = trusted or span >= o.confirm_fix_span_s or (full and wins >= o.full_set_confirm_epochs)
             elif not strict:
@@ -522,7 +527,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
                     full and wins >= o.full_set_confirm_epochs and span >= o.confirm_fix_span_s)
         elif ratio >= need_ratio:
             accept = res.success_rate >= need_sr and (bool(st.held_prns.any() or st.known_amb[idx].all())
-                                                     or _agrees_with_validated(st, ref, others, res.fixed[:, 0]))
+                                                     or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_amb_dd + 1))
         if accept:
             ints = res.fixed[:, 0]
             try:
