@@ -728,7 +728,9 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         locked = (st.lock > o.min_lock_epochs) | st.known_amb
         cand = use_phase & (el >= np.radians(o.ar_elmask_deg)) & ~half & locked & (amb_var > 0)
         fix = _resamb_lambda(st, st.x, st.p, cand, el, o.min_amb_dd, rover.time)
-        if fix is not None:
+        for _retry in range(2):
+            if fix is None:
+                break
             # validate: float-fix consistency and post-fit residuals of the fixed solution
             dpos = fix.pos - st.x[:3]
             try:
@@ -740,10 +742,28 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             use_fix[fix.slots] = True
             use_fix[fix.ref] = True
             dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False, trop_r)
-            resid_ok = bool(np.all(_valid_residuals(dd_fix, o.validation_sigma_factor)))
-            if maha > _CHI2_3DOF_999 or not resid_ok:
-                log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", rover.time, maha, resid_ok)
-                fix = None
+            valid = _valid_residuals(dd_fix, o.validation_sigma_factor)
+            if maha <= _CHI2_3DOF_999 and valid.all():
+                break
+            log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", rover.time, maha, bool(valid.all()))
+            # a second look at this epoch: without the one satellite whose phase does not fit the fixed solution
+            # (multipath, a half cycle) while the float agrees with the fix, or, with a set held, on the held
+            # satellites alone (a newcomer, e.g. G23 on M8P a 0.4 cycle off, pulls a full set away from the held
+            # float); RTKLIB only rejects the epoch. A fix that fits nowhere is not retried. The retry is no
+            # confirmation: it can only fix a set trusted without one (held or validated), and the first-fix
+            # confirmation under way is left as it was.
+            fix = None
+            retry = None
+            if _retry == 0 and maha <= _CHI2_3DOF_999 and int((~valid).sum()) == 1 and valid.sum() >= o.min_amb_dd:
+                retry = cand.copy()
+                retry[dd_fix.slot[~valid]] = False
+            elif _retry == 0 and st.held_prns.any() and np.any(cand & ~st.held_prns):
+                retry = cand & st.held_prns
+            if retry is not None:
+                pending = st.pending_fix
+                st.pending_fix = None
+                fix = _resamb_lambda(st, st.x, st.p, retry, el, o.min_amb_dd, rover.time)
+                st.pending_fix = pending
     if fix is None:
         st.fix_count = 0
         st.fail_count += 1
