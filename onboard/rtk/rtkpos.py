@@ -713,6 +713,9 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         log.info("%s: held fix released (%d phase residuals out of bounds)", rover.time, bad_phase.size)
         st.held_prns[:] = False
         st.fix_count = 0
+        if bad_phase.size > 1:
+            # several misfits point at the set rather than at one satellite: it no longer vouches for a re-fix
+            st.validated_int[:] = np.nan
         amb = NX0 + np.flatnonzero(st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
         st.p[amb, amb] += 0.5**2
         if bad_phase.size >= 1:
