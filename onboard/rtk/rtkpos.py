@@ -92,6 +92,10 @@ class RtkState:
     held_prns: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
     known_amb: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
     """Ambiguities seeded from the surveyed take-off point (exempt from the lock wait before AR)."""
+    validated_int: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
+    """Integer SD-ambiguity offsets (cycles, relative to one member) of the last held set, NaN off it; a slot
+    leaves it on any reset (slip, outage, outlier), so the rest stays tracked without a slip since validation.
+    Survives the release of a hold, whose misfitting satellites are reset."""
     static: bool = False
     init_pos_ecef_m: Arr | None = None
     fail_count: int = 0
@@ -99,13 +103,14 @@ class RtkState:
     base_cache: tuple[GpsTime, _Receiver] | None = None
     last_ratio: float = 0.0
     clock_bias_m: float = 0.0
-    pending_fix: tuple[tuple, GpsTime] | None = None
+    pending_fix: tuple[tuple, GpsTime, int] | None = None
+    """Integer set (ref, slots, DD integers) winning the ratio test without a held set to lean on, since when,
+    and at how many consecutive epochs."""
     pending_slip: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
     """Rover slips detected while no base data was usable, applied at the next relative epoch."""
     code_scatter: CodeScatter = field(default_factory=CodeScatter)
     code_var_scale: float = 1.0
     """Factor on the modelled code variance from the measured code scatter (see code_variance_scale)."""
-    """Integer set (ref, slots, DD integers) winning the ratio test below the success rate, and since when."""
 
 
 def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkState:
@@ -174,6 +179,7 @@ def _reset_amb(st: RtkState, k: npt.NDArray[np.int64]) -> None:
     st.lock[k] = 0
     st.held_prns[k] = False
     st.known_amb[k] = False
+    st.validated_int[k] = np.nan
 
 
 def _process_noise(st: RtkState, dt: float, pos: Arr) -> Arr:
@@ -517,6 +523,21 @@ class _Fix:
     nb: int
 
 
+def _agrees_with_validated(st: RtkState, ref: int, others: npt.NDArray[np.int64], ints: Arr, min_common: int) -> bool:
+    """True when at least `min_common` satellites of a candidate set belong to the last validated (held) set
+    and the candidate's integers equal that set's on all of them: a re-fix of integers already validated and
+    tracked without a slip since (e.g. after a hold released for one satellite's misfit, which that satellite's
+    reset removed), extended at most by satellites that joined since, as a held set would be."""
+    c = np.full(NSAT, np.nan)
+    c[ref] = 0.0
+    c[others] = np.rint(ints)
+    common = np.isfinite(c) & np.isfinite(st.validated_int)
+    if common.sum() < min_common:
+        return False
+    d = c[common] - st.validated_int[common]  # equal integers up to the choice of reference: a constant
+    return bool(np.all(d == d[0]))
+
+
 def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el: Arr,
                    min_dd: int, t: GpsTime) -> _Fix | None:
     """Integer ambiguity resolution on the DD ambiguities of `cand` slots (RTKLIB resamb_LAMBDA) with
@@ -553,18 +574,31 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             # gives a wrong set that satellite motion breaks within seconds. Below the success rate, it must
             # win over consistent_fix_span_s: satellite motion over that span separates position from
             # ambiguities, which a float built on code cannot do in a few epochs.
+            #
+            # A full set (no satellite dropped) is one ratio test on every ambiguity the float carries, low
+            # satellites included; a partial set is the survivor of up to max_partial_drop + 1 tests, which
+            # inflates the chance that a code-biased float passes one of them by luck. On the real sets and the
+            # hil_sim flight every wrong candidate was partial (2 to 4 satellites dropped), no full-set candidate
+            # in 131 was wrong: a full set needs its win confirmed at full_set_confirm_epochs consecutive epochs
+            # (and, below the success rate, over confirm_fix_span_s), a partial one the wall-time spans.
             seen_candidate = True
+            full = _drop == 0
             key = (ref, tuple(others.tolist()), tuple(np.rint(res.fixed[:, 0]).astype(int).tolist()))
             if st.pending_fix is None or st.pending_fix[0] != key:
-                st.pending_fix = (key, t)
-            span = t.diff_s(st.pending_fix[1])
-            trusted = bool(st.held_prns.any() or st.known_amb[idx].all())
+                st.pending_fix = (key, t, 0)
+            st.pending_fix = (key, st.pending_fix[1], st.pending_fix[2] + 1)
+            span = abs(t.diff_s(st.pending_fix[1]))
+            wins = st.pending_fix[2]
+            trusted = bool(st.held_prns.any() or st.known_amb[idx].all()) \
+                or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_amb_dd + 1)
             if res.success_rate >= need_sr:
-                accept = trusted or abs(span) >= o.confirm_fix_span_s
+                accept = trusted or span >= o.confirm_fix_span_s or (full and wins >= o.full_set_confirm_epochs)
             elif not strict:
-                accept = abs(span) >= o.consistent_fix_span_s
+                accept = span >= o.consistent_fix_span_s or (
+                    full and wins >= o.full_set_confirm_epochs and span >= o.confirm_fix_span_s)
         elif ratio >= need_ratio:
-            accept = res.success_rate >= need_sr and bool(st.held_prns.any() or st.known_amb[idx].all())
+            accept = res.success_rate >= need_sr and (bool(st.held_prns.any() or st.known_amb[idx].all())
+                                                     or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_amb_dd + 1))
         if accept:
             ints = res.fixed[:, 0]
             try:
@@ -575,8 +609,10 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             cov = p[:3, :3] - gain @ qba.T
             st.last_ratio = ratio
             return _Fix(pos, cov, ratio, others, ref, ints, others.size)
-        # partial: drop the lowest-elevation non-reference satellite
-        idx = idx[idx != others[np.argmin(el[others])]]
+        # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
+        # whose ambiguity is still code-level, else mostly the lowest one), not blindly the lowest satellite:
+        # one fresh ambiguity would otherwise sink the ratio of a set determined long ago
+        idx = idx[idx != others[np.argmax(np.diag(qa))]]
     st.last_ratio = best_ratio
     if not seen_candidate:
         st.pending_fix = None
@@ -604,6 +640,9 @@ def _holdamb(st: RtkState, fix: _Fix) -> None:
     st.held_prns[:] = False
     st.held_prns[fix.slots] = True
     st.held_prns[fix.ref] = True
+    st.validated_int[:] = np.nan
+    st.validated_int[fix.ref] = 0.0
+    st.validated_int[fix.slots] = np.rint(fix.ints)
 
 
 def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
@@ -760,6 +799,9 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         log.info("%s: held fix released (%d phase residuals out of bounds)", rover.time, bad_phase.size)
         st.held_prns[:] = False
         st.fix_count = 0
+        if bad_phase.size > 1:
+            # several misfits point at the set rather than at one satellite: it no longer vouches for a re-fix
+            st.validated_int[:] = np.nan
         amb = NX0 + np.flatnonzero(st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
         st.p[amb, amb] += 0.5**2
         if bad_phase.size >= 1:
@@ -775,7 +817,9 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         locked = (st.lock > o.min_lock_epochs) | st.known_amb
         cand = use_phase & (el >= np.radians(o.ar_elmask_deg)) & ~half & locked & (amb_var > 0)
         fix = _resamb_lambda(st, st.x, st.p, cand, el, o.min_amb_dd, rover.time)
-        if fix is not None:
+        for _retry in range(2):
+            if fix is None:
+                break
             # validate: float-fix consistency and post-fit residuals of the fixed solution
             dpos = fix.pos - st.x[:3]
             try:
@@ -787,10 +831,28 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             use_fix[fix.slots] = True
             use_fix[fix.ref] = True
             dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False, trop_r)
-            resid_ok = bool(np.all(_valid_residuals(dd_fix, o.validation_sigma_factor)))
-            if maha > _CHI2_3DOF_999 or not resid_ok:
-                log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", rover.time, maha, resid_ok)
-                fix = None
+            valid = _valid_residuals(dd_fix, o.validation_sigma_factor)
+            if maha <= _CHI2_3DOF_999 and valid.all():
+                break
+            log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", rover.time, maha, bool(valid.all()))
+            # a second look at this epoch: without the one satellite whose phase does not fit the fixed solution
+            # (multipath, a half cycle) while the float agrees with the fix, or, with a set held, on the held
+            # satellites alone (a newcomer, e.g. G23 on M8P a 0.4 cycle off, pulls a full set away from the held
+            # float); RTKLIB only rejects the epoch. A fix that fits nowhere is not retried. The retry is no
+            # confirmation: it can only fix a set trusted without one (held or validated), and the first-fix
+            # confirmation under way is left as it was.
+            fix = None
+            retry = None
+            if _retry == 0 and maha <= _CHI2_3DOF_999 and int((~valid).sum()) == 1 and valid.sum() >= o.min_amb_dd:
+                retry = cand.copy()
+                retry[dd_fix.slot[~valid]] = False
+            elif _retry == 0 and st.held_prns.any() and np.any(cand & ~st.held_prns):
+                retry = cand & st.held_prns
+            if retry is not None:
+                pending = st.pending_fix
+                st.pending_fix = None
+                fix = _resamb_lambda(st, st.x, st.p, retry, el, o.min_amb_dd, rover.time)
+                st.pending_fix = pending
     if fix is None:
         st.fix_count = 0
         st.fail_count += 1

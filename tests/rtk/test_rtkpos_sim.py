@@ -207,12 +207,33 @@ def test_phase_gap_without_lli_is_a_slip_unless_the_doppler_bridges_it(nav, cycl
 
 def test_first_fix_waits_until_the_integer_set_has_won_the_ratio_test_for_confirm_fix_span_s(nav):
     """No held set, no known start: the winning integer set must keep winning for confirm_fix_span_s before
-    Q=1 (the real-time chain's 1.5 s wrong fix of a float 4 m off); a known take-off point needs no wait."""
-    opts = RtkOptions(confirm_fix_span_s=30.0)
+    Q=1 (the real-time chain's 1.5 s wrong fix of a float 4 m off); a full set (no satellite dropped) needs
+    full_set_confirm_epochs consecutive wins instead, never its first; a known take-off point needs no wait."""
+    opts = RtkOptions(confirm_fix_span_s=30.0, full_set_confirm_epochs=10**6)
     sols, truths, _ = _run(nav, 60, opts, noise=True)
     q = np.array([s.q for s in sols])
     ratio_ok = np.flatnonzero(np.array([s.ratio for s in sols]) >= opts.ratio_threshold)
     assert ratio_ok.size and np.any(q == Q_FIX)
     assert np.flatnonzero(q == Q_FIX)[0] >= ratio_ok[0] + 30
+    sols, truths, _ = _run(nav, 60, replace(opts, full_set_confirm_epochs=2), noise=True)
+    q = np.array([s.q for s in sols])
+    assert ratio_ok[0] + 1 <= np.flatnonzero(q == Q_FIX)[0] < ratio_ok[0] + 30
     sols, truths, _ = _run(nav, 3, replace(opts, static_start=True), noise=True, init_pos=True)
     assert sols[0].q == Q_FIX
+
+
+def test_a_candidate_is_trusted_only_on_enough_satellites_of_the_validated_set_with_its_integers():
+    """The last held set (SD integers relative to one member) vouches for a re-fix whose integers equal it on
+    at least min_common satellites, whatever the reference, newcomers allowed; one integer off, or too few
+    validated satellites, and the candidate waits for the usual confirmation."""
+    from onboard.rtk.rtkpos import _agrees_with_validated
+
+    st = rtk_init(RtkOptions())
+    st.validated_int[[0, 3, 5, 8, 9]] = [0.0, -4.0, 7.0, 2.0, -11.0]  # held set, relative to slot 0
+    others = np.array([0, 5, 8, 9, 12])  # reference slot 3, slot 12 joined since
+    ints = np.array([4.0, 11.0, 6.0, -7.0, 123.0])  # the validated integers, now relative to slot 3
+    assert _agrees_with_validated(st, 3, others, ints, 5)
+    assert not _agrees_with_validated(st, 3, others, ints + np.array([0, 0, 1, 0, 0]), 5)
+    assert not _agrees_with_validated(st, 3, others[1:], ints[1:], 5)  # only 4 validated satellites in common
+    st.validated_int[8] = np.nan  # slot 8 slipped since (reset)
+    assert not _agrees_with_validated(st, 3, others, ints, 5)
