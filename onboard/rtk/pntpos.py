@@ -49,6 +49,14 @@ def sat_az_el(rcv_ecef_m: Arr, e_ecef: Arr) -> tuple[Arr, Arr]:
     return np.arctan2(enu[:, 0], enu[:, 1]) % (2 * np.pi), np.arcsin(np.clip(enu[:, 2], -1.0, 1.0))
 
 
+def _design(e: Arr) -> Arr:
+    """Design matrix [−LOS | 1] (n,4) of position + receiver clock (np.c_ costs more than the arithmetic)."""
+    h = np.empty((e.shape[0], 4))
+    np.negative(e, out=h[:, :3])
+    h[:, 3] = 1.0
+    return h
+
+
 def _atmosphere_m(pos: Arr, az: Arr, el: Arr, tow_s: float, iono: tuple | None) -> Arr:
     lat, lon, h = ecef_to_llh(pos)
     alpha, beta = (iono if iono is not None else (None, None))
@@ -112,7 +120,7 @@ def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: 
                 return SppSolution(x[:3], x[3], np.full(3, np.nan), np.nan, full(mask, False), full(az, 0.0),
                                    full(el, 0.0), False, np.inf, np.inf, f"only {int(mask.sum())} usable satellites")
             res = pr - (r + x[3] - sclk + corr)
-            h = np.c_[-e, np.ones(m)][mask]
+            h = _design(e)[mask]
             w = np.sin(np.maximum(el[mask], np.radians(5.0))) / ERR_CODE_BASE_M
             dx, *_ = np.linalg.lstsq(h * w[:, None], res[mask] * w, rcond=None)
             x = x + dx
@@ -122,7 +130,7 @@ def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: 
         r, e = geometry(x)
         mask = use & (el >= elmask_rad)
         res = pr - (r + x[3] - sclk + corr)
-        h = np.c_[-e, np.ones(m)][mask]
+        h = _design(e)[mask]
         try:
             gdop = float(np.sqrt(np.trace(np.linalg.inv(h.T @ h))))
         except np.linalg.LinAlgError:
@@ -160,7 +168,7 @@ def doppler_velocity(dop_hz: Arr | None, sats: SatState, e: Arr, pos: Arr,
     # range-rate model incl. Sagnac rate (RTKLIB resdop())
     sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, 1] * pos[0] - vs[:, 0] * pos[1])
     em = e[m]
-    h = np.c_[-em, np.ones(m.sum())]
+    h = _design(em)
     y = rate_obs - (np.einsum("ij,ij->i", em, vs) + sag - CLIGHT_M_S * sats.drift_s_s[m])
     x, *_ = np.linalg.lstsq(h, y, rcond=None)
     return x[:3], float(x[3])

@@ -39,6 +39,7 @@ NSAT = 32
 NX0 = 6
 NX = NX0 + NSAT
 _CHI2_3DOF_999 = 16.27
+_NO_TIME_NS = np.iinfo(np.int64).min
 
 
 class NavData(Protocol):
@@ -85,7 +86,8 @@ class RtkState:
     prev_time_r: GpsTime | None = None
     prev_phase_r: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
     """Slots with rover phase at the previous rover epoch (a gap without a Doppler bridge is a slip)."""
-    last_t_r: list[GpsTime | None] = field(default_factory=lambda: [None] * NSAT)
+    last_t_r_ns: npt.NDArray[np.int64] = field(default_factory=lambda: np.full(NSAT, _NO_TIME_NS, np.int64))
+    """Per slot, the rover time (ns since the GPS epoch) of its last phase + Doppler; _NO_TIME_NS = never."""
     prev_zb: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
     prev_time_b: GpsTime | None = None
     fix_count: int = 0
@@ -253,7 +255,8 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
     # Doppler-predicted phase on the rover, from each satellite's last phase (across short gaps)
     bridged = np.zeros(NSAT, bool)  # phase continuity checked against the Doppler
     if st.prev_time_r is not None:
-        dt_all = np.array([t_r.diff_s(t) if t is not None else np.nan for t in st.last_t_r])
+        seen = st.last_t_r_ns != _NO_TIME_NS
+        dt_all = np.where(seen, (t_r.total_ns - np.where(seen, st.last_t_r_ns, 0)) / 1e9, np.nan)
         if np.any(np.isfinite(dt_all)):
             dop_avg = np.where(np.isfinite(st.prev_dop_r), 0.5 * (rov.dop_hz + st.prev_dop_r), rov.dop_hz)
             d = (rov.cp_cyc - st.prev_cp_r) + dop_avg * dt_all  # RINEX: phase follows range, Doppler = −rate
@@ -267,7 +270,7 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
                 # is compared over its own interval
                 clean = ok & ~slip
                 rate = d / np.where(ok, dt_all, 1.0)
-                d = d - np.median(rate[clean] if clean.sum() >= 2 else rate[ok]) * dt_all
+                d = d - _median(rate[clean] if clean.sum() >= 2 else rate[ok]) * dt_all
                 thr = o.slip_threshold_cyc * np.maximum(1.0, np.abs(np.nan_to_num(dt_all, nan=1.0)))
                 slip |= ok & (np.abs(d) > thr)
                 bridged = ok
@@ -279,13 +282,20 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
     return slip
 
 
+def _median(a: Arr) -> float:
+    """np.median of a short finite 1-D array, to the bit (mean of the middle two when even), without its
+    generic-reduction overhead (and without its import of numpy.ma)."""
+    v = sorted(a.tolist())
+    h = len(v) // 2
+    return v[h] if len(v) % 2 else (v[h - 1] + v[h]) / 2.0
+
+
 def _remember_rover(st: RtkState, rov: _Receiver, t_r: GpsTime) -> None:
     """Keep this rover epoch's phase/Doppler for the next epoch's slip tests."""
     have = np.isfinite(rov.cp_cyc) & np.isfinite(rov.dop_hz)
     st.prev_cp_r[have] = rov.cp_cyc[have]
     st.prev_dop_r[have] = rov.dop_hz[have]
-    for k in np.flatnonzero(have):
-        st.last_t_r[k] = t_r
+    st.last_t_r_ns[have] = t_r.total_ns
     st.prev_time_r = t_r
     st.prev_phase_r = np.isfinite(rov.cp_cyc)
 
@@ -353,13 +363,9 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     o = st.options
     rng_r, e = _range_with_trop_m(rov, x[:3], trop_r)
     var_sd = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m)
-    rows_v: list[Arr] = []
-    rows_h: list[Arr] = []
-    blocks: list[Arr] = []
-    kinds: list[Arr] = []
-    slots: list[Arr] = []
+    # groups (kind, reference slot, other slots, zero-difference residual z, per-slot variance), rows i − ref
+    groups: list[tuple[int, int, npt.NDArray[np.int64], Arr, Arr]] = []
     ref_phase = -1
-    amb = NX0 + np.arange(NSAT)
     for kind, ok in ((0, phase_ok), (1, code_ok)):
         idx = np.flatnonzero(ok)
         if idx.size < 2:
@@ -367,23 +373,12 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         ref = int(idx[np.argmax(el[idx])])
         if kind == 0:
             ref_phase = ref
-            z = LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b) - LAMBDA_L1_M * x[amb]
+            z = LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b) - LAMBDA_L1_M * x[NX0:]
             var = var_sd
         else:
             z = (rov.pr_m - base.pr_m) - (rng_r - rng_b)
             var = var_sd * o.code_phase_ratio**2
-        others = idx[idx != ref]
-        v = z[others] - z[ref]
-        h = np.zeros((others.size, NX))
-        h[:, :3] = -e[others] + e[ref]
-        if kind == 0:
-            h[np.arange(others.size), NX0 + others] = LAMBDA_L1_M
-            h[:, NX0 + ref] = -LAMBDA_L1_M
-        rows_v.append(v)
-        rows_h.append(h)
-        blocks.append(np.diag(var[others]) + var[ref])
-        kinds.append(np.full(others.size, kind, np.int8))
-        slots.append(others)
+        groups.append((kind, ref, idx[idx != ref], z, var))
     if with_doppler:
         idx = np.flatnonzero(code_ok & np.isfinite(rov.dop_hz))
         if idx.size >= 2:
@@ -392,33 +387,42 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
             sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, 1] * x[0] - vs[:, 0] * x[1])
             rate_model = np.einsum("ij,ij->i", e, vs - x[3:6]) + sag - CLIGHT_M_S * rov.sats.drift_s_s
             z = -LAMBDA_L1_M * rov.dop_hz - rate_model
-            others = idx[idx != ref]
-            h = np.zeros((others.size, NX))
-            h[:, 3:6] = -e[others] + e[ref]
             s2 = (o.doppler_sigma_m_s / np.sin(np.maximum(el, 0.1))) ** 2
-            rows_v.append(z[others] - z[ref])
-            rows_h.append(h)
-            blocks.append(np.diag(s2[others]) + s2[ref])
-            kinds.append(np.full(others.size, 2, np.int8))
-            slots.append(others)
-    if not rows_v:
+            groups.append((2, ref, idx[idx != ref], z, s2))
+    if not groups:
         return _DD(np.zeros(0), np.zeros((0, NX)), np.zeros((0, 0)), np.zeros(0, np.int8), np.zeros(0, np.int64), -1), e
-    nrow = sum(b.shape[0] for b in blocks)
+    nrow = sum(g[2].size for g in groups)
+    v = np.empty(nrow)
+    h = np.zeros((nrow, NX))
     r = np.zeros((nrow, nrow))
+    kinds = np.empty(nrow, np.int8)
+    slots = np.empty(nrow, np.int64)
     k = 0
-    for b in blocks:
-        m = b.shape[0]
-        r[k : k + m, k : k + m] = b
+    for kind, ref, others, z, var in groups:
+        m = others.size
+        rows = slice(k, k + m)
+        v[rows] = z[others] - z[ref]
+        # position (phase, code) or velocity (Doppler) columns: LOS difference ref − other
+        cols = slice(3, 6) if kind == 2 else slice(0, 3)
+        h[rows, cols] = e[ref] - e[others]
+        if kind == 0:
+            h[np.arange(k, k + m), NX0 + others] = LAMBDA_L1_M
+            h[rows, NX0 + ref] = -LAMBDA_L1_M
+        # covariance of rows sharing the reference: var_ref everywhere, var_other + var_ref on the diagonal
+        r[rows, rows] = var[ref]
+        r[np.arange(k, k + m), np.arange(k, k + m)] = var[others] + var[ref]
+        kinds[rows] = kind
+        slots[rows] = others
         k += m
-    return _DD(np.concatenate(rows_v), np.vstack(rows_h), r, np.concatenate(kinds), np.concatenate(slots),
-               ref_phase), e
+    return _DD(v, h, r, kinds, slots, ref_phase), e
 
 
 def _kf_update(x: Arr, p: Arr, v: Arr, h: Arr, r: Arr) -> tuple[Arr, Arr]:
     """Kalman measurement update on the active states only (zero-variance states are left alone)."""
-    act = np.flatnonzero(np.diag(p) > 0)
+    act = np.flatnonzero(p.diagonal() > 0)
+    rows, cols = act[:, None], act[None, :]  # np.ix_ without its per-call overhead
     ha = h[:, act]
-    pa = p[np.ix_(act, act)]
+    pa = p[rows, cols]
     ph = pa @ ha.T
     s = ha @ ph + r
     k = np.linalg.solve(s, ph.T).T
@@ -426,7 +430,7 @@ def _kf_update(x: Arr, p: Arr, v: Arr, h: Arr, r: Arr) -> tuple[Arr, Arr]:
     x[act] += k @ v
     pn = pa - k @ ph.T
     p = p.copy()
-    p[np.ix_(act, act)] = 0.5 * (pn + pn.T)
+    p[rows, cols] = 0.5 * (pn + pn.T)
     return x, p
 
 
