@@ -103,6 +103,7 @@ class EphemerisStore:
 
     def __init__(self, ephemerides: Iterable[Ephemeris] = ()) -> None:
         self._by_prn: dict[int, list[Ephemeris]] = {}
+        self._toe_ns: dict[int, list[int]] = {}  # toe (ns since the GPS epoch) of each _by_prn entry
         for eph in ephemerides:
             self.add(eph)
 
@@ -114,9 +115,11 @@ class EphemerisStore:
                 if old == eph:
                     return False
                 lst[i] = eph
+                self._toe_ns[eph.prn] = [e.toe.total_ns for e in lst]
                 return True
         lst.append(eph)
         lst.sort(key=lambda e: e.toe)
+        self._toe_ns[eph.prn] = [e.toe.total_ns for e in lst]
         return True
 
     def __len__(self) -> int:
@@ -138,8 +141,8 @@ class EphemerisStore:
     def select_ns(self, prn: int, t_total_ns: int) -> Ephemeris | None:
         """As select() for a time given in ns since the GPS epoch (the engine's per-satellite hot path)."""
         best, best_dt = None, MAX_EPH_AGE_S
-        for eph in self._by_prn.get(prn, ()):
-            dt = abs(t_total_ns - eph.toe.total_ns) / NS_PER_S
+        for eph, toe_ns in zip(self._by_prn.get(prn, ()), self._toe_ns.get(prn, ())):
+            dt = abs(t_total_ns - toe_ns) / NS_PER_S
             if dt <= best_dt:
                 best, best_dt = eph, dt
         return best
@@ -284,7 +287,7 @@ def geometric_range(
     `sat_pos_m` (n,3), `rcv_pos_m` (3,), both ECEF; follows RTKLIB geodist().
     """
     d = sat_pos_m - rcv_pos_m
-    r = np.linalg.norm(d, axis=1)
+    r = np.sqrt(np.add.reduce(d * d, axis=1))  # np.linalg.norm(d, axis=1) without its dispatch overhead
     e = d / r[:, None]
     sagnac = OMEGA_E_RAD_S * (sat_pos_m[:, 0] * rcv_pos_m[1] - sat_pos_m[:, 1] * rcv_pos_m[0]) / CLIGHT_M_S
     return r + sagnac, e

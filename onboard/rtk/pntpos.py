@@ -42,9 +42,11 @@ class SppSolution:
     message: str = ""
 
 
-def sat_az_el(rcv_ecef_m: Arr, e_ecef: Arr) -> tuple[Arr, Arr]:
-    """Azimuth/elevation (rad) from unit line-of-sight vectors (n,3) at receiver position (3,)."""
-    lat, lon, _ = ecef_to_llh(rcv_ecef_m)
+def sat_az_el(rcv_ecef_m: Arr, e_ecef: Arr, llh: Arr | None = None) -> tuple[Arr, Arr]:
+    """Azimuth/elevation (rad) from unit line-of-sight vectors (n,3) at receiver position (3,).
+
+    `llh` = ecef_to_llh(rcv_ecef_m) when the caller already has it (saves the conversion)."""
+    lat, lon, _ = ecef_to_llh(rcv_ecef_m) if llh is None else llh
     enu = e_ecef @ enu_rotation(lat, lon).T
     return np.arctan2(enu[:, 0], enu[:, 1]) % (2 * np.pi), np.arcsin(np.clip(enu[:, 2], -1.0, 1.0))
 
@@ -57,8 +59,9 @@ def _design(e: Arr) -> Arr:
     return h
 
 
-def _atmosphere_m(pos: Arr, az: Arr, el: Arr, tow_s: float, iono: tuple | None) -> Arr:
-    lat, lon, h = ecef_to_llh(pos)
+def _atmosphere_m(llh: Arr, az: Arr, el: Arr, tow_s: float, iono: tuple | None) -> Arr:
+    """Troposphere + ionosphere delays (m) at geodetic position `llh` (rad, rad, m)."""
+    lat, lon, h = llh
     alpha, beta = (iono if iono is not None else (None, None))
     return saastamoinen_m(lat, h, el) + klobuchar_m(tow_s, lat, lon, az, el, alpha, beta)
 
@@ -105,8 +108,9 @@ def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: 
         r, e = geometric_range(spos, xx[:3])
         # the atmosphere and elevations change negligibly within 50 m: evaluate them once there
         if np.linalg.norm(xx[:3]) > 1e6 and (corr_at is None or np.linalg.norm(xx[:3] - corr_at) > 50.0):
-            az, el = sat_az_el(xx[:3], e)
-            corr = _atmosphere_m(xx[:3], az, el, tow_s, iono)
+            llh = ecef_to_llh(xx[:3])
+            az, el = sat_az_el(xx[:3], e, llh)
+            corr = _atmosphere_m(llh, az, el, tow_s, iono)
             corr_at = xx[:3].copy()
         return r, e
 

@@ -40,6 +40,8 @@ NX0 = 6
 NX = NX0 + NSAT
 _CHI2_3DOF_999 = 16.27
 _NO_TIME_NS = np.iinfo(np.int64).min
+_PRNS = np.arange(1, NSAT + 1, dtype=np.int16)
+_PRNS.flags.writeable = False  # shared by every epoch's SatState
 
 
 class NavData(Protocol):
@@ -125,26 +127,18 @@ def _slots(obs: ObsEpoch, store: EphemerisStore) -> _Receiver:
     lli = np.zeros(NSAT, np.uint8)
     pr[idx], cp[idx], dop[idx], lli[idx] = g.pr_m, g.cp_cyc, g.dop_hz, g.lli
     has = np.isfinite(pr)
-    prns = np.arange(1, NSAT + 1)
-    sats_part = satellite_states(store, prns[has], g.time, pr[has])
-    pos = np.zeros((NSAT, 3))
-    vel = np.zeros((NSAT, 3))
-    clk = np.zeros(NSAT)
-    drift = np.zeros(NSAT)
-    var = np.zeros(NSAT)
-    ok = np.zeros(NSAT, bool)
-    pos[has], vel[has], clk[has], drift[has] = sats_part.pos_m, sats_part.vel_m_s, sats_part.clock_s, sats_part.drift_s_s
-    var[has], ok[has] = sats_part.var_m2, sats_part.ok
-    sats = SatState(prns.astype(np.int16), pos, vel, clk, drift, var, ok)
-    return _Receiver(pr, cp, dop, lli, sats, has & ok)
+    # straight onto the 32 slots: satellite_states leaves slots without a pseudorange zero and not ok
+    sats = satellite_states(store, _PRNS, g.time, pr)
+    return _Receiver(pr, cp, dop, lli, sats, has & sats.ok)
 
 
 def _model_range_m(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr, Arr, Arr]:
     """Modelled range (geometric + Sagnac − sat clock + dry/wet troposphere), LOS, az, el for every slot."""
     with np.errstate(invalid="ignore", divide="ignore"):  # empty slots (zero positions) give NaN, unused
         r, e = geometric_range(rcv.sats.pos_m, pos_ecef_m)
-        az, el = sat_az_el(pos_ecef_m, e)
-    lat, _, h = ecef_to_llh(pos_ecef_m)
+        llh = ecef_to_llh(pos_ecef_m)
+        az, el = sat_az_el(pos_ecef_m, e, llh)
+    lat, _, h = llh
     trop = saastamoinen_m(lat, h, el)
     return r - CLIGHT_M_S * rcv.sats.clock_s + trop, e, az, el
 
@@ -336,12 +330,10 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
 
 def _dd_matrix(idx: npt.NDArray[np.int64], ref: int) -> Arr:
     """Rows i − ref over the slots `idx` (ref excluded): shape (len(idx)−1, len(idx))."""
-    others = [j for j in range(len(idx)) if idx[j] != ref]
-    d = np.zeros((len(others), len(idx)))
-    rpos = int(np.flatnonzero(idx == ref)[0])
-    for r, j in enumerate(others):
-        d[r, j] = 1.0
-        d[r, rpos] = -1.0
+    others = (idx != ref).nonzero()[0]
+    d = np.zeros((others.size, idx.size))
+    d[np.arange(others.size), others] = 1.0
+    d[:, int((idx == ref).nonzero()[0][0])] = -1.0
     return d
 
 
@@ -367,7 +359,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     groups: list[tuple[int, int, npt.NDArray[np.int64], Arr, Arr]] = []
     ref_phase = -1
     for kind, ok in ((0, phase_ok), (1, code_ok)):
-        idx = np.flatnonzero(ok)
+        idx = ok.nonzero()[0]
         if idx.size < 2:
             continue
         ref = int(idx[np.argmax(el[idx])])
@@ -380,7 +372,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
             var = var_sd * o.code_phase_ratio**2
         groups.append((kind, ref, idx[idx != ref], z, var))
     if with_doppler:
-        idx = np.flatnonzero(code_ok & np.isfinite(rov.dop_hz))
+        idx = (code_ok & np.isfinite(rov.dop_hz)).nonzero()[0]
         if idx.size >= 2:
             ref = int(idx[np.argmax(el[idx])])
             vs = rov.sats.vel_m_s
@@ -419,7 +411,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
 
 def _kf_update(x: Arr, p: Arr, v: Arr, h: Arr, r: Arr) -> tuple[Arr, Arr]:
     """Kalman measurement update on the active states only (zero-variance states are left alone)."""
-    act = np.flatnonzero(p.diagonal() > 0)
+    act = (p.diagonal() > 0).nonzero()[0]
     rows, cols = act[:, None], act[None, :]  # np.ix_ without its per-call overhead
     ha = h[:, act]
     pa = p[rows, cols]
