@@ -211,7 +211,7 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2) -> LambdaResult:
         raise LambdaError(f"bad shapes: a {a.shape}, Q {q.shape}")
     lmat0, d0 = _ld_lists(np.asarray(q, dtype=float))
     lmat, d, z_list = _reduction_lists(lmat0, d0)
-    z = np.array(z_list)
+    z: Arr = np.array(z_list, dtype=float)
     zs = z.T @ a
     e, s = _search_lists(lmat, d, zs.tolist(), m)
     f = np.linalg.solve(z.T, e)

@@ -48,7 +48,8 @@ def sat_az_el(rcv_ecef_m: Arr, e_ecef: Arr, llh: Arr | None = None) -> tuple[Arr
     `llh` = ecef_to_llh(rcv_ecef_m) when the caller already has it (saves the conversion)."""
     lat, lon, _ = ecef_to_llh(rcv_ecef_m) if llh is None else llh
     enu = e_ecef @ enu_rotation(lat, lon).T
-    return np.arctan2(enu[:, 0], enu[:, 1]) % (2 * np.pi), np.arcsin(np.clip(enu[:, 2], -1.0, 1.0))
+    up = np.minimum(np.maximum(enu[:, 2], -1.0), 1.0)  # np.clip to the bit, without its dispatch overhead
+    return np.arctan2(enu[:, 0], enu[:, 1]) % (2 * np.pi), np.arcsin(up)
 
 
 def _design(e: Arr) -> Arr:

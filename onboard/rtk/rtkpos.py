@@ -69,6 +69,10 @@ class _Receiver:
     lli: npt.NDArray[np.uint8]
     sats: SatState  # aligned with the 32 slots
     has: npt.NDArray[np.bool_]
+    memo: dict[tuple[str, bytes], tuple[Arr, ...]] = field(default_factory=dict)
+    """Geometry already computed for this epoch, by (what, receiver position bytes): the base epoch serves
+    several rover epochs from the same known position, and the rover's is asked for again at the same
+    predicted position. The arrays are read-only."""
 
 
 @dataclass
@@ -132,22 +136,41 @@ def _slots(obs: ObsEpoch, store: EphemerisStore) -> _Receiver:
     return _Receiver(pr, cp, dop, lli, sats, has & sats.ok)
 
 
+def _geometry(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr]:
+    """geometric_range() of the receiver's satellites from `pos_ecef_m`: range with Sagnac, LOS (memoised)."""
+    key = ("geo", pos_ecef_m.tobytes())
+    hit = rcv.memo.get(key)
+    if hit is None:
+        with np.errstate(invalid="ignore", divide="ignore"):  # empty slots (zero positions) give NaN, unused
+            hit = geometric_range(rcv.sats.pos_m, pos_ecef_m)
+        for a in hit:
+            a.flags.writeable = False
+        rcv.memo[key] = hit
+    return hit[0], hit[1]
+
+
 def _model_range_m(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr, Arr, Arr]:
     """Modelled range (geometric + Sagnac − sat clock + dry/wet troposphere), LOS, az, el for every slot."""
-    with np.errstate(invalid="ignore", divide="ignore"):  # empty slots (zero positions) give NaN, unused
-        r, e = geometric_range(rcv.sats.pos_m, pos_ecef_m)
-        llh = ecef_to_llh(pos_ecef_m)
-        az, el = sat_az_el(pos_ecef_m, e, llh)
-    lat, _, h = llh
-    trop = saastamoinen_m(lat, h, el)
-    return r - CLIGHT_M_S * rcv.sats.clock_s + trop, e, az, el
+    key = ("model", pos_ecef_m.tobytes())
+    hit = rcv.memo.get(key)
+    if hit is None:
+        r, e = _geometry(rcv, pos_ecef_m)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            llh = ecef_to_llh(pos_ecef_m)
+            az, el = sat_az_el(pos_ecef_m, e, llh)
+        lat, _, h = llh
+        trop = saastamoinen_m(lat, h, el)
+        hit = (r - CLIGHT_M_S * rcv.sats.clock_s + trop, e, az, el)
+        for a in hit:
+            a.flags.writeable = False
+        rcv.memo[key] = hit
+    return hit[0], hit[1], hit[2], hit[3]
 
 
 def _range_with_trop_m(rcv: _Receiver, pos_ecef_m: Arr, trop_m: Arr) -> tuple[Arr, Arr]:
     """As _model_range_m with the troposphere already evaluated this epoch (it changes negligibly with
     the millimetre-to-metre position updates inside one epoch): modelled range and LOS."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        r, e = geometric_range(rcv.sats.pos_m, pos_ecef_m)
+    r, e = _geometry(rcv, pos_ecef_m)
     return r - CLIGHT_M_S * rcv.sats.clock_s + trop_m, e
 
 
