@@ -92,7 +92,7 @@ def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: 
     pr = pr_m[idx]
     spos = sats.pos_m[idx]
     sclk = CLIGHT_M_S * sats.clock_s[idx]
-    x = np.zeros(4) if x0_ecef_m is None else np.r_[x0_ecef_m, clock0_m]
+    x = np.zeros(4) if x0_ecef_m is None else np.append(x0_ecef_m, clock0_m)  # np.r_ costs more
     excluded = np.zeros(m, bool)
     az = np.zeros(m)
     el = np.full(m, np.pi / 2)
