@@ -7,6 +7,7 @@ receiver velocity and clock drift from Doppler.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,6 +51,14 @@ def sat_az_el(rcv_ecef_m: Arr, e_ecef: Arr, llh: Arr | None = None) -> tuple[Arr
     enu = e_ecef @ enu_rotation(lat, lon).T
     up = np.minimum(np.maximum(enu[:, 2], -1.0), 1.0)  # np.clip to the bit, without its dispatch overhead
     return np.arctan2(enu[:, 0], enu[:, 1]) % (2 * np.pi), np.arcsin(up)
+
+
+_MIN_WEIGHT_EL_RAD = float(np.radians(5.0))
+
+
+def _norm(v: Arr) -> float:
+    """np.linalg.norm of a 1-D vector, to the bit (√(v·v), as numpy computes it), without its dispatch."""
+    return math.sqrt(v.dot(v))
 
 
 def _design(e: Arr) -> Arr:
@@ -108,7 +117,7 @@ def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: 
         nonlocal az, el, corr, corr_at
         r, e = geometric_range(spos, xx[:3])
         # the atmosphere and elevations change negligibly within 50 m: evaluate them once there
-        if np.linalg.norm(xx[:3]) > 1e6 and (corr_at is None or np.linalg.norm(xx[:3] - corr_at) > 50.0):
+        if _norm(xx[:3]) > 1e6 and (corr_at is None or _norm(xx[:3] - corr_at) > 50.0):
             llh = ecef_to_llh(xx[:3])
             az, el = sat_az_el(xx[:3], e, llh)
             corr = _atmosphere_m(llh, az, el, tow_s, iono)
@@ -126,10 +135,10 @@ def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: 
                                    full(el, 0.0), False, np.inf, np.inf, f"only {int(mask.sum())} usable satellites")
             res = pr - (r + x[3] - sclk + corr)
             h = _design(e)[mask]
-            w = np.sin(np.maximum(el[mask], np.radians(5.0))) / ERR_CODE_BASE_M
+            w = np.sin(np.maximum(el[mask], _MIN_WEIGHT_EL_RAD)) / ERR_CODE_BASE_M
             dx, *_ = np.linalg.lstsq(h * w[:, None], res[mask] * w, rcond=None)
             x = x + dx
-            if np.linalg.norm(dx) < 1e-4 and corr_at is not None:
+            if _norm(dx) < 1e-4 and corr_at is not None:
                 converged = True
                 break
         r, e = geometry(x)
