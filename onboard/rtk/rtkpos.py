@@ -42,6 +42,8 @@ _CHI2_3DOF_999 = 16.27
 _NO_TIME_NS = np.iinfo(np.int64).min
 _PRNS = np.arange(1, NSAT + 1, dtype=np.int16)
 _PRNS.flags.writeable = False  # shared by every epoch's SatState
+_ROWS = np.arange(3 * NSAT)  # row indices of the DD system (phase + code + Doppler rows at most)
+_ROWS.flags.writeable = False
 
 
 class NavData(Protocol):
@@ -377,10 +379,16 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     """Double-difference residuals at state `x` (RTKLIB ddres): phase, code, rover Doppler between satellites."""
     o = st.options
     rng_r, e = _range_with_trop_m(rov, x[:3], trop_r)
-    var_sd = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m)
+    key = ("var_sd", el.tobytes())  # the same elevations serve every _ddres call of the epoch
+    var_sd = rov.memo.get(key, (None,))[0]
+    if var_sd is None:
+        var_sd = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m)
+        var_sd.flags.writeable = False
+        rov.memo[key] = (var_sd,)
     # groups (kind, reference slot, other slots, zero-difference residual z, per-slot variance), rows i − ref
     groups: list[tuple[int, int, npt.NDArray[np.int64], Arr, Arr]] = []
     ref_phase = -1
+    drng = rng_r - rng_b
     for kind, ok in ((0, phase_ok), (1, code_ok)):
         idx = ok.nonzero()[0]
         if idx.size < 2:
@@ -388,10 +396,10 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         ref = int(idx[np.argmax(el[idx])])
         if kind == 0:
             ref_phase = ref
-            z = LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b) - LAMBDA_L1_M * x[NX0:]
+            z = LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - drng - LAMBDA_L1_M * x[NX0:]
             var = var_sd
         else:
-            z = (rov.pr_m - base.pr_m) - (rng_r - rng_b)
+            z = (rov.pr_m - base.pr_m) - drng
             var = var_sd * o.code_phase_ratio**2
         groups.append((kind, ref, idx[idx != ref], z, var))
     if with_doppler:
@@ -412,6 +420,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     r = np.zeros((nrow, nrow))
     kinds = np.empty(nrow, np.int8)
     slots = np.empty(nrow, np.int64)
+    var_other: list[Arr] = []
     k = 0
     for kind, ref, others, z, var in groups:
         m = others.size
@@ -421,14 +430,16 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         cols = slice(3, 6) if kind == 2 else slice(0, 3)
         h[rows, cols] = e[ref] - e[others]
         if kind == 0:
-            h[np.arange(k, k + m), NX0 + others] = LAMBDA_L1_M
+            h[_ROWS[k : k + m], NX0 + others] = LAMBDA_L1_M
             h[rows, NX0 + ref] = -LAMBDA_L1_M
         # covariance of rows sharing the reference: var_ref everywhere, var_other + var_ref on the diagonal
         r[rows, rows] = var[ref]
-        r[np.arange(k, k + m), np.arange(k, k + m)] = var[others] + var[ref]
+        var_other.append(var[others])
         kinds[rows] = kind
         slots[rows] = others
         k += m
+    diag = _ROWS[:nrow]
+    r[diag, diag] += np.concatenate(var_other)
     return _DD(v, h, r, kinds, slots, ref_phase), e
 
 
