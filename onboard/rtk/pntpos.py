@@ -96,7 +96,7 @@ def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: 
             iono: tuple | None, x0_ecef_m: Arr | None, max_iter: int, outlier_m: float, max_gdop: float,
             n: int, base_ok: npt.NDArray[np.bool_], clock0_m: float = 0.0) -> SppSolution:
     # work on the satellites with data only; results are scattered back to the caller's n slots
-    idx = np.flatnonzero(base_ok)
+    idx = base_ok.nonzero()[0]
     m = idx.size
     pr = pr_m[idx]
     spos = sats.pos_m[idx]
@@ -130,7 +130,7 @@ def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: 
         for _it in range(max_iter):
             r, e = geometry(x)
             mask = use & (el >= elmask_rad) if corr_at is not None else use
-            if mask.sum() < 4:
+            if np.count_nonzero(mask) < 4:
                 return SppSolution(x[:3], x[3], np.full(3, np.nan), np.nan, full(mask, False), full(az, 0.0),
                                    full(el, 0.0), False, np.inf, np.inf, f"only {int(mask.sum())} usable satellites")
             res = pr - (r + x[3] - sclk + corr)
@@ -149,8 +149,10 @@ def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: 
             gdop = float(np.sqrt(np.trace(np.linalg.inv(h.T @ h))))
         except np.linalg.LinAlgError:
             gdop = np.inf
-        rms = float(np.sqrt(np.mean(res[mask] ** 2))) if mask.any() else np.inf
-        dof = int(mask.sum()) - 4
+        n_used = np.count_nonzero(mask)
+        # √(mean of squares) as np.mean computes it (sum, then ÷ count), without its dispatch
+        rms = math.sqrt(np.add.reduce(res[mask] ** 2) / n_used) if n_used else np.inf
+        dof = n_used - 4
         if converged and (rms <= outlier_m / 3.0 or dof < 2):
             e_full = np.zeros((n, 3))
             e_full[idx] = e
