@@ -48,9 +48,10 @@ def test_satellite_states_on_32_slots_equal_the_per_satellite_formulas() -> None
         assert slots.ok.sum() >= 5
         # and each state agrees with the scalar per-ephemeris formulas at the transmission time
         for i in np.flatnonzero(subset.ok):
-            prn = int(g.sv_id[i])
-            t_tx = g.time.add_s(-g.pr_m[i] / 299792458.0 - subset.clock_s[i] - store.select(prn, g.time).tgd_s)
-            pos, vel, _, _ = eph_position_velocity(store.select(prn, g.time), t_tx)
+            eph = store.select(int(g.sv_id[i]), g.time)
+            assert eph is not None
+            t_tx = g.time.add_s(-g.pr_m[i] / 299792458.0 - subset.clock_s[i] - eph.tgd_s)
+            pos, vel, _, _ = eph_position_velocity(eph, t_tx)
             assert np.allclose(subset.pos_m[i], pos, atol=1e-3) and np.allclose(subset.vel_m_s[i], vel, atol=1e-3)
 
 
