@@ -1,6 +1,9 @@
 """`python -m onboard <command>`: the onboard command line.
 
-Commands register in `COMMANDS` as "module:function" registrars; adding one (e.g. `rtk`, `base`) is one line. Nothing happens at import: `main()` builds everything.
+Commands register in `COMMANDS` as (name, "module:function" registrar); adding one (e.g. `rtk`, `base`) is one
+line. Nothing happens at import: `main()` builds the parser, importing only the chosen command's module (a
+command's start-up then pays for its own imports alone: `rtk` needs neither pyubx2 nor the web server);
+`--help` and unknown commands import every registrar so that all commands are listed.
 """
 
 from __future__ import annotations
@@ -14,7 +17,6 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from onboard.errors import ConfigFileError
-from onboard.settings import add_recorder_arguments
 
 log = logging.getLogger("onboard")
 
@@ -22,6 +24,8 @@ EXIT_USAGE = 2
 
 def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:  # type: ignore[type-arg]
     """Register `run` (the recorder daemon)."""
+    from onboard.settings import add_recorder_arguments
+
     p = subparsers.add_parser("run", help="record: the onboard recorder daemon",
                               description="Record every byte from the receiver into a crash-safe journal, "
                                           "configure and monitor the receiver, write a status snapshot.")
@@ -105,24 +109,41 @@ def _check(args: argparse.Namespace) -> int:
     return code
 
 
-# Sub-commands: "module:function" registrars, each adding its parser to the sub-parsers and setting
-# `func(args) -> exit code`. Adding a command (`rtk`, `base`, ...) is one line here.
-COMMANDS: tuple[str, ...] = (
-    "onboard.__main__:add_run_parser",
-    "onboard.__main__:add_check_parser",
-    "onboard.convert:add_convert_parser",
-    "onboard.rtk_cli:add_rtk_parser",
-    "onboard.base_cli:add_base_parser",
-    "onboard.web.cli:add_web_parser",
+# Sub-commands: (name, "module:function" registrar), the registrar adding its parser to the sub-parsers and
+# setting `func(args) -> exit code`. Adding a command (`rtk`, `base`, ...) is one line here.
+COMMANDS: tuple[tuple[str, str], ...] = (
+    ("run", "onboard.__main__:add_run_parser"),
+    ("check", "onboard.__main__:add_check_parser"),
+    ("convert", "onboard.convert:add_convert_parser"),
+    ("rtk", "onboard.rtk_cli:add_rtk_parser"),
+    ("base", "onboard.base_cli:add_base_parser"),
+    ("web", "onboard.web.cli:add_web_parser"),
 )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every registered command."""
+def _chosen_command(argv: Sequence[str] | None) -> str | None:
+    """The command named in `argv` (its first non-option word: the top level has only flags), if known."""
+    if argv is None:
+        return None
+    names = {name for name, _ in COMMANDS}
+    for arg in argv:
+        if arg in ("-h", "--help"):
+            return None
+        if not arg.startswith("-"):
+            return arg if arg in names else None
+    return None
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The argument parser: with `argv` naming a command, only that command is registered (its module alone is
+    imported); otherwise every registered command (for `--help` and the usage error of an unknown command)."""
     parser = argparse.ArgumentParser(prog="python -m onboard", description="directgeo onboard tools")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for spec in COMMANDS:
+    chosen = _chosen_command(argv)
+    for name, spec in COMMANDS:
+        if chosen is not None and name != chosen:
+            continue
         module_name, func_name = spec.split(":")
         getattr(importlib.import_module(module_name), func_name)(sub)
     return parser
@@ -130,7 +151,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit code."""
-    args = build_parser().parse_args(argv)
+    if argv is None:
+        argv = sys.argv[1:]
+    args = build_parser(argv).parse_args(argv)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",

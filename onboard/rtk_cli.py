@@ -37,9 +37,9 @@ class ObsInput:
 
 
 def _is_rinex(path: Path) -> bool:
-    from onboard.receiver.decode import iter_file_bytes
+    from onboard.formats.textfile import read_head_bytes
 
-    head = next(iter_file_bytes(path, 4096), b"")
+    head = read_head_bytes(path, 4096)
     return b"RINEX VERSION" in head[:200]
 
 
@@ -131,11 +131,15 @@ def rtk_main(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from onboard.rtk_inputs import read_base_observations
-
     rover = read_observations(args.rover)
-    # the base may also be an RTCM3 stream or a journal folder (e.g. the rover's radio/ journal)
-    base = read_base_observations(args.base, rover.epochs[0].time if rover.epochs else None)
+    base_path = Path(args.base)
+    if base_path.is_file() and _is_rinex(base_path):
+        base = read_observations(base_path)  # without loading the RTCM3 decoders (start-up time)
+    else:
+        from onboard.rtk_inputs import read_base_observations
+
+        # the base may also be an RTCM3 stream or a journal folder (e.g. the rover's radio/ journal)
+        base = read_base_observations(args.base, rover.epochs[0].time if rover.epochs else None)
     nav = read_navigation(args.nav, rover.ephemerides + base.ephemerides)
     if len(nav.store) == 0:
         raise InputError("no GPS ephemeris: give --nav FILE (RINEX navigation) or logs with RXM-SFRB(X)/AID-EPH")

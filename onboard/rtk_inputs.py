@@ -124,7 +124,7 @@ def read_base_observations(path: str | Path, reference: GpsTime | None):  # type
     the stream's last 1005/1006 (phase centre = ARP + antenna height), else the median of the log's fixes.
     Raises InputError when the file holds no usable base observations.
     """
-    from onboard.receiver.decode import iter_file_bytes
+    from onboard.formats.textfile import read_head_bytes
     from onboard.rtk_cli import ObsInput, read_observations
 
     path = Path(path)
@@ -132,9 +132,11 @@ def read_base_observations(path: str | Path, reference: GpsTime | None):  # type
         return _read_journal_dir(path, reference)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
-    head = next(iter_file_bytes(path, 65536), b"")
+    head = read_head_bytes(path, 65536)
     if b"RINEX VERSION" in head[:200]:
         return read_observations(path)
+    from onboard.receiver.decode import iter_file_bytes
+
     counts = count_protocols(head)
     if not counts.get(Protocol.RTCM3):
         return read_observations(path)

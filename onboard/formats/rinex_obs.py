@@ -89,11 +89,6 @@ class RinexObsFile:
     epochs: list[ObsEpoch]
 
 
-def _float(text: str) -> float:
-    text = text.strip()
-    return float(text) if text else math.nan
-
-
 def _parse_header(path: Path, lines: list[str]) -> tuple[RinexObsHeader, int]:
     if not lines or "RINEX VERSION" not in lines[0]:
         raise InputError(f"{path}: not a RINEX file (no 'RINEX VERSION / TYPE' header line)")
@@ -165,22 +160,29 @@ class _EpochBuilder:
         self.cn0: list[float] = []
         self.lli: list[int] = []
 
-    def add(self, sys_letter: str, prn: int, values: list[tuple[float, int]], cols: dict[str, int],
-            force_slip: bool) -> None:
-        def val(key: str) -> tuple[float, int]:
-            k = cols[key]
-            return values[k] if 0 <= k < len(values) else (math.nan, 0)
+    def add_fields(self, sys_letter: str, prn: int, text: str, offset: int, cols: dict[str, int],
+                   force_slip: bool) -> None:
+        """Add one satellite from its fixed 16-column fields (F14.3 + LLI + SSI) starting at `text[offset]`.
 
-        pr, _ = val("pr")
-        cp, lli = val("cp")
+        Only the kept quantities are parsed (a blank or missing field is NaN, its LLI 0), straight from the
+        line: the reader's cost is per field, and most files carry more observation types than L1 C/A.
+        """
+        pr = _field_value(text, offset, cols["pr"])
+        k = cols["cp"]
+        cp = _field_value(text, offset, k)
         if math.isnan(pr) and math.isnan(cp):
             return
+        if k >= 0:
+            lli_c = text[offset + 16 * k + 14 : offset + 16 * k + 15].strip()
+            lli = int(lli_c) if lli_c.isdigit() else 0
+        else:
+            lli = 0
         self.gnss.append(SYSTEM_GNSS_ID.get(sys_letter, -1))
         self.sv.append(prn)
         self.pr.append(pr if pr != 0.0 else math.nan)
         self.cp.append(cp if cp != 0.0 else math.nan)
-        self.dop.append(val("dop")[0])
-        self.cn0.append(val("cn0")[0])
+        self.dop.append(_field_value(text, offset, cols["dop"]))
+        self.cn0.append(_field_value(text, offset, cols["cn0"]))
         self.lli.append((lli | LLI_SLIP) if force_slip else lli)
 
     def build(self, time: GpsTime) -> ObsEpoch:
@@ -193,15 +195,17 @@ class _EpochBuilder:
         )
 
 
-def _split_values(text: str, count: int) -> list[tuple[float, int]]:
-    """Fixed 16-column fields (F14.3 + LLI + SSI) → list of (value, lli)."""
-    out = []
-    for k in range(count):
-        f = text[16 * k : 16 * k + 16]
-        v = _float(f[:14])
-        lli_c = f[14:15].strip()
-        out.append((v, int(lli_c) if lli_c.isdigit() else 0))
-    return out
+def _field_value(text: str, offset: int, k: int) -> float:
+    """Value of the k-th fixed 16-column field after `offset` (its F14.3 part); NaN for k < 0 or blank."""
+    if k < 0:
+        return math.nan
+    f = text[offset + 16 * k : offset + 16 * k + 14]
+    try:
+        return float(f)  # float() ignores the blanks around the number, as strip() would
+    except ValueError:
+        if f.strip():
+            raise
+        return math.nan
 
 
 def _iter_v3(path: Path, lines: list[str], start: int, hdr: RinexObsHeader) -> Iterator[ObsEpoch]:
@@ -236,10 +240,9 @@ def _iter_v3(path: Path, lines: list[str], start: int, hdr: RinexObsHeader) -> I
             except ValueError as exc:
                 raise InputError(f"{path}: malformed satellite id {row[:3]!r}") from exc
             try:
-                values = _split_values(row[3:], len(hdr.obs_types[sys_letter]))
+                b.add_fields(sys_letter, prn, row, 3, cols[sys_letter], flag == 1)
             except ValueError as exc:
                 raise InputError(f"{path}: malformed observation for {row[:3]}: {exc}") from exc
-            b.add(sys_letter, prn, values, cols[sys_letter], flag == 1)
         yield b.build(gpst_from_calendar(year, mo, dd, hh, mi, round(sec * 1e9)))
 
 
@@ -288,10 +291,9 @@ def _iter_v2(path: Path, lines: list[str], start: int, hdr: RinexObsHeader) -> I
                 raise InputError(f"{path}: malformed satellite id {sat!r}") from exc
             text = "".join(ln.ljust(80)[:80] for ln in body[k * lines_per_sat : (k + 1) * lines_per_sat])
             try:
-                values = _split_values(text, ntypes)
+                b.add_fields(sys_letter, prn, text, 0, cols, flag == 1)
             except ValueError as exc:
                 raise InputError(f"{path}: malformed observation for {sat}: {exc}") from exc
-            b.add(sys_letter, prn, values, cols, flag == 1)
         yield b.build(gpst_from_calendar(year, mo, dd, hh, mi, round(sec * 1e9)))
 
 

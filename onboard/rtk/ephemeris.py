@@ -5,13 +5,14 @@ Follows IS-GPS-200 20.3.3.4.3 and RTKLIB ephemeris.c eph2pos()/eph2clk()/satposs
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from onboard.gnsstime import GpsTime
+from onboard.gnsstime import NS_PER_S, GpsTime
 from onboard.rtk.consts import CLIGHT_M_S, F_REL_S_SQRT_M, MU_GPS_M3_S2, OMEGA_E_RAD_S
 from onboard.rtk.types import Ephemeris
 
@@ -102,6 +103,7 @@ class EphemerisStore:
 
     def __init__(self, ephemerides: Iterable[Ephemeris] = ()) -> None:
         self._by_prn: dict[int, list[Ephemeris]] = {}
+        self._toe_ns: dict[int, list[int]] = {}  # toe (ns since the GPS epoch) of each _by_prn entry
         for eph in ephemerides:
             self.add(eph)
 
@@ -113,9 +115,11 @@ class EphemerisStore:
                 if old == eph:
                     return False
                 lst[i] = eph
+                self._toe_ns[eph.prn] = [e.toe.total_ns for e in lst]
                 return True
         lst.append(eph)
         lst.sort(key=lambda e: e.toe)
+        self._toe_ns[eph.prn] = [e.toe.total_ns for e in lst]
         return True
 
     def __len__(self) -> int:
@@ -130,6 +134,15 @@ class EphemerisStore:
         best, best_dt = None, MAX_EPH_AGE_S
         for eph in self._by_prn.get(prn, ()):
             dt = abs(t.diff_s(eph.toe))
+            if dt <= best_dt:
+                best, best_dt = eph, dt
+        return best
+
+    def select_ns(self, prn: int, t_total_ns: int) -> Ephemeris | None:
+        """As select() for a time given in ns since the GPS epoch (the engine's per-satellite hot path)."""
+        best, best_dt = None, MAX_EPH_AGE_S
+        for eph, toe_ns in zip(self._by_prn.get(prn, ()), self._toe_ns.get(prn, ())):
+            dt = abs(t_total_ns - toe_ns) / NS_PER_S
             if dt <= best_dt:
                 best, best_dt = eph, dt
         return best
@@ -170,17 +183,35 @@ def _batch_position(p: npt.NDArray[np.float64], tk: npt.NDArray[np.float64],
     return pos, F_REL_S_SQRT_M * ecc * sqrt_a * sin_e
 
 
-def _eph_params(store: EphemerisStore, ephs: list[Ephemeris]) -> npt.NDArray[np.float64]:
-    """(19, n) parameter rows for a list of ephemerides, cached on the store (the set changes every ~2 h)."""
+@dataclass
+class _EphBatch:
+    """Per-epoch constants of an ephemeris list for the vectorised evaluation: `params` (19, 2n) parameter rows
+    in _EPH_FIELDS order, twice over (columns n.. evaluate the +1 ms point of the velocity difference),
+    `toe_s` (2n,) toe seconds of week, `toe_ns`/`toc_ns` (n,) toe/toc in ns since the GPS epoch, `ura_var_m2`."""
+
+    params: npt.NDArray[np.float64]
+    toe_s: npt.NDArray[np.float64]
+    toe_ns: npt.NDArray[np.int64]
+    toc_ns: npt.NDArray[np.int64]
+    ura_var_m2: npt.NDArray[np.float64]
+
+
+def _eph_batch(store: EphemerisStore, ephs: list[Ephemeris]) -> _EphBatch:
+    """The _EphBatch of a list of ephemerides, cached on the store (the selected set changes every ~2 h)."""
     key = tuple(id(e) for e in ephs)
-    cache: dict[tuple[int, ...], npt.NDArray[np.float64]] = store.__dict__.setdefault("_param_cache", {})
-    arr = cache.get(key)
-    if arr is None:
+    cache: dict[tuple[int, ...], _EphBatch] = store.__dict__.setdefault("_batch_cache", {})
+    batch = cache.get(key)
+    if batch is None:
         if len(cache) > 64:
             cache.clear()
         arr = np.array([[getattr(e, f) for e in ephs] for f in _EPH_FIELDS])
-        cache[key] = arr
-    return arr
+        toe_s = np.array([e.toe_s for e in ephs])
+        batch = _EphBatch(np.concatenate([arr, arr], axis=1), np.concatenate([toe_s, toe_s]),
+                          np.array([e.toe.total_ns for e in ephs], np.int64),
+                          np.array([e.toc.total_ns for e in ephs], np.int64),
+                          np.array([ura_sigma_m(e.ura_index) ** 2 for e in ephs]))
+        cache[key] = batch
+    return batch
 
 
 def satellite_states(
@@ -203,10 +234,12 @@ def satellite_states(
     ok = np.zeros(n, dtype=bool)
     ephs: list[Ephemeris] = []
     rows: list[int] = []
-    for i in range(n):
-        if not np.isfinite(pr[i]):
+    t_rx_ns = t_rx.total_ns
+    # ephemeris choice at t_rx − pr/c (ns arithmetic of GpsTime.add_s/diff_s without building GpsTime objects)
+    for i, (prn, p_i) in enumerate(zip(prn_arr.tolist(), pr.tolist())):
+        if not math.isfinite(p_i):
             continue
-        eph = store.select(int(prn_arr[i]), t_rx.add_s(-pr[i] / CLIGHT_M_S))
+        eph = store.select_ns(prn, t_rx_ns + round(-p_i / CLIGHT_M_S * NS_PER_S))
         if eph is None or eph.health != 0:
             continue
         ephs.append(eph)
@@ -214,29 +247,34 @@ def satellite_states(
     if not rows:
         return SatState(prn_arr, pos, vel, clk, drift, var, ok)
     idx = np.array(rows)
-    p = _eph_params(store, ephs)
+    m = len(rows)
+    b = _eph_batch(store, ephs)
+    p = b.params
     af0, af1, af2, tgd = p[15], p[16], p[17], p[18]
-    toe_s = np.array([e.toe_s for e in ephs])
-    rx_toe = np.array([t_rx.diff_ns(e.toe) for e in ephs]) / 1e9
-    rx_toc = np.array([t_rx.diff_ns(e.toc) for e in ephs]) / 1e9
+    rx_toe = (t_rx_ns - b.toe_ns) / 1e9
+    rx_toc = (t_rx_ns - b.toc_ns) / 1e9
     tau = pr[idx] / CLIGHT_M_S
 
-    def clock(dt: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    def clock(dt: npt.NDArray[np.float64], k: int) -> npt.NDArray[np.float64]:
+        a0, a1, a2 = af0[:k], af1[:k], af2[:k]
         for _ in range(2):  # as eph_clock_s: the polynomial evaluated at t − dts
-            dt = dt - (af0 + af1 * dt + af2 * dt * dt)
-        return af0 + af1 * dt + af2 * dt * dt
+            dt = dt - (a0 + a1 * dt + a2 * dt * dt)
+        return a0 + a1 * dt + a2 * dt * dt
 
-    off = -tau - clock(rx_toc - tau)  # t_tx − t_rx (s)
+    off = -tau - clock(rx_toc - tau, m)  # t_tx − t_rx (s)
     step = 1e-3
-    p0, rel0 = _batch_position(p, rx_toe + off, toe_s)
-    p1, rel1 = _batch_position(p, rx_toe + off + step, toe_s)
-    c0 = clock(rx_toc + off) + rel0
-    c1 = clock(rx_toc + off + step) + rel1
+    # both points of the velocity/drift difference in one vectorised pass (columns m.. are t + step)
+    tk0 = rx_toe + off
+    p01, rel01 = _batch_position(p, np.concatenate([tk0, tk0 + step]), b.toe_s)
+    t0 = rx_toc + off
+    c01 = clock(np.concatenate([t0, t0 + step]), 2 * m) + rel01
+    p0, p1 = p01[:m], p01[m:]
+    c0, c1 = c01[:m], c01[m:]
     pos[idx] = p0
     vel[idx] = (p1 - p0) / step
-    clk[idx] = c0 - tgd
+    clk[idx] = c0 - tgd[:m]
     drift[idx] = (c1 - c0) / step
-    var[idx] = np.array([ura_sigma_m(e.ura_index) ** 2 for e in ephs])
+    var[idx] = b.ura_var_m2
     ok[idx] = True
     return SatState(prn_arr, pos, vel, clk, drift, var, ok)
 
@@ -249,7 +287,7 @@ def geometric_range(
     `sat_pos_m` (n,3), `rcv_pos_m` (3,), both ECEF; follows RTKLIB geodist().
     """
     d = sat_pos_m - rcv_pos_m
-    r = np.linalg.norm(d, axis=1)
+    r = np.sqrt(np.add.reduce(d * d, axis=1))  # np.linalg.norm(d, axis=1) without its dispatch overhead
     e = d / r[:, None]
     sagnac = OMEGA_E_RAD_S * (sat_pos_m[:, 0] * rcv_pos_m[1] - sat_pos_m[:, 1] * rcv_pos_m[0]) / CLIGHT_M_S
     return r + sagnac, e

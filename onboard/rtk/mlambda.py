@@ -23,34 +23,38 @@ class LambdaError(ValueError):
 
 def ld_factor(q: Arr) -> tuple[Arr, Arr]:
     """Q = Lᵀ·diag(D)·L with L unit lower-triangular (RTKLIB LD()). Returns (L, D)."""
+    lmat, d = _ld_lists(np.asarray(q, dtype=float))
+    return np.array(lmat).reshape(q.shape), np.array(d)
+
+
+# The factorisation, decorrelation and search below work on nested Python lists: for the n ≤ ~15 ambiguities
+# of single-frequency GPS, element-wise numpy indexing costs more than the arithmetic.
+
+
+def _ld_lists(q: Arr) -> tuple[list[list[float]], list[float]]:
+    """ld_factor() on lists: the same operations element by element (same results to the bit)."""
     n = q.shape[0]
-    a = np.array(q, dtype=float, copy=True)
-    lmat = np.zeros((n, n))
-    d = np.zeros(n)
+    a = q.tolist()
+    lmat = [[0.0] * n for _ in range(n)]
+    d = [0.0] * n
     for i in range(n - 1, -1, -1):
-        d[i] = a[i, i]
-        if d[i] <= 0.0:
+        di = a[i][i]
+        d[i] = di
+        if di <= 0.0:
             raise LambdaError("ambiguity covariance not positive definite")
-        s = np.sqrt(d[i])
-        lmat[i, : i + 1] = a[i, : i + 1] / s
-        # rank-one downdate of the leading block
-        a[:i, :i] -= np.outer(lmat[i, :i], lmat[i, :i])
-        lmat[i, : i + 1] /= lmat[i, i]
+        s = math.sqrt(di)
+        ai, li = a[i], lmat[i]
+        for k in range(i + 1):
+            li[k] = ai[k] / s
+        # rank-one downdate of the leading block; its lower triangle is all that is read later
+        for j in range(i):
+            lj, aj = li[j], a[j]
+            for k in range(j + 1):
+                aj[k] -= lj * li[k]
+        lii = li[i]
+        for k in range(i + 1):
+            li[k] /= lii
     return lmat, d
-
-
-# The decorrelation and search below work on nested Python lists: for the n ≤ ~15 ambiguities of single-
-# frequency GPS, element-wise numpy indexing costs more than the arithmetic.
-
-
-def _gauss(lmat: list[list[float]], z: list[list[float]], i: int, j: int) -> None:
-    mu = round(lmat[i][j])
-    if mu != 0:
-        n = len(lmat)
-        for k in range(i, n):
-            lmat[k][j] -= mu * lmat[k][i]
-        for k in range(n):
-            z[k][j] -= mu * z[k][i]
 
 
 def _perm(lmat: list[list[float]], d: list[float], j: int, delta: float, z: list[list[float]]) -> None:
@@ -76,16 +80,28 @@ def _perm(lmat: list[list[float]], d: list[float], j: int, delta: float, z: list
 
 def reduction(lmat_in: Arr, d_in: Arr) -> tuple[Arr, Arr, Arr]:
     """Decorrelate (integer Gauss transforms + permutations, RTKLIB reduction()): returns (L, D, Z)."""
-    n = d_in.shape[0]
-    lmat = lmat_in.tolist()
-    d = d_in.tolist()
-    z = np.eye(n).tolist()
+    lmat, d, z = _reduction_lists(lmat_in.tolist(), d_in.tolist())
+    return np.array(lmat), np.array(d), np.array(z)
+
+
+def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list[float]], list[float],
+                                                                          list[list[float]]]:
+    """reduction() on lists, in place on `lmat` and `d`; returns (L, D, Z)."""
+    n = len(d)
+    z = [[1.0 if r == c else 0.0 for c in range(n)] for r in range(n)]
     j = n - 2
     k = n - 2
     while j >= 0:
         if j <= k:
             for i in range(j + 1, n):
-                _gauss(lmat, z, i, j)
+                # integer Gauss transformation (RTKLIB gauss()), inlined: it runs ~100 times per call
+                mu = round(lmat[i][j])
+                if mu != 0:
+                    for kk in range(i, n):
+                        row = lmat[kk]
+                        row[j] -= mu * row[i]
+                    for row in z:
+                        row[j] -= mu * row[i]
         delta = d[j] + lmat[j + 1][j] ** 2 * d[j + 1]
         if delta + 1e-6 < d[j + 1]:
             _perm(lmat, d, j, delta, z)
@@ -93,15 +109,17 @@ def reduction(lmat_in: Arr, d_in: Arr) -> tuple[Arr, Arr, Arr]:
             j = n - 2
         else:
             j -= 1
-    return np.array(lmat), np.array(d), np.array(z)
+    return lmat, d, z
 
 
 def search(lmat_a: Arr, d_a: Arr, zs_a: Arr, m: int = 2) -> tuple[Arr, Arr]:
     """MLAMBDA search: the `m` best integer vectors (n, m) and their squared distances (m,), best first."""
-    n = d_a.shape[0]
-    lmat = lmat_a.tolist()
-    d = d_a.tolist()
-    zs = zs_a.tolist()
+    return _search_lists(lmat_a.tolist(), d_a.tolist(), zs_a.tolist(), m)
+
+
+def _search_lists(lmat: list[list[float]], d: list[float], zs: list[float], m: int) -> tuple[Arr, Arr]:
+    """search() on lists."""
+    n = len(d)
     s_mat = [[0.0] * n for _ in range(n)]
     dist = [0.0] * n
     zb = [0.0] * n
@@ -191,9 +209,10 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2) -> LambdaResult:
     n = a.shape[0]
     if n == 0 or q.shape != (n, n):
         raise LambdaError(f"bad shapes: a {a.shape}, Q {q.shape}")
-    lmat0, d0 = ld_factor(q)
-    lmat, d, z = reduction(lmat0, d0)
+    lmat0, d0 = _ld_lists(np.asarray(q, dtype=float))
+    lmat, d, z_list = _reduction_lists(lmat0, d0)
+    z: Arr = np.array(z_list, dtype=float)
     zs = z.T @ a
-    e, s = search(lmat, d, zs, m)
+    e, s = _search_lists(lmat, d, zs.tolist(), m)
     f = np.linalg.solve(z.T, e)
-    return LambdaResult(np.round(f), s, d)
+    return LambdaResult(np.round(f), s, np.array(d))

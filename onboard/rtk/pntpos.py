@@ -7,6 +7,7 @@ receiver velocity and clock drift from Doppler.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,15 +43,35 @@ class SppSolution:
     message: str = ""
 
 
-def sat_az_el(rcv_ecef_m: Arr, e_ecef: Arr) -> tuple[Arr, Arr]:
-    """Azimuth/elevation (rad) from unit line-of-sight vectors (n,3) at receiver position (3,)."""
-    lat, lon, _ = ecef_to_llh(rcv_ecef_m)
+def sat_az_el(rcv_ecef_m: Arr, e_ecef: Arr, llh: Arr | None = None) -> tuple[Arr, Arr]:
+    """Azimuth/elevation (rad) from unit line-of-sight vectors (n,3) at receiver position (3,).
+
+    `llh` = ecef_to_llh(rcv_ecef_m) when the caller already has it (saves the conversion)."""
+    lat, lon, _ = ecef_to_llh(rcv_ecef_m) if llh is None else llh
     enu = e_ecef @ enu_rotation(lat, lon).T
-    return np.arctan2(enu[:, 0], enu[:, 1]) % (2 * np.pi), np.arcsin(np.clip(enu[:, 2], -1.0, 1.0))
+    up = np.minimum(np.maximum(enu[:, 2], -1.0), 1.0)  # np.clip to the bit, without its dispatch overhead
+    return np.arctan2(enu[:, 0], enu[:, 1]) % (2 * np.pi), np.arcsin(up)
 
 
-def _atmosphere_m(pos: Arr, az: Arr, el: Arr, tow_s: float, iono: tuple | None) -> Arr:
-    lat, lon, h = ecef_to_llh(pos)
+_MIN_WEIGHT_EL_RAD = float(np.radians(5.0))
+
+
+def _norm(v: Arr) -> float:
+    """np.linalg.norm of a 1-D vector, to the bit (√(v·v), as numpy computes it), without its dispatch."""
+    return math.sqrt(v.dot(v))
+
+
+def _design(e: Arr) -> Arr:
+    """Design matrix [−LOS | 1] (n,4) of position + receiver clock (np.c_ costs more than the arithmetic)."""
+    h = np.empty((e.shape[0], 4))
+    np.negative(e, out=h[:, :3])
+    h[:, 3] = 1.0
+    return h
+
+
+def _atmosphere_m(llh: Arr, az: Arr, el: Arr, tow_s: float, iono: tuple | None) -> Arr:
+    """Troposphere + ionosphere delays (m) at geodetic position `llh` (rad, rad, m)."""
+    lat, lon, h = llh
     alpha, beta = (iono if iono is not None else (None, None))
     return saastamoinen_m(lat, h, el) + klobuchar_m(tow_s, lat, lon, az, el, alpha, beta)
 
@@ -75,12 +96,12 @@ def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: 
             iono: tuple | None, x0_ecef_m: Arr | None, max_iter: int, outlier_m: float, max_gdop: float,
             n: int, base_ok: npt.NDArray[np.bool_], clock0_m: float = 0.0) -> SppSolution:
     # work on the satellites with data only; results are scattered back to the caller's n slots
-    idx = np.flatnonzero(base_ok)
+    idx = base_ok.nonzero()[0]
     m = idx.size
     pr = pr_m[idx]
     spos = sats.pos_m[idx]
     sclk = CLIGHT_M_S * sats.clock_s[idx]
-    x = np.zeros(4) if x0_ecef_m is None else np.r_[x0_ecef_m, clock0_m]
+    x = np.zeros(4) if x0_ecef_m is None else np.append(x0_ecef_m, clock0_m)  # np.r_ costs more
     excluded = np.zeros(m, bool)
     az = np.zeros(m)
     el = np.full(m, np.pi / 2)
@@ -96,9 +117,10 @@ def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: 
         nonlocal az, el, corr, corr_at
         r, e = geometric_range(spos, xx[:3])
         # the atmosphere and elevations change negligibly within 50 m: evaluate them once there
-        if np.linalg.norm(xx[:3]) > 1e6 and (corr_at is None or np.linalg.norm(xx[:3] - corr_at) > 50.0):
-            az, el = sat_az_el(xx[:3], e)
-            corr = _atmosphere_m(xx[:3], az, el, tow_s, iono)
+        if _norm(xx[:3]) > 1e6 and (corr_at is None or _norm(xx[:3] - corr_at) > 50.0):
+            llh = ecef_to_llh(xx[:3])
+            az, el = sat_az_el(xx[:3], e, llh)
+            corr = _atmosphere_m(llh, az, el, tow_s, iono)
             corr_at = xx[:3].copy()
         return r, e
 
@@ -108,27 +130,29 @@ def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: 
         for _it in range(max_iter):
             r, e = geometry(x)
             mask = use & (el >= elmask_rad) if corr_at is not None else use
-            if mask.sum() < 4:
+            if np.count_nonzero(mask) < 4:
                 return SppSolution(x[:3], x[3], np.full(3, np.nan), np.nan, full(mask, False), full(az, 0.0),
                                    full(el, 0.0), False, np.inf, np.inf, f"only {int(mask.sum())} usable satellites")
             res = pr - (r + x[3] - sclk + corr)
-            h = np.c_[-e, np.ones(m)][mask]
-            w = np.sin(np.maximum(el[mask], np.radians(5.0))) / ERR_CODE_BASE_M
+            h = _design(e)[mask]
+            w = np.sin(np.maximum(el[mask], _MIN_WEIGHT_EL_RAD)) / ERR_CODE_BASE_M
             dx, *_ = np.linalg.lstsq(h * w[:, None], res[mask] * w, rcond=None)
             x = x + dx
-            if np.linalg.norm(dx) < 1e-4 and corr_at is not None:
+            if _norm(dx) < 1e-4 and corr_at is not None:
                 converged = True
                 break
         r, e = geometry(x)
         mask = use & (el >= elmask_rad)
         res = pr - (r + x[3] - sclk + corr)
-        h = np.c_[-e, np.ones(m)][mask]
+        h = _design(e)[mask]
         try:
             gdop = float(np.sqrt(np.trace(np.linalg.inv(h.T @ h))))
         except np.linalg.LinAlgError:
             gdop = np.inf
-        rms = float(np.sqrt(np.mean(res[mask] ** 2))) if mask.any() else np.inf
-        dof = int(mask.sum()) - 4
+        n_used = np.count_nonzero(mask)
+        # √(mean of squares) as np.mean computes it (sum, then ÷ count), without its dispatch
+        rms = math.sqrt(np.add.reduce(res[mask] ** 2) / n_used) if n_used else np.inf
+        dof = n_used - 4
         if converged and (rms <= outlier_m / 3.0 or dof < 2):
             e_full = np.zeros((n, 3))
             e_full[idx] = e
@@ -160,7 +184,7 @@ def doppler_velocity(dop_hz: Arr | None, sats: SatState, e: Arr, pos: Arr,
     # range-rate model incl. Sagnac rate (RTKLIB resdop())
     sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, 1] * pos[0] - vs[:, 0] * pos[1])
     em = e[m]
-    h = np.c_[-em, np.ones(m.sum())]
+    h = _design(em)
     y = rate_obs - (np.einsum("ij,ij->i", em, vs) + sag - CLIGHT_M_S * sats.drift_s_s[m])
     x, *_ = np.linalg.lstsq(h, y, rcond=None)
     return x[:3], float(x[3])

@@ -39,6 +39,11 @@ NSAT = 32
 NX0 = 6
 NX = NX0 + NSAT
 _CHI2_3DOF_999 = 16.27
+_NO_TIME_NS = np.iinfo(np.int64).min
+_PRNS = np.arange(1, NSAT + 1, dtype=np.int16)
+_PRNS.flags.writeable = False  # shared by every epoch's SatState
+_ROWS = np.arange(3 * NSAT)  # row indices of the DD system (phase + code + Doppler rows at most)
+_ROWS.flags.writeable = False
 
 
 class NavData(Protocol):
@@ -66,6 +71,10 @@ class _Receiver:
     lli: npt.NDArray[np.uint8]
     sats: SatState  # aligned with the 32 slots
     has: npt.NDArray[np.bool_]
+    memo: dict[tuple[str, bytes], tuple[Arr, ...]] = field(default_factory=dict)
+    """Geometry already computed for this epoch, by (what, receiver position bytes): the base epoch serves
+    several rover epochs from the same known position, and the rover's is asked for again at the same
+    predicted position. The arrays are read-only."""
 
 
 @dataclass
@@ -85,7 +94,8 @@ class RtkState:
     prev_time_r: GpsTime | None = None
     prev_phase_r: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
     """Slots with rover phase at the previous rover epoch (a gap without a Doppler bridge is a slip)."""
-    last_t_r: list[GpsTime | None] = field(default_factory=lambda: [None] * NSAT)
+    last_t_r_ns: npt.NDArray[np.int64] = field(default_factory=lambda: np.full(NSAT, _NO_TIME_NS, np.int64))
+    """Per slot, the rover time (ns since the GPS epoch) of its last phase + Doppler; _NO_TIME_NS = never."""
     prev_zb: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
     prev_time_b: GpsTime | None = None
     fix_count: int = 0
@@ -131,35 +141,46 @@ def _slots(obs: ObsEpoch, store: EphemerisStore) -> _Receiver:
     lli = np.zeros(NSAT, np.uint8)
     pr[idx], cp[idx], dop[idx], lli[idx] = g.pr_m, g.cp_cyc, g.dop_hz, g.lli
     has = np.isfinite(pr)
-    prns = np.arange(1, NSAT + 1)
-    sats_part = satellite_states(store, prns[has], g.time, pr[has])
-    pos = np.zeros((NSAT, 3))
-    vel = np.zeros((NSAT, 3))
-    clk = np.zeros(NSAT)
-    drift = np.zeros(NSAT)
-    var = np.zeros(NSAT)
-    ok = np.zeros(NSAT, bool)
-    pos[has], vel[has], clk[has], drift[has] = sats_part.pos_m, sats_part.vel_m_s, sats_part.clock_s, sats_part.drift_s_s
-    var[has], ok[has] = sats_part.var_m2, sats_part.ok
-    sats = SatState(prns.astype(np.int16), pos, vel, clk, drift, var, ok)
-    return _Receiver(pr, cp, dop, lli, sats, has & ok)
+    # straight onto the 32 slots: satellite_states leaves slots without a pseudorange zero and not ok
+    sats = satellite_states(store, _PRNS, g.time, pr)
+    return _Receiver(pr, cp, dop, lli, sats, has & sats.ok)
+
+
+def _geometry(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr]:
+    """geometric_range() of the receiver's satellites from `pos_ecef_m`: range with Sagnac, LOS (memoised)."""
+    key = ("geo", pos_ecef_m.tobytes())
+    hit = rcv.memo.get(key)
+    if hit is None:
+        with np.errstate(invalid="ignore", divide="ignore"):  # empty slots (zero positions) give NaN, unused
+            hit = geometric_range(rcv.sats.pos_m, pos_ecef_m)
+        for a in hit:
+            a.flags.writeable = False
+        rcv.memo[key] = hit
+    return hit[0], hit[1]
 
 
 def _model_range_m(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr, Arr, Arr]:
     """Modelled range (geometric + Sagnac − sat clock + dry/wet troposphere), LOS, az, el for every slot."""
-    with np.errstate(invalid="ignore", divide="ignore"):  # empty slots (zero positions) give NaN, unused
-        r, e = geometric_range(rcv.sats.pos_m, pos_ecef_m)
-        az, el = sat_az_el(pos_ecef_m, e)
-    lat, _, h = ecef_to_llh(pos_ecef_m)
-    trop = saastamoinen_m(lat, h, el)
-    return r - CLIGHT_M_S * rcv.sats.clock_s + trop, e, az, el
+    key = ("model", pos_ecef_m.tobytes())
+    hit = rcv.memo.get(key)
+    if hit is None:
+        r, e = _geometry(rcv, pos_ecef_m)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            llh = ecef_to_llh(pos_ecef_m)
+            az, el = sat_az_el(pos_ecef_m, e, llh)
+        lat, _, h = llh
+        trop = saastamoinen_m(lat, h, el)
+        hit = (r - CLIGHT_M_S * rcv.sats.clock_s + trop, e, az, el)
+        for a in hit:
+            a.flags.writeable = False
+        rcv.memo[key] = hit
+    return hit[0], hit[1], hit[2], hit[3]
 
 
 def _range_with_trop_m(rcv: _Receiver, pos_ecef_m: Arr, trop_m: Arr) -> tuple[Arr, Arr]:
     """As _model_range_m with the troposphere already evaluated this epoch (it changes negligibly with
     the millimetre-to-metre position updates inside one epoch): modelled range and LOS."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        r, e = geometric_range(rcv.sats.pos_m, pos_ecef_m)
+    r, e = _geometry(rcv, pos_ecef_m)
     return r - CLIGHT_M_S * rcv.sats.clock_s + trop_m, e
 
 
@@ -260,7 +281,7 @@ def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t
             d = base_zb - st.prev_zb
             ok = np.isfinite(d) & common
             if ok.sum() >= 3:
-                d = d - np.median(d[ok])
+                d = d - _median(d[ok])
                 thr = 1.0 + 0.05 * dtb  # cycles: atmosphere/orbit changes grow with the gap
                 slip |= ok & (np.abs(d) > thr)
     return slip
@@ -274,7 +295,8 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
     # Doppler-predicted phase on the rover, from each satellite's last phase (across short gaps)
     bridged = np.zeros(NSAT, bool)  # phase continuity checked against the Doppler
     if st.prev_time_r is not None:
-        dt_all = np.array([t_r.diff_s(t) if t is not None else np.nan for t in st.last_t_r])
+        seen = st.last_t_r_ns != _NO_TIME_NS
+        dt_all = np.where(seen, (t_r.total_ns - np.where(seen, st.last_t_r_ns, 0)) / 1e9, np.nan)
         if np.any(np.isfinite(dt_all)):
             dop_avg = np.where(np.isfinite(st.prev_dop_r), 0.5 * (rov.dop_hz + st.prev_dop_r), rov.dop_hz)
             d = (rov.cp_cyc - st.prev_cp_r) + dop_avg * dt_all  # RINEX: phase follows range, Doppler = −rate
@@ -288,7 +310,7 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
                 # is compared over its own interval
                 clean = ok & ~slip
                 rate = d / np.where(ok, dt_all, 1.0)
-                d = d - np.median(rate[clean] if clean.sum() >= 2 else rate[ok]) * dt_all
+                d = d - _median(rate[clean] if clean.sum() >= 2 else rate[ok]) * dt_all
                 thr = o.slip_threshold_cyc * np.maximum(1.0, np.abs(np.nan_to_num(dt_all, nan=1.0)))
                 slip |= ok & (np.abs(d) > thr)
                 bridged = ok
@@ -300,13 +322,20 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
     return slip
 
 
+def _median(a: Arr) -> float:
+    """np.median of a short finite 1-D array, to the bit (mean of the middle two when even), without its
+    generic-reduction overhead (and without its import of numpy.ma)."""
+    v = sorted(a.tolist())
+    h = len(v) // 2
+    return v[h] if len(v) % 2 else (v[h - 1] + v[h]) / 2.0
+
+
 def _remember_rover(st: RtkState, rov: _Receiver, t_r: GpsTime) -> None:
     """Keep this rover epoch's phase/Doppler for the next epoch's slip tests."""
     have = np.isfinite(rov.cp_cyc) & np.isfinite(rov.dop_hz)
     st.prev_cp_r[have] = rov.cp_cyc[have]
     st.prev_dop_r[have] = rov.dop_hz[have]
-    for k in np.flatnonzero(have):
-        st.last_t_r[k] = t_r
+    st.last_t_r_ns[have] = t_r.total_ns
     st.prev_time_r = t_r
     st.prev_phase_r = np.isfinite(rov.cp_cyc)
 
@@ -369,12 +398,10 @@ def code_variance_scale(st: RtkState, rov: _Receiver, base: _Receiver, phase_ok:
 
 def _dd_matrix(idx: npt.NDArray[np.int64], ref: int) -> Arr:
     """Rows i − ref over the slots `idx` (ref excluded): shape (len(idx)−1, len(idx))."""
-    others = [j for j in range(len(idx)) if idx[j] != ref]
-    d = np.zeros((len(others), len(idx)))
-    rpos = int(np.flatnonzero(idx == ref)[0])
-    for r, j in enumerate(others):
-        d[r, j] = 1.0
-        d[r, rpos] = -1.0
+    others = (idx != ref).nonzero()[0]
+    d = np.zeros((others.size, idx.size))
+    d[np.arange(others.size), others] = 1.0
+    d[:, int((idx == ref).nonzero()[0][0])] = -1.0
     return d
 
 
@@ -395,73 +422,76 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     """Double-difference residuals at state `x` (RTKLIB ddres): phase, code, rover Doppler between satellites."""
     o = st.options
     rng_r, e = _range_with_trop_m(rov, x[:3], trop_r)
-    var_sd = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m)
-    rows_v: list[Arr] = []
-    rows_h: list[Arr] = []
-    blocks: list[Arr] = []
-    kinds: list[Arr] = []
-    slots: list[Arr] = []
+    key = ("var_sd", el.tobytes())  # the same elevations serve every _ddres call of the epoch
+    var_sd = rov.memo.get(key, (None,))[0]
+    if var_sd is None:
+        var_sd = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m)
+        var_sd.flags.writeable = False
+        rov.memo[key] = (var_sd,)
+    # groups (kind, reference slot, other slots, zero-difference residual z, per-slot variance), rows i − ref
+    groups: list[tuple[int, int, npt.NDArray[np.int64], Arr, Arr]] = []
     ref_phase = -1
-    amb = NX0 + np.arange(NSAT)
+    drng = rng_r - rng_b
     for kind, ok in ((0, phase_ok), (1, code_ok)):
-        idx = np.flatnonzero(ok)
+        idx = ok.nonzero()[0]
         if idx.size < 2:
             continue
         ref = int(idx[np.argmax(el[idx])])
         if kind == 0:
             ref_phase = ref
-            z = LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b) - LAMBDA_L1_M * x[amb]
+            z = LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - drng - LAMBDA_L1_M * x[NX0:]
             var = var_sd
         else:
-            z = (rov.pr_m - base.pr_m) - (rng_r - rng_b)
+            z = (rov.pr_m - base.pr_m) - drng
             var = var_sd * o.code_phase_ratio**2 * st.code_var_scale
-        others = idx[idx != ref]
-        v = z[others] - z[ref]
-        h = np.zeros((others.size, NX))
-        h[:, :3] = -e[others] + e[ref]
-        if kind == 0:
-            h[np.arange(others.size), NX0 + others] = LAMBDA_L1_M
-            h[:, NX0 + ref] = -LAMBDA_L1_M
-        rows_v.append(v)
-        rows_h.append(h)
-        blocks.append(np.diag(var[others]) + var[ref])
-        kinds.append(np.full(others.size, kind, np.int8))
-        slots.append(others)
+        groups.append((kind, ref, idx[idx != ref], z, var))
     if with_doppler:
-        idx = np.flatnonzero(code_ok & np.isfinite(rov.dop_hz))
+        idx = (code_ok & np.isfinite(rov.dop_hz)).nonzero()[0]
         if idx.size >= 2:
             ref = int(idx[np.argmax(el[idx])])
             vs = rov.sats.vel_m_s
             sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, 1] * x[0] - vs[:, 0] * x[1])
             rate_model = np.einsum("ij,ij->i", e, vs - x[3:6]) + sag - CLIGHT_M_S * rov.sats.drift_s_s
             z = -LAMBDA_L1_M * rov.dop_hz - rate_model
-            others = idx[idx != ref]
-            h = np.zeros((others.size, NX))
-            h[:, 3:6] = -e[others] + e[ref]
             s2 = (o.doppler_sigma_m_s / np.sin(np.maximum(el, 0.1))) ** 2
-            rows_v.append(z[others] - z[ref])
-            rows_h.append(h)
-            blocks.append(np.diag(s2[others]) + s2[ref])
-            kinds.append(np.full(others.size, 2, np.int8))
-            slots.append(others)
-    if not rows_v:
+            groups.append((2, ref, idx[idx != ref], z, s2))
+    if not groups:
         return _DD(np.zeros(0), np.zeros((0, NX)), np.zeros((0, 0)), np.zeros(0, np.int8), np.zeros(0, np.int64), -1), e
-    nrow = sum(b.shape[0] for b in blocks)
+    nrow = sum(g[2].size for g in groups)
+    v = np.empty(nrow)
+    h = np.zeros((nrow, NX))
     r = np.zeros((nrow, nrow))
+    kinds = np.empty(nrow, np.int8)
+    slots = np.empty(nrow, np.int64)
+    var_other: list[Arr] = []
     k = 0
-    for b in blocks:
-        m = b.shape[0]
-        r[k : k + m, k : k + m] = b
+    for kind, ref, others, z, var in groups:
+        m = others.size
+        rows = slice(k, k + m)
+        v[rows] = z[others] - z[ref]
+        # position (phase, code) or velocity (Doppler) columns: LOS difference ref − other
+        cols = slice(3, 6) if kind == 2 else slice(0, 3)
+        h[rows, cols] = e[ref] - e[others]
+        if kind == 0:
+            h[_ROWS[k : k + m], NX0 + others] = LAMBDA_L1_M
+            h[rows, NX0 + ref] = -LAMBDA_L1_M
+        # covariance of rows sharing the reference: var_ref everywhere, var_other + var_ref on the diagonal
+        r[rows, rows] = var[ref]
+        var_other.append(var[others])
+        kinds[rows] = kind
+        slots[rows] = others
         k += m
-    return _DD(np.concatenate(rows_v), np.vstack(rows_h), r, np.concatenate(kinds), np.concatenate(slots),
-               ref_phase), e
+    diag = _ROWS[:nrow]
+    r[diag, diag] += np.concatenate(var_other)
+    return _DD(v, h, r, kinds, slots, ref_phase), e
 
 
 def _kf_update(x: Arr, p: Arr, v: Arr, h: Arr, r: Arr) -> tuple[Arr, Arr]:
     """Kalman measurement update on the active states only (zero-variance states are left alone)."""
-    act = np.flatnonzero(np.diag(p) > 0)
+    act = (p.diagonal() > 0).nonzero()[0]
+    rows, cols = act[:, None], act[None, :]  # np.ix_ without its per-call overhead
     ha = h[:, act]
-    pa = p[np.ix_(act, act)]
+    pa = p[rows, cols]
     ph = pa @ ha.T
     s = ha @ ph + r
     k = np.linalg.solve(s, ph.T).T
@@ -469,7 +499,7 @@ def _kf_update(x: Arr, p: Arr, v: Arr, h: Arr, r: Arr) -> tuple[Arr, Arr]:
     x[act] += k @ v
     pn = pa - k @ ph.T
     p = p.copy()
-    p[np.ix_(act, act)] = 0.5 * (pn + pn.T)
+    p[rows, cols] = 0.5 * (pn + pn.T)
     return x, p
 
 

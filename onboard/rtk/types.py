@@ -62,6 +62,8 @@ class ObsEpoch:
     def gps_only(self) -> ObsEpoch:
         """The same epoch restricted to GPS satellites (gnssId 0, PRN 1–32)."""
         keep = (self.gnss_id == GNSS_GPS) & (self.sv_id >= 1) & (self.sv_id <= 32)
+        if keep.all():  # frozen: the epoch itself is its GPS part (GPS-only files, every engine epoch)
+            return self
         return self.select(keep)
 
     def select(self, keep: npt.NDArray[np.bool_]) -> ObsEpoch:

@@ -133,3 +133,29 @@ def test_ubx_rover_log_with_its_own_ephemerides(tmp_path, capsys):
     assert np.mean(track.q == 1) >= 0.9
     ref = np.array([3774088.9931, -601661.8217, 5089321.3853])
     assert np.linalg.norm(track.pos_ecef_m[track.q == 1] - ref, axis=1).max() < 0.10
+
+
+def test_rinex_run_imports_only_what_rinex_needs(tmp_path):
+    """`python -m onboard rtk` on RINEX inputs loads neither the UBX/RTCM decoders nor the other commands'
+    modules (start-up is part of the whole-command CPU time the RTKLIB driver is compared with)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    project = Path(__file__).resolve().parents[2]
+    args = ["rtk", "--rover", str(shared_file(GEONET + "07590920.05o.gz")),
+            "--base", str(shared_file(GEONET + "30400920.05o.gz")),
+            "--nav", str(shared_file(GEONET + "07590920.05n.gz")), f"--base-pos={BASE_3040}", "--no-progress",
+            "-o", str(tmp_path / "g.pos")]
+    code = ("import sys\nfrom onboard.__main__ import main\nrc = main(sys.argv[1:])\n"
+            "print('MODULES', *sorted(m for m in sys.modules if '.' not in m or m.startswith('onboard.')))\n"
+            "sys.exit(rc)")
+    out = subprocess.run([sys.executable, "-c", code, *args], cwd=project, capture_output=True, text=True,
+                         timeout=120, check=False)
+    assert out.returncode == 0, out.stderr
+    assert "120 epochs" in out.stdout
+    loaded = set(next(ln for ln in out.stdout.splitlines() if ln.startswith("MODULES")).split()[1:])
+    assert "onboard.rtk.rtkpos" in loaded and "onboard.formats.rinex_obs" in loaded
+    unneeded = {"pyubx2", "pyrtcm", "scipy", "pyproj", "tqdm", "fastapi", "serial", "tomllib", "onboard.settings",
+                "onboard.convert", "onboard.receiver.decode", "onboard.base_cli", "onboard.web", "onboard.daemon"}
+    assert not loaded & unneeded, sorted(loaded & unneeded)

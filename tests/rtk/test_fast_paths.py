@@ -1,0 +1,103 @@
+"""The engine's speed-oriented code paths give what the plain numpy/per-satellite formulations give, to the bit.
+
+The speed work (whole-command CPU against the RTKLIB driver) replaced numpy conveniences by cheaper
+equivalents that must not change a single result: these tests pin that equivalence on real data, so a later
+edit that changes the numbers (not only the speed) shows up here rather than as a drift in the benchmarks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from onboard.formats.rinex_nav import read_rinex_nav
+from onboard.formats.rinex_obs import read_rinex_obs
+from onboard.gnsstime import GpsTime
+from onboard.rtk.ephemeris import EphemerisStore, eph_position_velocity, satellite_states
+from onboard.rtk.mlambda import ld_factor, mlambda
+from onboard.rtk.pntpos import _norm
+from onboard.rtk.rtkpos import _dd_matrix, _median
+from tests.conftest import shared_file
+
+M8P = "gnss/ublox-m8p-galway-2018/rinex/"
+
+
+def test_small_median_and_norm_equal_numpy_to_the_bit() -> None:
+    rng = np.random.default_rng(7)
+    for n in range(1, 14):
+        a = rng.normal(0.0, 3.0, n) * 10.0 ** rng.integers(-3, 4)
+        assert _median(a) == np.median(a)
+        assert _norm(a) == np.linalg.norm(a)
+
+
+def test_satellite_states_on_32_slots_equal_the_per_satellite_formulas() -> None:
+    nav = read_rinex_nav(shared_file(M8P + "rover-20181004-1237.nav.gz"))
+    obs = read_rinex_obs(shared_file(M8P + "rover-20181004-1237.obs.gz"))
+    store = EphemerisStore(nav.ephemerides)
+    for ep in obs.epochs[::300]:
+        g = ep.gps_only()
+        pr = np.full(32, np.nan)
+        pr[g.sv_id - 1] = g.pr_m
+        slots = satellite_states(store, np.arange(1, 33), g.time, pr)
+        subset = satellite_states(store, g.sv_id, g.time, g.pr_m)
+        # the 32-slot call is the subset call scattered, empty slots zero and not ok
+        k = g.sv_id - 1
+        for name in ("pos_m", "vel_m_s", "clock_s", "drift_s_s", "var_m2", "ok"):
+            assert np.array_equal(getattr(slots, name)[k], getattr(subset, name)), name
+        empty = np.setdiff1d(np.arange(32), k)
+        assert not slots.ok[empty].any() and not slots.pos_m[empty].any()
+        assert slots.ok.sum() >= 5
+        # and each state agrees with the scalar per-ephemeris formulas at the transmission time
+        for i in np.flatnonzero(subset.ok):
+            eph = store.select(int(g.sv_id[i]), g.time)
+            assert eph is not None
+            t_tx = g.time.add_s(-g.pr_m[i] / 299792458.0 - subset.clock_s[i] - eph.tgd_s)
+            pos, vel, _, _ = eph_position_velocity(eph, t_tx)
+            assert np.allclose(subset.pos_m[i], pos, atol=1e-3) and np.allclose(subset.vel_m_s[i], vel, atol=1e-3)
+
+
+def _ld_reference(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The LtDL factorisation as first written with numpy row operations (RTKLIB LD())."""
+    n = q.shape[0]
+    a = q.copy()
+    lmat = np.zeros((n, n))
+    d = np.zeros(n)
+    for i in range(n - 1, -1, -1):
+        d[i] = a[i, i]
+        lmat[i, : i + 1] = a[i, : i + 1] / np.sqrt(d[i])
+        a[:i, :i] -= np.outer(lmat[i, :i], lmat[i, :i])
+        lmat[i, : i + 1] /= lmat[i, i]
+    return lmat, d
+
+
+def test_ld_factor_and_lambda_on_list_code_match_the_numpy_formulation() -> None:
+    rng = np.random.default_rng(3)
+    for n in (3, 6, 9, 12):
+        g = rng.normal(size=(n, n))
+        q = g @ g.T * 0.01 + np.eye(n) * 1e-3
+        lmat, d = ld_factor(q)
+        ref_l, ref_d = _ld_reference(q)
+        assert np.array_equal(lmat, ref_l) and np.array_equal(d, ref_d)
+        a = rng.normal(size=n) * 5.0
+        res = mlambda(a, q)
+        assert res.fixed.shape == (n, 2) and res.sq_dist[0] <= res.sq_dist[1]
+        # the best candidate is an integer vector at least as close (Q-norm) as rounding the float
+        qi = np.linalg.inv(q)
+        best, rounded = res.fixed[:, 0] - a, np.round(a) - a
+        assert best @ qi @ best <= rounded @ qi @ rounded + 1e-9
+
+
+def test_dd_matrix_rows_are_other_minus_reference() -> None:
+    idx = np.array([2, 5, 9, 17])
+    d = _dd_matrix(idx, 9)
+    assert np.array_equal(d, [[1, 0, -1, 0], [0, 1, -1, 0], [0, 0, -1, 1]])
+    x = np.array([10.0, 20.0, 30.0, 40.0])
+    assert np.array_equal(d @ x, [-20.0, -10.0, 10.0])
+
+
+def test_gps_only_epoch_is_itself_and_mixed_epochs_are_filtered() -> None:
+    obs = read_rinex_obs(shared_file(M8P + "rover-20181004-1237.obs.gz"))
+    mixed = next(e for e in obs.epochs if (e.gnss_id != 0).any())
+    g = mixed.gps_only()
+    assert g is not mixed and (g.gnss_id == 0).all() and len(g) < len(mixed)
+    assert g.gps_only() is g
+    assert g.time == GpsTime(mixed.time.week, mixed.time.tow_ns)
