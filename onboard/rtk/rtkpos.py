@@ -102,6 +102,9 @@ class RtkState:
     pending_fix: tuple[tuple, GpsTime] | None = None
     pending_slip: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
     """Rover slips detected while no base data was usable, applied at the next relative epoch."""
+    base_hist: list[tuple[GpsTime, Arr]] = field(default_factory=list)
+    """Recent base epochs (time, phase − modelled range in cycles per slot, NaN after a base slip), oldest
+    first: the per-satellite correction rate that bridges a radio gap (see _extrapolated_base)."""
     """Integer set (ref, slots, DD integers) winning the ratio test below the success rate, and since when."""
 
 
@@ -277,6 +280,62 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
         amb_on = st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0
         slip |= common & ~st.prev_phase_r & amb_on & ~bridged
     return slip
+
+
+def _remember_base(st: RtkState, base: _Receiver, t_b: GpsTime, base_zb_cyc: Arr) -> None:
+    """Add a new base epoch to the correction history (forward time only; a base slip voids the slot's past)."""
+    o = st.options
+    hist = st.base_hist
+    if hist and (t_b <= hist[-1][0] or t_b.diff_s(hist[-1][0]) > o.max_age_s):
+        hist.clear()  # backward processing or a long outage: start a new history
+    zb = base_zb_cyc.copy()
+    if hist:
+        t_l, z_l = hist[-1]
+        dtb = t_b.diff_s(t_l)
+        d = zb - z_l
+        ok = np.isfinite(d)
+        jump = ((base.lli & LLI_SLIP) != 0) & np.isfinite(zb)
+        if ok.sum() >= 3:
+            d = d - np.median(d[ok])  # the base clock is common to every satellite
+            jump |= ok & (np.abs(d) > 1.0 + 0.05 * dtb)  # as _detect_slips' base test
+        for _t, z in hist:
+            z[jump] = np.nan
+    hist.append((t_b, zb))
+    while len(hist) > 1 and t_b.diff_s(hist[0][0]) > o.base_rate_window_s:
+        hist.pop(0)
+
+
+def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver:
+    """Base phase carried forward over `age_s` (rover − base time, s) along each satellite's correction rate.
+
+    During a radio gap the rover's epochs are differenced with the last base epoch: the geometry is evaluated
+    at each receiver's own time and the base clock cancels, but what the base observes and the model does
+    not (ionosphere, satellite clock and orbit errors) changes with the age: decimetres over 20 s at low
+    elevation (Klobuchar-sized slant delays). Its rate, measured on the base's own phase − modelled range over
+    the last `base_rate_window_s` (the common base-clock drift removed), carries it forward as RTCM 2's
+    range-rate corrections did. Slots without a clean history keep the raw phase.
+    """
+    o = st.options
+    hist = st.base_hist
+    if age_s < o.base_extrapolate_min_age_s or len(hist) < 3:
+        return base
+    t_n = hist[-1][0]
+    tk = np.array([t.diff_s(t_n) for t, _ in hist])  # ≤ 0, newest last
+    if -tk[0] < 0.5 * o.base_rate_window_s:
+        return base
+    z = np.array([zk for _, zk in hist])
+    z = z - np.nanmedian(z - z[-1], axis=1)[:, None] - z[-1]  # base clock removed, relative to the newest
+    ok = np.all(np.isfinite(z), axis=0) & np.isfinite(base.cp_cyc)
+    if ok.sum() < 2:
+        return base
+    # a quadratic over the window follows the curvature of a setting satellite's delay; the correction is
+    # the fitted change from the newest base epoch to the rover epoch
+    deg = 2 if -tk[0] >= 20.0 else 1
+    coef = np.polynomial.polynomial.polyfit(tk, z[:, ok], deg)
+    delta = np.polynomial.polynomial.polyval(age_s, coef) - np.polynomial.polynomial.polyval(0.0, coef)
+    cp = base.cp_cyc.copy()
+    cp[ok] += delta
+    return _Receiver(base.pr_m, cp, base.dop_hz, base.lli, base.sats, base.has)
 
 
 def _remember_rover(st: RtkState, rov: _Receiver, t_r: GpsTime) -> None:
@@ -603,6 +662,9 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             st.slips += int(gone.size)
         slip |= st.pending_slip & phase_ok
         st.pending_slip[:] = False
+    if st.prev_time_b != base.time:
+        _remember_base(st, bas, base.time, base_zb_cyc)
+    bas = _extrapolated_base(st, bas, age)
     _udbias(st, rov, bas, rng_r, rng_b, phase_ok, slip)
 
     # remember raw data for next epoch's slip tests
