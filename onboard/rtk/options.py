@@ -78,6 +78,10 @@ class RtkOptions:
     """Span (s) of base epochs over which each satellite's correction rate (base phase − modelled range) is
     measured to carry the last base epoch across a radio gap: long enough that 3 mm phase noise gives
     < 1 mm/s, short enough for the curvature of the ionospheric delay."""
+    base_age_sigma_m_s: float = 0.0005
+    """Growth (m/s) of the phase σ of an aged base epoch after it is carried forward (RTKLIB demo5's sclkstab
+    term, smaller since the rate is removed): hil_sim leaves < 0.5 cm after 20 s; real data are rougher. Lets
+    the hold's residual check and the fix's σ widen with the age instead of releasing a good fix at 25 s."""
     base_extrapolate_min_age_s: float = 2.5
     """Base epochs older than this (s) are carried forward along the correction rate. Younger ones (1 Hz base,
     one lost epoch) are used raw: the atmosphere moves < 1 cm in 2 s, less than the rate's own noise adds

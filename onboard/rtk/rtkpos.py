@@ -102,6 +102,9 @@ class RtkState:
     pending_fix: tuple[tuple, GpsTime] | None = None
     pending_slip: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
     """Rover slips detected while no base data was usable, applied at the next relative epoch."""
+    base_age_var_m2: float = 0.0
+    """Variance (m²) of this epoch's carried-forward base phase (atmosphere/clock drift the correction rate
+    does not follow): (base_age_sigma_m_s · age)², added to every single difference; 0 for raw base data."""
     base_hist: list[tuple[GpsTime, Arr]] = field(default_factory=list)
     """Recent base epochs (time, phase − modelled range in cycles per slot, NaN after a base slip), oldest
     first: the per-satellite correction rate that bridges a radio gap (see _extrapolated_base)."""
@@ -370,6 +373,13 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
     if np.any(new):
         if st.init_pos_ecef_m is not None and st.fix_count == 0 and st.p[0, 0] <= (2 * o.init_pos_sigma_m) ** 2:
             sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b)) / LAMBDA_L1_M
+            # phase − modelled range keeps the receivers' clock difference (0.5 ms = 150 km on hil_sim), which
+            # phase − code removes: take it out (the median over satellites of code − range, common to all, so
+            # the double differences keep the surveyed precision), or a satellite re-initialised from code
+            # after a slip never fits the others again
+            clk = (rov.pr_m - base.pr_m) - (rng_r - rng_b)
+            if np.any(new & np.isfinite(clk)):
+                sd = sd - np.median(clk[new & np.isfinite(clk)]) / LAMBDA_L1_M
             var = (0.05 + o.init_pos_sigma_m / LAMBDA_L1_M) ** 2
             st.known_amb[new] = True
         else:
@@ -411,7 +421,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     """Double-difference residuals at state `x` (RTKLIB ddres): phase, code, rover Doppler between satellites."""
     o = st.options
     rng_r, e = _range_with_trop_m(rov, x[:3], trop_r)
-    var_sd = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m)
+    var_sd = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m) + st.base_age_var_m2
     rows_v: list[Arr] = []
     rows_h: list[Arr] = []
     blocks: list[Arr] = []
@@ -664,7 +674,10 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         st.pending_slip[:] = False
     if st.prev_time_b != base.time:
         _remember_base(st, bas, base.time, base_zb_cyc)
-    bas = _extrapolated_base(st, bas, age)
+    carried = _extrapolated_base(st, bas, age)
+    # the variance of what the rate misses; raw base data (young, or no history, e.g. processed backward) as before
+    st.base_age_var_m2 = (o.base_age_sigma_m_s * age) ** 2 if carried is not bas else 0.0
+    bas = carried
     _udbias(st, rov, bas, rng_r, rng_b, phase_ok, slip)
 
     # remember raw data for next epoch's slip tests
