@@ -197,3 +197,18 @@ def test_ubx_relay_from_the_base_decodes_to_the_base_epochs(world) -> None:
     assert bs.epoch_count == 10 and core.scheduler.counts.sent == {"obs": 10, "position": 2}  # 1006 at 0 and 5 s
     assert bs.position is not None
     np.testing.assert_allclose(bs.position.phase_centre_ecef_m, world.base_ecef_m, atol=1e-3)
+
+
+def test_max_base_age_comes_from_the_settings_and_defaults_to_30_s(tmp_path) -> None:
+    from onboard.daemon import RecorderDeps
+    from onboard.rtk_service import RtkRecorder, recorder_for
+    from onboard.settings import default_config_path, load_settings
+
+    deps = RecorderDeps(open_port=lambda: FakeByteStream(0.02))
+    shipped = load_settings(default_config_path(), environ={})
+    assert shipped.rtk_max_base_age_s == 30.0 and RtkServiceOptions().max_base_age_s == 30.0
+    settings = load_settings(default_config_path(), environ={}, overrides={
+        "rtk.max_base_age_s": 12.5, "rtk.base_stream": "tcp://127.0.0.1:9", "journal.data_dir": str(tmp_path)})
+    rec = recorder_for(settings, deps, settings.rtk_base_stream)
+    assert isinstance(rec, RtkRecorder)
+    assert rec.rtk.options.max_base_age_s == 12.5 and rec.rtk.engine_options.max_age_s == 12.5
