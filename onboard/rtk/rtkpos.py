@@ -313,8 +313,8 @@ def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver
 
     During a radio gap the rover's epochs are differenced with the last base epoch: the geometry is evaluated
     at each receiver's own time and the base clock cancels, but what the base observes and the model does
-    not (ionosphere, satellite clock and orbit errors) changes with the age: decimetres over 20 s at low
-    elevation (Klobuchar-sized slant delays). Its rate, measured on the base's own phase − modelled range over
+    not (ionosphere, satellite clock and orbit errors) changes with the age: centimetres to decimetres over
+    20 s at low elevation (hil_sim: up to 5 cm). Its rate, measured on the base's own phase − modelled range over
     the last `base_rate_window_s` (the common base-clock drift removed), carries it forward as RTCM 2's
     range-rate corrections did. Slots without a clean history keep the raw phase.
     """
@@ -326,18 +326,24 @@ def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver
     tk = np.array([t.diff_s(t_n) for t, _ in hist])  # ≤ 0, newest last
     if -tk[0] < 0.5 * o.base_rate_window_s:
         return base
-    z = np.array([zk for _, zk in hist])
-    z = z - np.nanmedian(z - z[-1], axis=1)[:, None] - z[-1]  # base clock removed, relative to the newest
+    z = np.array([zk for _, zk in hist]) - hist[-1][1]  # relative to the newest epoch
+    fin = np.isfinite(z)
+    keep = fin.sum(axis=1) >= 3
+    if keep.sum() < 3:
+        return base
+    z, tk = z[keep], tk[keep]
+    if -tk[0] < 0.5 * o.base_rate_window_s:
+        return base
+    z = z - np.array([np.median(row[np.isfinite(row)]) for row in z])[:, None]  # the base clock, common
     ok = np.all(np.isfinite(z), axis=0) & np.isfinite(base.cp_cyc)
     if ok.sum() < 2:
         return base
-    # a quadratic over the window follows the curvature of a setting satellite's delay; the correction is
-    # the fitted change from the newest base epoch to the rover epoch
-    deg = 2 if -tk[0] >= 20.0 else 1
-    coef = np.polynomial.polynomial.polyfit(tk, z[:, ok], deg)
-    delta = np.polynomial.polynomial.polyval(age_s, coef) - np.polynomial.polynomial.polyval(0.0, coef)
+    # least-squares slope over the window (a quadratic over 30 s followed the curvature better on hil_sim but
+    # amplified the real M8P base's noise: 94.2 → 91.4 % fixed)
+    tc = tk - tk.mean()
+    slope = tc @ (z[:, ok] - z[:, ok].mean(axis=0)) / (tc @ tc)
     cp = base.cp_cyc.copy()
-    cp[ok] += delta
+    cp[ok] += slope * age_s
     return _Receiver(base.pr_m, cp, base.dop_hz, base.lli, base.sats, base.has)
 
 
