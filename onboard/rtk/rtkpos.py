@@ -97,17 +97,17 @@ class RtkState:
     fail_count: int = 0
     slips: int = 0
     base_cache: tuple[GpsTime, _Receiver] | None = None
-    last_ratio: float = 0.0
-    clock_bias_m: float = 0.0
-    pending_fix: tuple[tuple, GpsTime] | None = None
-    pending_slip: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
-    """Rover slips detected while no base data was usable, applied at the next relative epoch."""
     base_age_var_m2: float = 0.0
     """Variance (m²) of this epoch's carried-forward base phase (atmosphere/clock drift the correction rate
     does not follow): (base_age_sigma_m_s · age)², added to every single difference; 0 for raw base data."""
     base_hist: list[tuple[GpsTime, Arr]] = field(default_factory=list)
     """Recent base epochs (time, phase − modelled range in cycles per slot, NaN after a base slip), oldest
     first: the per-satellite correction rate that bridges a radio gap (see _extrapolated_base)."""
+    last_ratio: float = 0.0
+    clock_bias_m: float = 0.0
+    pending_fix: tuple[tuple, GpsTime] | None = None
+    pending_slip: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
+    """Rover slips detected while no base data was usable, applied at the next relative epoch."""
     """Integer set (ref, slots, DD integers) winning the ratio test below the success rate, and since when."""
 
 
