@@ -5,6 +5,8 @@ wrong fixes (Q=1 more than 10 cm off in 3D), µs per epoch (CPU time of the filt
 `whole` includes reading the files). GPS L1 only, 15° mask, fix-and-hold, as the RTKLIB rows in
 ../shared/data/gnss/README.md.
 
+Then (forward only, unless --no-sim) the hil_sim scenario matrix of bench/rtk_sim.py (LEA-6T and M8T).
+
 Run: `.venv/bin/python bench/rtk_accuracy.py [--direction forward|combined] [--only NAME ...] [--no-sim]`
 """
 
@@ -87,31 +89,6 @@ def _sept():
         (lambda t: rows.get(round(t.tow_s * 1000))), None
 
 
-def _sim(max_sats: int | None, known_start: bool, duration_s: float = 600.0):
-    def load():
-        from hil_sim.scenario import ReceiverModel, Scenario
-        from hil_sim.world import World
-
-        over = {"duration_s": duration_s}
-        sc = Scenario.default("m8t", **over)
-        if max_sats is not None:
-            sc = replace(sc, rover_receiver=replace(sc.rover_receiver, max_sats=max_sats),
-                         base_receiver=replace(sc.base_receiver, max_sats=max_sats))
-        world = World(sc)
-        t0 = sc.start
-        rov, bas = [], []
-        for k in range(int(duration_s)):
-            t = t0.add_s(k)
-            rov.append(world.observe("rover", t))
-            bas.append(world.observe("base", t))
-        store = EphemerisStore(world.ephemerides())
-        init = world.truth(t0)["antenna_ecef_m"] if known_start else None
-        _ = ReceiverModel
-        return rov, bas, Nav(store, world.iono_params()), world.base_ecef_m, \
-            (lambda t: world.truth(t)["antenna_ecef_m"]), init
-    return load
-
-
 CASES = [
     Case("m8p-static (M8P base, 0.33 m)", "2.4.3 75.3 % / demo5 89.3 %, 1st fix 128 s, 1.2-1.6 cm h",
          _m8p(M8P / "rinex/base-20181004-1236.rtcm.obs.gz", np.array([3774088.9931, -601661.8217, 5089321.3853]))),
@@ -119,9 +96,6 @@ CASES = [
          _m8p(M8P / "cors-glw1/glw1277m.18o.gz", np.array([3774088.6821, -601663.0350, 5089318.2304]))),
     Case("geonet 0759/3040 (3.3 km, 30 s)", "2.4.3 99 % / demo5 95 %, 6 mm h, 1.1 cm v", _geonet),
     Case("geonet 3034/Sept moving (5.3 km)", "2.4.3 31 % / demo5 0 %, 3.7 cm h", _sept),
-    Case("hil_sim flight (m8t, 1 km)", "target: 0 wrong, >= 99 % airborne, <= 2 cm 3D", _sim(None, False)),
-    Case("hil_sim flight, 5 satellites", "target: 0 wrong", _sim(5, False)),
-    Case("hil_sim flight, known take-off point", "target: fix at the first epoch", _sim(None, True)),
 ]
 
 
@@ -181,12 +155,22 @@ def main() -> None:
     for case in CASES:
         if args.only and not any(s in case.name for s in args.only):
             continue
-        if args.no_sim and case.name.startswith("hil_sim"):
-            continue
         r = evaluate(case, args.direction)
         print(f"{case.name:36s} {r['epochs']:6d} {r['fix %']:6.1f} {r['first fix s']:6.0f}s {r['h RMS cm']:5.1f}c "
               f"{r['v RMS cm']:5.1f}c {r['wrong']:5d} {r['air fix %']:6.1f} {r['us/epoch']:6.0f} {r['whole us/epoch']:6.0f}  {case.rtklib}",
               flush=True)
+    if not args.no_sim and args.direction == "forward":
+        # the hil_sim scenario matrix (bench/rtk_sim.py): LEA-6T and M8T through the real byte paths
+        import sys
+
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from rtk_sim import CASES as SIM_CASES
+        from rtk_sim import run_matrix
+
+        only = [s for s in args.only or [] if any(s in c.name for c in SIM_CASES)]
+        if not args.only or only:
+            print()
+            run_matrix(only or None)
 
 
 if __name__ == "__main__":

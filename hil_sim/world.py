@@ -55,6 +55,10 @@ time t (GPS time):
   pseudorange (by c·1 ms = 299 792.458 m) and the phase (by exactly 1 575 420 cycles, an integer, no slip)
   all jump together, as on real u-blox RXM-RAW/RAWX; the RAWX `clock_reset` flag marks the epoch after it.
 
+The common slowly varying errors (orbit, satellite clock, ionosphere model error, troposphere residual) are
+Gauss–Markov samples every `SMOOTH_DT_S` (300 s) joined by cubic splines: their σ and τ as stated, their rates
+continuous (a rover epoch differenced with a 20-s-old base epoch sees them drift smoothly, as real ones do).
+
 Everything random is drawn from `np.random.default_rng` seeded by (scenario seed, purpose, receiver,
 satellite, epoch): a scenario reproduces exactly, in any order of calls (except the LLI/clock-reset flags,
 which compare with the previous call). `ErrorModel.noise_free()` removes every random error.
@@ -70,6 +74,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from scipy.interpolate import CubicSpline
 from scipy.signal import lfilter
 
 from hil_sim.camera import CameraEvent, camera_events
@@ -93,6 +98,14 @@ MARGIN_S = 300.0
 """Span simulated before the start and after the end of the scenario (s); observations outside raise."""
 SLOW_DT_S = 10.0
 FAST_DT_S = 1.0
+SMOOTH_DT_S = 300.0
+"""Knot spacing of the common slowly varying errors (orbit, satellite clock, ionosphere model error,
+troposphere residual): Gauss–Markov samples every 300 s joined by a cubic spline. Linear interpolation of
+10-s samples gave them random rates changing every 10 s (slant ionosphere 1-2 cm/s ≈ 6-12 TECU/min, storm
+level; satellite clocks 3 cm in 20 s where GPS clocks drift millimetres); 60-s knots still bent by 5-8 cm
+over 20 s. Harmless while base and rover observe at the same instant (the errors cancel); unphysical once a
+rover epoch is differenced with an older base epoch (radio gaps), where real broadcast-model errors drift
+smoothly (travelling ionospheric disturbances: ≤ 1 TECU over 10-60 min, millimetres of curvature in 20 s)."""
 AMBIGUITY_RANGE_CYC = 500
 LEAP_S_2010 = 15
 
@@ -140,6 +153,19 @@ class _Grid:
 
     def time(self, i: int) -> GpsTime:
         return GpsTime.from_total_ns(self.t0_ns + i * self.dt_ns)
+
+
+class _SplineGrid(_Grid):
+    """A knot grid whose sampled processes are joined by cubic splines (continuous rates)."""
+
+    def spline(self, values: Vec) -> CubicSpline:
+        """The spline through (n, cols) samples at the knots, over knot index."""
+        return CubicSpline(np.arange(self.n, dtype=float), values, axis=0)
+
+    def at(self, spline: CubicSpline, t: GpsTime) -> Vec:
+        """The spline's (cols,) values at time `t`."""
+        i, f = self.locate(t)
+        return np.asarray(spline(i + f))
 
 
 @dataclass(frozen=True)
@@ -272,15 +298,17 @@ class World:
         self._slow = _Grid(t0_ns, SLOW_DT_S, math.ceil(span_s / SLOW_DT_S) + 2)
         self._fast = _Grid(t0_ns, FAST_DT_S, math.ceil(span_s / FAST_DT_S) + 2)
         seed = sc.seed
-        ns, nf = self._slow.n, self._fast.n
-        self._orbit_err = em.orbit_sigma_m * _gauss_markov(
-            _rng(seed, _P_ORBIT), ns, 3 * N_PRN, SLOW_DT_S, em.orbit_tau_s).reshape(ns, N_PRN, 3)
-        self._satclk_err_m = em.sat_clock_sigma_m * _gauss_markov(
-            _rng(seed, _P_SATCLK), ns, N_PRN, SLOW_DT_S, em.sat_clock_tau_s)
-        self._iono_err = em.iono_model_error_fraction * _gauss_markov(
-            _rng(seed, _P_IONO), ns, N_PRN, SLOW_DT_S, em.iono_model_error_tau_s)
-        self._tropo_res_m = em.tropo_residual_zenith_sigma_m * _gauss_markov(
-            _rng(seed, _P_TROPO), ns, 1, SLOW_DT_S, em.tropo_residual_tau_s)[:, 0]
+        nf = self._fast.n
+        self._smooth = _SplineGrid(t0_ns, SMOOTH_DT_S, math.ceil(span_s / SMOOTH_DT_S) + 4)
+        nk = self._smooth.n
+        self._orbit_err = self._smooth.spline(em.orbit_sigma_m * _gauss_markov(
+            _rng(seed, _P_ORBIT), nk, 3 * N_PRN, SMOOTH_DT_S, em.orbit_tau_s))
+        self._satclk_err_m = self._smooth.spline(em.sat_clock_sigma_m * _gauss_markov(
+            _rng(seed, _P_SATCLK), nk, N_PRN, SMOOTH_DT_S, em.sat_clock_tau_s))
+        self._iono_err = self._smooth.spline(em.iono_model_error_fraction * _gauss_markov(
+            _rng(seed, _P_IONO), nk, N_PRN, SMOOTH_DT_S, em.iono_model_error_tau_s))
+        self._tropo_res_m = self._smooth.spline(em.tropo_residual_zenith_sigma_m * _gauss_markov(
+            _rng(seed, _P_TROPO), nk, 1, SMOOTH_DT_S, em.tropo_residual_tau_s))
         ang = _rng(seed, _P_GRAD).uniform(0.0, 2 * math.pi, N_PRN)
         self._iono_grad_enu = em.iono_gradient_mm_per_km * 1e-6 * np.stack([np.sin(ang), np.cos(ang)], axis=1)
         models = {"rover": sc.rover_receiver, "base": sc.base_receiver}
@@ -367,8 +395,8 @@ class World:
         range (m), range rate (m/s), satellite position/velocity rotated into the ECEF frame of reception,
         satellite clock (s, incl. relativity, −TGD and the clock error) and drift (s/s)."""
         eph = self._eph[prn]
-        orbit_err = self._slow.interp(self._orbit_err[:, prn - 1, :], t)
-        clk_err_s = float(self._slow.interp(self._satclk_err_m[:, prn - 1], t)) / CLIGHT_M_S
+        orbit_err = self._smooth.at(self._orbit_err, t)[3 * (prn - 1):3 * prn]
+        clk_err_s = float(self._smooth.at(self._satclk_err_m, t)[prn - 1]) / CLIGHT_M_S
         tau = 0.075
         rot = np.eye(3)
         pos_r = np.zeros(3)
@@ -397,11 +425,11 @@ class World:
         """(troposphere, ionosphere, Saastamoinen part, Klobuchar part) slant delays (m) on L1."""
         sin_el = np.sin(np.maximum(el, math.radians(1.0)))
         tropo_model = saastamoinen_m(lat, h, el)
-        tropo = tropo_model + float(self._slow.interp(self._tropo_res_m, t)) / sin_el
+        tropo = tropo_model + float(self._smooth.at(self._tropo_res_m, t)[0]) / sin_el
         iono_model = klobuchar_m(t.tow_s, lat, lon, az, el, self._alpha, self._beta)
         obliquity = 1.0 + 16.0 * (0.53 - el / math.pi) ** 3
         grad = self._iono_grad_enu[col] @ d_enu[:2] if col.size else np.zeros(0)
-        iono = iono_model * (1.0 + self._slow.interp(self._iono_err, t)[col]) + grad * obliquity
+        iono = iono_model * (1.0 + self._smooth.at(self._iono_err, t)[col]) + grad * obliquity
         return tropo, iono, tropo_model, iono_model
 
     def _elevation_grid(self, receiver: str) -> Vec:

@@ -11,9 +11,12 @@ Two threads beside the recorder's own, so the engine can never delay or block re
                     `base_wait_s` for the matching one, the radio's latency) → `<flight>/solution.pos`
                     → `snapshot()` (Q, ratio, satellites, age of corrections, baseline, time to first fix)
 
-Radio gaps: corrections older than `max_base_age_s` are not used (the engine reports a single-point
-solution), so the filter never runs on stale corrections — on the hil_sim flight a 20 s gap at 30 s maximum
-age ended in wrong fixes; at 5 s none, and fixes return within seconds of the base coming back.
+Radio gaps: while the newest base epoch is at most `max_base_age_s` old (default 30 s, settings key
+`rtk.max_base_age_s`, RTKLIB's maxtdiff) the engine keeps differencing the rover with it, carried forward
+along each satellite's correction rate (`onboard.rtk.rtkpos._extrapolated_base`): the solution stays float or
+keeps its held fix through 5-20 s gaps (hil_sim: no wrong fix, fixed throughout). Older corrections are not
+used (single-point solution) and the filter's ambiguities wait, slips watched, for the base to return.
+`rtk.json` shows the age of the newest base epoch (`age_s`) in both cases.
 
 Wiring into the recorder: `RtkRecorder` is the recorder with this service attached through its decoded-item
 hook (`Recorder._on_decoded`) and its status writes; `rtk.json` is written beside the status snapshot. The
@@ -58,6 +61,8 @@ Arr = npt.NDArray[np.float64]
 RADIO_DIR = "radio"
 SOLUTION_NAME = "solution.pos"
 RTK_STATUS_NAME = "rtk.json"
+GAP_NO_WAIT_S = 2.0
+"""Base data this much (s) later than its own interval are in a radio gap: the engine stops waiting for them."""
 
 
 @dataclass(frozen=True)
@@ -65,7 +70,9 @@ class RtkServiceOptions:
     """Real-time RTK settings. `base_pos_ecef_m` overrides the position the base sends (1005/1006)."""
 
     engine: RtkOptions = field(default_factory=RtkOptions)
-    max_base_age_s: float = 5.0
+    max_base_age_s: float = 30.0
+    """Base epochs up to this old (s) are used through a radio gap (float or held fix); older: single. Was 5 s
+    when the engine differenced aged base epochs raw: on hil_sim a 20 s gap then ended in wrong fixes."""
     base_wait_s: float = 0.5
     queue_max_items: int = 64
     base_buffer_epochs: int = 30
@@ -224,6 +231,7 @@ class RtkService:
         self._pos_file: Any = None
         self.flight_dir: Path | None = None
         self.solutions_written = 0
+        self._last_base_time: GpsTime | None = None
 
     # -- lifecycle ----------------------------------------------------------------------------------------
     def start(self, flight_dir: Path) -> None:
@@ -402,6 +410,8 @@ class RtkService:
                     interval_s = newest.time.diff_s(eps[-2].time) if len(eps) >= 2 else 0.0
                     if newest.time.diff_s(t) + interval_s > tol:
                         break
+                    if t.diff_s(newest.time) > interval_s + GAP_NO_WAIT_S:
+                        break  # a radio gap: waiting for each rover epoch would only make the engine lag
                 left = (deadline - self.clock.monotonic_ns()) / 1e9
                 if left <= 0 or self._stop.is_set():
                     break
@@ -412,6 +422,7 @@ class RtkService:
             base_pos: Arr | None = np.array(self.options.base_pos_ecef_m, float)
         else:
             base_pos = None if pos is None else pos.phase_centre_ecef_m
+        self._last_base_time = None if base is None else base.time
         if base is not None and t.diff_s(base.time) > self.options.max_base_age_s:
             base = None  # stale: the engine reports single rather than filtering on old corrections
         return base, base_pos
@@ -423,7 +434,9 @@ class RtkService:
         st = self._status
         st.epochs += 1
         st.q, st.ratio, st.ns = int(sol.q), float(sol.ratio), int(sol.ns)
-        st.age_s = float(sol.age_s) if base is not None else None
+        # the age of the newest base epoch, also once it is too old to be used (the operator sees the gap)
+        st.age_s = float(sol.age_s) if base is not None else (
+            None if self._last_base_time is None else round(sol.time.diff_s(self._last_base_time), 3))
         st.fixed += sol.q == Q_FIX
         st.float_ += sol.q == Q_FLOAT
         st.single += sol.q == Q_SINGLE
@@ -497,4 +510,5 @@ def recorder_for(settings: Settings, deps: RecorderDeps, base_stream: str | None
         return Recorder(settings, deps)
     from onboard.hw.net_stream import open_base_stream
 
-    return RtkRecorder(settings, deps, options or RtkServiceOptions(), open_base_stream(base_stream))
+    return RtkRecorder(settings, deps, options or RtkServiceOptions(max_base_age_s=settings.rtk_max_base_age_s),
+                       open_base_stream(base_stream))

@@ -50,6 +50,7 @@ class Settings:
     gpio_flash_pin: int = -1
     gpio_pin_factory: str = "lgpio"
     rtk_base_stream: str = ""
+    rtk_max_base_age_s: float = 30.0
 
 
 # TOML key -> Settings field. `receiver.<ReceiverOptions field>` keys are handled separately.
@@ -76,6 +77,7 @@ KEYS: Mapping[str, str] = MappingProxyType(
         "gpio.flash_pin": "gpio_flash_pin",
         "gpio.pin_factory": "gpio_pin_factory",
         "rtk.base_stream": "rtk_base_stream",
+        "rtk.max_base_age_s": "rtk_max_base_age_s",
     }
 )
 MODELS = ("auto", "lea6t", "m8t")

@@ -1,4 +1,4 @@
-"""Real-time RTK service: hil_sim rover epochs in, base RTCM3 through a real pty radio with 5-20 s gaps.
+"""Real-time RTK service: hil_sim rover epochs in, base RTCM3 through a real pty radio with 15-20 s gaps.
 
 Truth is the simulator's World. A wrong fix is Q=1 more than 10 cm (3D) from the true antenna position.
 """
@@ -19,7 +19,7 @@ from onboard.formats.pos import read_pos
 from onboard.hw.fake import FakeByteStream
 from onboard.hw.serial_port import SerialByteStream
 from onboard.logger.journal import iter_journal_bytes
-from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE
+from onboard.rtk.types import Q_FIX, Q_FLOAT
 from onboard.rtk_inputs import read_base_observations
 from onboard.rtk_service import RADIO_DIR, SOLUTION_NAME, BaseStream, RtkService, RtkServiceOptions
 from tests.conftest import shared_file
@@ -71,7 +71,7 @@ def _run_service(world, tmp_path: Path, gaps) -> tuple[RtkService, list, Path]:
     master, slave = os.openpty()
     tty.setraw(slave)
     radio_path = os.ttyname(slave)
-    options = RtkServiceOptions(base_wait_s=0.3, max_base_age_s=5.0)
+    options = RtkServiceOptions(base_wait_s=0.3)
     svc = RtkService(options, lambda: SerialByteStream(radio_path, 57600, 0.02))
     flight = tmp_path / "flight"
     flight.mkdir()
@@ -80,6 +80,7 @@ def _run_service(world, tmp_path: Path, gaps) -> tuple[RtkService, list, Path]:
     for eph in world.ephemerides():
         svc.submit(eph)
     sent = bytearray()
+    ages: dict[int, float | None] = {}
     try:
         wait_until(lambda: svc.snapshot()["radio_open"], 5, "radio open")
         for k in range(DURATION_S):
@@ -88,16 +89,19 @@ def _run_service(world, tmp_path: Path, gaps) -> tuple[RtkService, list, Path]:
                 sent += frames[k]
             wait_until(lambda: svc._queue.qsize() < 8, 10, "engine to keep up")
             svc.submit(world.observe("rover", t0.add_s(k)))
+            if any(a <= k < b for a, b in gaps):
+                wait_until(lambda: svc.snapshot()["epochs"] == k + 1, 10, "gap epoch solved")  # noqa: B023
+                ages[k] = svc.snapshot()["age_s"]
         wait_until(lambda: svc.snapshot()["epochs"] == DURATION_S, 30, "all epochs solved")
     finally:
         svc.stop()
         os.close(master)
         os.close(slave)
-    return svc, list(sent), flight
+    return svc, list(sent), flight, ages
 
 
 def test_radio_gaps_degrade_without_wrong_fixes_and_fix_again_after(world, tmp_path) -> None:
-    svc, sent, flight = _run_service(world, tmp_path, GAPS_S)
+    svc, sent, flight, ages = _run_service(world, tmp_path, GAPS_S)
     track = read_pos(flight / SOLUTION_NAME)
     assert len(track.q) == DURATION_S
     t0 = world.scenario.start
@@ -106,14 +110,14 @@ def test_radio_gaps_degrade_without_wrong_fixes_and_fix_again_after(world, tmp_p
     wrong = [(k, e) for k, q, e in zip(k_of, track.q, err) if q == Q_FIX and e > 0.10]
     assert wrong == []
     for a, b in GAPS_S:
-        in_gap = [q for k, q in zip(k_of, track.q) if a + 5 < k < b]
-        # corrections older than 5 s are not used: no RTK solution at all, never a fix on stale data
-        assert in_gap and set(in_gap) <= {Q_FLOAT, Q_SINGLE}
+        # corrections up to 30 s old are still used, carried forward: float or the held fix, never single
+        in_gap = [q for k, q in zip(k_of, track.q) if a <= k < b]
+        assert len(in_gap) == b - a and set(in_gap) <= {Q_FIX, Q_FLOAT}
+        assert in_gap.count(Q_FIX) >= len(in_gap) - 2, in_gap
+        # rtk.json shows the age of corrections growing through the gap (1 s base interval)
+        assert [round(ages[k]) for k in range(a, b)] == list(range(1, b - a + 1))
         after = [q for k, q in zip(k_of, track.q) if b <= k < b + 20]
         assert Q_FIX in after, f"no fix again within 20 s after the gap ending at {b} s"
-        # while the corrections age, the filter keeps float (or holds its fix) before giving up
-        ageing = [q for k, q in zip(k_of, track.q) if a <= k < a + 3]
-        assert set(ageing) <= {Q_FIX, Q_FLOAT}
     snap = svc.snapshot()
     assert snap["fixed"] == int(np.sum(track.q == Q_FIX)) and snap["ttff_s"] is not None
     assert snap["dropped_epochs"] == 0 and snap["errors"] == 0
@@ -193,3 +197,18 @@ def test_ubx_relay_from_the_base_decodes_to_the_base_epochs(world) -> None:
     assert bs.epoch_count == 10 and core.scheduler.counts.sent == {"obs": 10, "position": 2}  # 1006 at 0 and 5 s
     assert bs.position is not None
     np.testing.assert_allclose(bs.position.phase_centre_ecef_m, world.base_ecef_m, atol=1e-3)
+
+
+def test_max_base_age_comes_from_the_settings_and_defaults_to_30_s(tmp_path) -> None:
+    from onboard.daemon import RecorderDeps
+    from onboard.rtk_service import RtkRecorder, recorder_for
+    from onboard.settings import default_config_path, load_settings
+
+    deps = RecorderDeps(open_port=lambda: FakeByteStream(0.02))
+    shipped = load_settings(default_config_path(), environ={})
+    assert shipped.rtk_max_base_age_s == 30.0 and RtkServiceOptions().max_base_age_s == 30.0
+    settings = load_settings(default_config_path(), environ={}, overrides={
+        "rtk.max_base_age_s": 12.5, "rtk.base_stream": "tcp://127.0.0.1:9", "journal.data_dir": str(tmp_path)})
+    rec = recorder_for(settings, deps, settings.rtk_base_stream)
+    assert isinstance(rec, RtkRecorder)
+    assert rec.rtk.options.max_base_age_s == 12.5 and rec.rtk.engine_options.max_age_s == 12.5

@@ -1,0 +1,155 @@
+"""hil_sim flights through the real byte paths into our RTK engine, scored against the World's truth.
+
+The pipeline of `bench/rtk_sim.py` (the issue-3 scenario matrix) and of its tests:
+- rover: `World.observe("rover")` each second → `hil_sim.ubx_encode` RXM-RAW (LEA-6T) / RXM-RAWX (M8T) bytes →
+  our UBX decoder with RTKLIB's lock rules (`onboard.convert.collect`, as `onboard rtk` reads a rover journal);
+- base: `World.observe("base")` → RXM-RAW(X) bytes → the same decoder → `BaseCore` (what `onboard base` sends:
+  RTCM3 1004 + 1006 + 1019 within its radio budget) → the radio (bytes of dropout windows lost) →
+  `onboard.rtk_inputs.collect_rtcm` (as `onboard rtk --base` reads a radio journal);
+- the engine forward (`postprocess`), ephemerides from the 1019 messages, Klobuchar from the World (the rover's
+  own subframes carry them).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from onboard.gnsstime import GpsTime
+from onboard.rtk.ephemeris import EphemerisStore
+from onboard.rtk.options import RtkOptions
+from onboard.rtk.postpro import postprocess
+from onboard.rtk.rtkpos import Nav
+from onboard.rtk.types import Q_FIX, ObsEpoch
+
+STALE_S = 30.0
+"""Base data older than this may not be fixed (issue 3): such epochs are excluded from the airborne ratio."""
+
+
+@dataclass(frozen=True)
+class SimCase:
+    """One scenario of the matrix (times in s after the scenario start)."""
+
+    name: str
+    target: str
+    duration_s: float = 600.0
+    gaps_s: tuple[tuple[float, float], ...] = ()
+    """Radio dropouts [start, end): the base's RTCM frames of these seconds never reach the rover."""
+    baseline_m: float | None = None
+    undetected_slips_per_h: float | None = None
+    """Per satellite and receiver (ErrorModel.slip_undetected_rate_per_h; default 0.02)."""
+    max_sats: int | None = None
+    known_start: bool = False
+    seed: int = 1
+
+
+@dataclass
+class SimData:
+    """Decoded inputs of one simulated flight and its truth."""
+
+    rover: list[ObsEpoch]
+    base: list[ObsEpoch]
+    nav: Nav
+    base_pos_ecef_m: np.ndarray
+    truth: Callable[[GpsTime], dict[str, Any]]
+    init_pos_ecef_m: np.ndarray | None
+    rtcm_bytes: int
+    lost_bytes: int
+
+
+def scenario_for(case: SimCase, model: str) -> Any:
+    """The hil_sim Scenario of `case` with both receivers of `model`."""
+    from hil_sim.scenario import Scenario
+
+    over: dict[str, Any] = {"duration_s": case.duration_s, "seed": case.seed}
+    if case.baseline_m is not None:
+        over["base_offset_enu_m"] = Scenario.base_offset_for(case.baseline_m)
+    sc = Scenario.default(model, **over)
+    if case.undetected_slips_per_h is not None:
+        sc = replace(sc, errors=replace(sc.errors, slip_undetected_rate_per_h=case.undetected_slips_per_h))
+    if case.max_sats is not None:
+        sc = replace(sc, rover_receiver=replace(sc.rover_receiver, max_sats=case.max_sats),
+                     base_receiver=replace(sc.base_receiver, max_sats=case.max_sats))
+    return sc
+
+
+def simulate(case: SimCase, model: str) -> SimData:
+    """Run the World and the byte paths of `case` for rover/base receivers of `model` ("lea6t" or "m8t")."""
+    from hil_sim import ubx_encode as enc
+    from hil_sim.world import World
+    from onboard.base_station import BaseCore, BaseOptions
+    from onboard.convert import collect
+    from onboard.rtk_inputs import collect_rtcm
+
+    world = World(scenario_for(case, model))
+    encode = enc.rxm_raw if model == "lea6t" else enc.rxm_rawx
+    t0 = world.start
+    n = int(case.duration_s) - 1  # the World simulates [start, start + duration): keep clear of its end
+    rover_ubx = b"".join(encode(world.observe("rover", t0.add_s(k))) for k in range(n))
+    base_ubx = b"".join(encode(world.observe("base", t0.add_s(k))) for k in range(n))
+    rover = collect(iter([rover_ubx])).epochs
+    base_decoded = collect(iter([base_ubx])).epochs
+    core = BaseCore(BaseOptions(station_id=7, position_ecef_m=tuple(float(v) for v in world.base_ecef_m),
+                                radio_budget_bytes_s=2000.0))
+    for eph in world.ephemerides():  # the base receiver's own subframes, decoded
+        core.on_item(eph)
+    radio = []
+    lost = 0
+    for ep in base_decoded:
+        sent = b"".join(f for _, f in core.on_item(ep))
+        t_s = ep.time.diff_s(t0)
+        if any(a <= t_s < b for a, b in case.gaps_s):
+            lost += len(sent)
+        else:
+            radio.append(sent)
+    rtcm = collect_rtcm(radio, rover[0].time)
+    if rtcm.base_position is None:
+        raise RuntimeError(f"{case.name}: no 1006 got through")
+    nav = Nav(EphemerisStore(rtcm.ephemerides), world.iono_params())
+    init = world.truth(t0)["antenna_ecef_m"] if case.known_start else None
+    return SimData(rover, rtcm.epochs, nav, rtcm.base_position.phase_centre_ecef_m, world.truth, init,
+                   sum(len(b) for b in radio), lost)
+
+
+def evaluate(case: SimCase, model: str, options: RtkOptions | None = None) -> dict[str, Any]:
+    """Simulate and solve `case`: the figures `bench/rtk_sim.py` prints (and per-epoch q, err_m, armed, age_s)."""
+    data = simulate(case, model)
+    opts = options or RtkOptions()
+    if data.init_pos_ecef_m is not None:
+        opts = replace(opts, static_start=True)
+    t_run = time.process_time()
+    sols, stats = postprocess(data.rover, data.base, data.nav, data.base_pos_ecef_m, opts, "forward",
+                              data.init_pos_ecef_m)
+    cpu = time.process_time() - t_run
+    base_times = np.array(sorted(b.time.total_ns for b in data.base))
+    q = np.array([s.q for s in sols])
+    err = np.array([np.linalg.norm(s.pos_ecef_m - data.truth(s.time)["antenna_ecef_m"]) for s in sols])
+    armed = np.array([bool(data.truth(s.time)["armed"]) for s in sols])
+    # age of the newest base epoch at each rover epoch (rover tags: receiver time, within 1 ms of GPS time)
+    rov_ns = np.array([r.time.total_ns for r in sorted(data.rover, key=lambda e: e.time)])
+    i = np.searchsorted(base_times, rov_ns + round(opts.pair_tolerance_s * 1e9), side="right") - 1
+    age = np.where(i >= 0, (rov_ns - base_times[np.maximum(i, 0)]) / 1e9, np.inf)
+    stale = age > STALE_S
+    fixed = q == Q_FIX
+    air = armed & ~stale
+    e = err[fixed]
+    return {
+        "epochs": len(sols),
+        "airborne": int(air.sum()),
+        "air fix %": 100.0 * float(fixed[air].mean()) if air.any() else float("nan"),
+        "fix %": 100.0 * float(fixed.mean()) if len(sols) else 0.0,
+        "3D RMS cm": 100 * float(np.sqrt(np.mean(e**2))) if e.size else float("nan"),
+        "max cm": 100 * float(e.max()) if e.size else float("nan"),
+        "wrong": int(np.sum(fixed & (err > 0.10))),
+        "stale wrong": int(np.sum(fixed & stale & (err > 0.10))),
+        "first fix s": float(sols[int(np.argmax(fixed))].time.diff_s(sols[0].time)) if fixed.any() else float("nan"),
+        "stale": int(stale.sum()),
+        "stale fixed": int(np.sum(fixed & stale)),
+        "slips": sum(s.slips for s in stats),
+        "us/epoch": 1e6 * cpu / max(len(sols), 1),
+        "q": q, "err_m": err, "armed": armed, "age_s": age,
+    }

