@@ -26,11 +26,18 @@ class RtkOptions:
     min_success_rate: float = 0.99
     """Bootstrapped ILS success rate a fix needs besides the ratio test (rejects fixes of ambiguities the
     float solution has not yet determined, e.g. single-epoch code-only geometry); see consistent_fix_span_s."""
-    confirm_fix_span_s: float = 10.0
+    confirm_fix_span_s: float = 30.0
     """A first fix on a partial set (nothing held or validated, no known start) needs the same integer set
-    winning the ratio test for this long (s). Floats built on correlated code multipath are metres off with
+    winning the ratio test for this long (s), scaled by the code's measured quality (`code_variance_scale`,
+    ≤ 1) but never under confirm_fix_span_min_s. Floats built on correlated code multipath are metres off with
     σ ≈ 1 m in their first seconds: hil_sim's real-time chain fixed one 4 m off (ratio 3.0) for 1.5 s; M8P/GLW1
-    processed backward, a set 3.4 m off won for 5 s. Full sets: see full_set_confirm_epochs."""
+    processed backward, a set 3.4 m off won for 5 s; a hil_sim flight at 5 km (u-blox-like code multipath,
+    τ = 30 s) fixed a set 1.6 m off after 10 s of wins and held it (141 wrong epochs). The span must outlast
+    the multipath's correlation time, which geodetic code (GEONET Trimble, Septentrio, scale ≈ 0.2) hardly
+    has: Septentrio fixes 71.7 % with 10 s, 1.4 % with 30 s; M8P and GLW1 lose nothing at 30 s (97.8 / 99.1 %).
+    Full sets: see full_set_confirm_epochs."""
+    confirm_fix_span_min_s: float = 10.0
+    """Floor of the partial-set confirmation span (s) for the cleanest code."""
     consistent_fix_span_s: float = 60.0
     """Below min_success_rate a fix on a partial set is still accepted when the same integer set has passed the
     ratio test at every epoch over this span (s). GEONET 0759/3040 (30 s epochs): the bootstrapped rate, a lower bound, stays
@@ -118,10 +125,12 @@ class RtkOptions:
     """Growth (m/s) of the phase σ of an aged base epoch after it is carried forward (RTKLIB demo5's sclkstab
     term, smaller since the rate is removed): hil_sim leaves < 0.5 cm after 20 s; real data are rougher. Lets
     the hold's residual check and the fix's σ widen with the age instead of releasing a good fix at 25 s."""
-    base_extrapolate_min_age_s: float = 2.5
+    base_extrapolate_min_age_s: float = 5.0
     """Base epochs older than this (s) are carried forward along the correction rate. Younger ones (1 Hz base,
-    one lost epoch) are used raw: the atmosphere moves < 1 cm in 2 s, less than the rate's own noise adds
-    (M8P static with its lossy base: 94.2 % fixed raw, 93.6 % extrapolating from 1.5 s, 94.3 % from 2.5 s)."""
+    a few lost epochs) are used raw: the atmosphere moves about a centimetre in 5 s, less than the rate's own
+    noise adds on a multipath-laden u-blox base (M8P static on its raw lossy RTCM3 stream: 93.5 % fixed, first
+    fix ~75 s, extrapolating from 2.5 s; 97.4 % from 5 s; 97.9 % never extrapolating). hil_sim's 5–20 s gaps
+    need it (without: 37.8 % airborne fixed, 2 wrong)."""
     pair_tolerance_s: float = 0.025
     static_start: bool = False
     """Hold the rover static (no process noise) until its Doppler speed exceeds takeoff_speed_m_s."""

@@ -695,14 +695,16 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
                 st.pending_fix = (key, t, 0)
             st.pending_fix = (key, st.pending_fix[1], st.pending_fix[2] + 1)
             span = abs(t.diff_s(st.pending_fix[1]))
+            # correlated code multipath biases the float for about its correlation time: clean code waits less
+            need_span = max(o.confirm_fix_span_min_s, o.confirm_fix_span_s * st.code_var_scale)
             wins = st.pending_fix[2]
             trusted = bool(st.held_prns.any() or st.known_amb[idx].all()) \
                 or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_amb_dd + 1)
             if res.success_rate >= need_sr:
-                accept = trusted or span >= o.confirm_fix_span_s or (full and wins >= o.full_set_confirm_epochs)
+                accept = trusted or span >= need_span or (full and wins >= o.full_set_confirm_epochs)
             elif not strict:
                 accept = span >= o.consistent_fix_span_s or (
-                    full and wins >= o.full_set_confirm_epochs and span >= o.confirm_fix_span_s)
+                    full and wins >= o.full_set_confirm_epochs and span >= need_span)
         elif ratio >= need_ratio:
             accept = res.success_rate >= need_sr and (bool(st.held_prns.any() or st.known_amb[idx].all())
                                                      or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_amb_dd + 1))

@@ -209,7 +209,7 @@ def test_first_fix_waits_until_the_integer_set_has_won_the_ratio_test_for_confir
     """No held set, no known start: the winning integer set must keep winning for confirm_fix_span_s before
     Q=1 (the real-time chain's 1.5 s wrong fix of a float 4 m off); a full set (no satellite dropped) needs
     full_set_confirm_epochs consecutive wins instead, never its first; a known take-off point needs no wait."""
-    opts = RtkOptions(confirm_fix_span_s=30.0, full_set_confirm_epochs=10**6)
+    opts = RtkOptions(confirm_fix_span_s=30.0, confirm_fix_span_min_s=30.0, full_set_confirm_epochs=10**6)
     sols, truths, _ = _run(nav, 60, opts, noise=True)
     q = np.array([s.q for s in sols])
     ratio_ok = np.flatnonzero(np.array([s.ratio for s in sols]) >= opts.ratio_threshold)
