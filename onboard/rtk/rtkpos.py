@@ -394,7 +394,9 @@ def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver
     tc = tk - tk.mean()
     slope = tc @ (z[:, ok] - z[:, ok].mean(axis=0)) / (tc @ tc)
     cp = base.cp_cyc.copy()
-    cp[ok] += slope * age_s
+    # from the age where carrying starts, so the correction does not jump when it starts (a jump of rate ×
+    # min age released a good hold on the M8P RAWX base); the drift before that stays, as for raw data
+    cp[ok] += slope * (age_s - o.base_extrapolate_min_age_s)
     return _Receiver(base.pr_m, cp, base.dop_hz, base.lli, base.sats, base.has)
 
 
