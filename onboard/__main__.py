@@ -45,17 +45,10 @@ def _run(args: argparse.Namespace) -> int:
     )
     from onboard.logger.files import FileLayer, OsFileLayer, SyncLogFileLayer
     from onboard.sdnotify import SdNotifier
-    from onboard.settings import load_settings
+    from onboard.settings import load_settings, recorder_overrides
 
-    overrides = {
-        "port.device": args.port,
-        "port.baud": args.baud,
-        "journal.data_dir": str(args.data_dir) if args.data_dir else None,
-        "status.path": str(args.status) if args.status else None,
-        "receiver.configure": False if args.no_configure else None,
-    }
     try:
-        settings = load_settings(args.config, overrides=overrides)
+        settings = load_settings(args.config, overrides=recorder_overrides(args))
     except ConfigFileError as exc:
         print(f"configuration error: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -51,17 +51,10 @@ def base_main(args: argparse.Namespace) -> int:
     from onboard.hw.ports import ByteStream
     from onboard.hw.serial_port import SerialByteStream
     from onboard.sdnotify import SdNotifier
-    from onboard.settings import load_settings
+    from onboard.settings import load_settings, recorder_overrides
 
-    overrides = {
-        "port.device": args.port,
-        "port.baud": args.baud,
-        "journal.data_dir": str(args.data_dir) if args.data_dir else None,
-        "status.path": str(args.status) if args.status else None,
-        "receiver.configure": False if args.no_configure else None,
-    }
     try:
-        settings = load_settings(args.config, overrides=overrides)
+        settings = load_settings(args.config, overrides=recorder_overrides(args))
         options = BaseOptions(station_id=args.station_id, obs_message=args.message,
                               radio_budget_bytes_s=args.budget, relay=args.relay,
                               obs_interval_s=args.obs_interval, position_ecef_m=args.position,

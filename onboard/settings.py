@@ -258,3 +258,15 @@ def add_recorder_arguments(parser: Any) -> None:
     parser.add_argument("--data-dir", type=Path, help="where flights are recorded (overrides journal.data_dir)")
     parser.add_argument("--status", type=Path, help="status snapshot JSON path (overrides status.path)")
     parser.add_argument("--no-configure", action="store_true", help="record only; never configure the receiver")
+
+
+def recorder_overrides(args: Any) -> dict[str, Any]:
+    """Settings overrides (dotted key → value, None = not given) from the arguments of
+    add_recorder_arguments plus `--port`."""
+    return {
+        "port.device": args.port,
+        "port.baud": args.baud,
+        "journal.data_dir": str(args.data_dir) if args.data_dir else None,
+        "status.path": str(args.status) if args.status else None,
+        "receiver.configure": False if args.no_configure else None,
+    }
