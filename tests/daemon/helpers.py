@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import subprocess
 import threading
 import time
 from collections.abc import Callable
@@ -109,3 +110,13 @@ def status(path: Path) -> dict[str, Any]:
         return read_status(path)
     except FileNotFoundError:
         return {}
+
+
+def reap(proc: subprocess.Popen[bytes]) -> None:
+    """After a daemon test, whatever happened: the process killed if it still runs, waited for, and its
+    piped stderr closed."""
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
+    if proc.stderr is not None:
+        proc.stderr.close()

@@ -24,7 +24,7 @@ from onboard.receiver.decode import iter_journal
 from onboard.rtk.types import ObsEpoch
 from onboard.timepulse.marks import BOUNCE, MISSED_FLASH, PULSE_WITHOUT_FLASH, parse_records
 from tests.conftest import shared_file
-from tests.daemon.helpers import status, wait_until
+from tests.daemon.helpers import reap, status, wait_until
 
 hil_scenario = pytest.importorskip("hil_sim.scenario")
 from hil_sim.faults import FaultOptions
@@ -73,9 +73,7 @@ def stop_cleanly(proc: subprocess.Popen[bytes]) -> None:
 
 def kill_leftovers(proc: subprocess.Popen[bytes], emu: ReceiverEmulator) -> None:
     """After a test, whatever happened: no daemon left running, the emulator stopped."""
-    if proc.poll() is None:
-        proc.kill()
-        proc.wait()
+    reap(proc)
     emu.stop()
 
 

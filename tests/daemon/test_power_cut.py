@@ -22,7 +22,7 @@ from onboard.logger.events import read_events
 from onboard.logger.files import cut_files, sync_points_from_log
 from onboard.logger.journal import iter_journal_frames, list_segments, read_index, read_manifest
 from onboard.receiver.decode import iter_journal
-from tests.daemon.helpers import SEQ_CLASS_ID, frame_number, numbered_frame, status, tim_tm2, wait_until
+from tests.daemon.helpers import SEQ_CLASS_ID, frame_number, numbered_frame, reap, status, tim_tm2, wait_until
 
 PROJECT = Path(__file__).resolve().parents[2]
 CYCLES = 4
@@ -79,11 +79,7 @@ def test_power_cuts_lose_nothing_older_than_a_second(tmp_path: Path) -> None:
                     cut = cut_files(sync_points_from_log(sync_log))  # the power loss
                     assert cut, "the sync log named no files"
             finally:
-                if proc.poll() is None:
-                    proc.kill()
-                    proc.wait()
-                if proc.stderr is not None:
-                    proc.stderr.close()
+                reap(proc)
             must_frames |= {n for n, t in sent if t < cut_at - 1.0}
             must_marks |= {n for n, t in marks if t < cut_at - 0.2}
             # drain what the dead daemon never read (a real UART would have lost it as well)

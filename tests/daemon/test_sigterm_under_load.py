@@ -21,7 +21,7 @@ import pytest
 
 from onboard.logger.journal import iter_journal_bytes, read_manifest
 from onboard.receiver.framing import ubx_frame
-from tests.daemon.helpers import status, wait_until
+from tests.daemon.helpers import reap, status, wait_until
 
 PROJECT = Path(__file__).resolve().parents[2]
 pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]
@@ -57,11 +57,7 @@ def test_sigterm_after_a_burst_stops_cleanly(tmp_path: Path) -> None:
         assert proc.returncode == 0, proc.stderr.read().decode(errors="replace")[-2000:]  # type: ignore[union-attr]
         assert time.monotonic() - t0 < 15
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        if proc.stderr is not None:
-            proc.stderr.close()
+        reap(proc)
         os.close(master)
         os.close(slave)
     manifest = read_manifest(flight)
