@@ -109,9 +109,17 @@ class CodeScatter:
         if old.sum() >= 3:
             # deviation from a mean of n samples has variance σ²(1 + w) for weight w
             wo = np.maximum(1.0 / (self.count[old] + 1.0), w_time)
-            r = float(np.median(dev[old] ** 2 / (model_var_m2[old] * (1.0 + wo)))) / CHI2_1DOF_MEDIAN
+            r = median_of_few(dev[old] ** 2 / (model_var_m2[old] * (1.0 + wo))) / CHI2_1DOF_MEDIAN
             a = max(1.0 / (self.epochs + 1), min(1.0, abs(dt_s) / self.window_s) if dt_s else 0.0)
             self.ratio = r if self.epochs == 0 else self.ratio + a * (r - self.ratio)
             self.epochs += 1
         self.mean_m[upd] += w * dev[upd]
         self.count[upd] += 1.0
+
+
+def median_of_few(a: Arr) -> float:
+    """np.median of a short, finite, non-empty 1-D array, to the bit (mean of the middle two when even),
+    without its generic-reduction overhead and its import of numpy.ma (per-epoch hot paths)."""
+    v = sorted(a.tolist())
+    h = len(v) // 2
+    return v[h] if len(v) % 2 else (v[h - 1] + v[h]) / 2.0

@@ -27,7 +27,7 @@ from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
 from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.mlambda import LambdaError, mlambda
-from onboard.rtk.models import CodeScatter, phase_variance_m2, saastamoinen_m
+from onboard.rtk.models import CodeScatter, median_of_few, phase_variance_m2, saastamoinen_m
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.pntpos import pntpos, sat_az_el
 from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP, Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, ObsEpoch, Solution
@@ -287,7 +287,7 @@ def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t
             d = base_zb - st.prev_zb
             ok = np.isfinite(d) & common
             if ok.sum() >= 3:
-                d = d - _median(d[ok])
+                d = d - median_of_few(d[ok])
                 thr = 1.0 + 0.05 * dtb  # cycles: atmosphere/orbit changes grow with the gap
                 slip |= ok & (np.abs(d) > thr)
     return slip
@@ -316,7 +316,7 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
                 # is compared over its own interval
                 clean = ok & ~slip
                 rate = d / np.where(ok, dt_all, 1.0)
-                d = d - _median(rate[clean] if clean.sum() >= 2 else rate[ok]) * dt_all
+                d = d - median_of_few(rate[clean] if clean.sum() >= 2 else rate[ok]) * dt_all
                 thr = o.slip_threshold_cyc * np.maximum(1.0, np.abs(np.nan_to_num(dt_all, nan=1.0)))
                 slip |= ok & (np.abs(d) > thr)
                 bridged = ok
@@ -327,13 +327,6 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
         slip |= common & ~st.prev_phase_r & amb_on & ~bridged
     return slip
 
-
-def _median(a: Arr) -> float:
-    """np.median of a short finite 1-D array, to the bit (mean of the middle two when even), without its
-    generic-reduction overhead (and without its import of numpy.ma)."""
-    v = sorted(a.tolist())
-    h = len(v) // 2
-    return v[h] if len(v) % 2 else (v[h - 1] + v[h]) / 2.0
 
 
 def _remember_base(st: RtkState, base: _Receiver, t_b: GpsTime, base_zb_cyc: Arr) -> None:
@@ -350,7 +343,7 @@ def _remember_base(st: RtkState, base: _Receiver, t_b: GpsTime, base_zb_cyc: Arr
         ok = np.isfinite(d)
         jump = ((base.lli & LLI_SLIP) != 0) & np.isfinite(zb)
         if ok.sum() >= 3:
-            d = d - _median(d[ok])  # the base clock is common to every satellite
+            d = d - median_of_few(d[ok])  # the base clock is common to every satellite
             jump |= ok & (np.abs(d) > 1.0 + 0.05 * dtb)  # as _detect_slips' base test
         for _t, z in hist:
             z[jump] = np.nan
@@ -385,7 +378,7 @@ def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver
     z, tk = z[keep], tk[keep]
     if -tk[0] < 0.5 * o.base_rate_window_s:
         return base
-    z = z - np.array([np.median(row[np.isfinite(row)]) for row in z])[:, None]  # the base clock, common
+    z = z - np.array([median_of_few(row[np.isfinite(row)]) for row in z])[:, None]  # the base clock, common
     ok = np.all(np.isfinite(z), axis=0) & np.isfinite(base.cp_cyc)
     if ok.sum() < 2:
         return base
@@ -437,7 +430,7 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
             # after a slip never fits the others again
             clk = (rov.pr_m - base.pr_m) - (rng_r - rng_b)
             if np.any(new & np.isfinite(clk)):
-                sd = sd - np.median(clk[new & np.isfinite(clk)]) / LAMBDA_L1_M
+                sd = sd - median_of_few(clk[new & np.isfinite(clk)]) / LAMBDA_L1_M
             var = (0.05 + o.init_pos_sigma_m / LAMBDA_L1_M) ** 2
             st.known_amb[new] = True
         else:

@@ -218,7 +218,7 @@ def test_first_fix_waits_until_the_integer_set_has_won_the_ratio_test_for_confir
     sols, truths, _ = _run(nav, 60, replace(opts, full_set_confirm_epochs=2), noise=True)
     q = np.array([s.q for s in sols])
     assert ratio_ok[0] + 1 <= np.flatnonzero(q == Q_FIX)[0] < ratio_ok[0] + 30
-    sols, truths, _ = _run(nav, 3, replace(opts, static_start=True), noise=True, init_pos=True)
+    sols, _truths, _ = _run(nav, 3, replace(opts, static_start=True), noise=True, init_pos=True)
     assert sols[0].q == Q_FIX
 
 
