@@ -137,6 +137,18 @@ class RtkOptions:
     static_start: bool = False
     """Hold the rover static (no process noise) until its Doppler speed exceeds takeoff_speed_m_s."""
     takeoff_speed_m_s: float = 0.5
+    standstill: bool = True
+    """Detect a rover standing still and hold it static (no position process noise, zero velocity) until it
+    moves (see onboard.rtk.standstill): the displacement from time-differenced phase over standstill_window_s
+    passes a χ² test against zero for standstill_min_s. Motion (the test failing, or a Doppler speed above
+    takeoff_speed_m_s) ends it at once, before the epoch's update."""
+    standstill_window_s: float = 10.0
+    """Window (s) of the displacement test; with sparser epochs the previous epoch is the window's start."""
+    standstill_min_s: float = 10.0
+    """Time (s) without motion before the static hold starts."""
+    standstill_max_sigma_m: float = 0.05
+    """The static hold starts only on a displacement known this well (3D σ, m): weaker geometry cannot tell
+    a standstill from a slow drift."""
     init_pos_sigma_m: float = 0.005
     """σ given to a known take-off position (Daakir 2015 known-point initialisation)."""
     max_iterations: int = 2
@@ -176,6 +188,9 @@ TOML_KEYS: dict[str, tuple[str, Any]] = {
     "max_outage_epochs": ("max_outage_epochs", int),
     "static_start": ("static_start", bool),
     "takeoff_speed_m_s": ("takeoff_speed_m_s", float),
+    "standstill": ("standstill", bool),
+    "standstill_window_s": ("standstill_window_s", float),
+    "standstill_min_s": ("standstill_min_s", float),
     "use_doppler": ("use_doppler", bool),
 }
 

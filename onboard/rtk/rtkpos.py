@@ -30,6 +30,7 @@ from onboard.rtk.mlambda import LambdaError, mlambda
 from onboard.rtk.models import CodeScatter, median_of_few, phase_variance_m2, saastamoinen_m
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.pntpos import pntpos, sat_az_el
+from onboard.rtk.standstill import StandstillMonitor
 from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP, Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, ObsEpoch, Solution
 
 log = logging.getLogger(__name__)
@@ -127,12 +128,13 @@ class RtkState:
     code_scatter: CodeScatter = field(default_factory=CodeScatter)
     code_var_scale: float = 1.0
     """Factor on the modelled code variance from the measured code scatter (see code_variance_scale)."""
+    standstill: StandstillMonitor = field(default_factory=StandstillMonitor)
 
 
 def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkState:
     """A fresh engine state. `init_pos_ecef_m` = surveyed take-off antenna position (known-point start)."""
-    st = RtkState(options=options)
-    st.static = options.static_start or init_pos_ecef_m is not None and options.static_start
+    st = RtkState(options=options, standstill=StandstillMonitor(window_s=options.standstill_window_s))
+    st.static = options.static_start
     st.init_pos_ecef_m = None if init_pos_ecef_m is None else np.asarray(init_pos_ecef_m, float)
     return st
 
@@ -261,6 +263,40 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
     amb = np.arange(NX0, NX)
     active = st.p[amb, amb] > 0
     st.p[amb[active], amb[active]] += bias_process_noise_cyc2_s(o, st.x[:3], base_pos) * abs(dt)
+
+
+def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, rng_b: Arr, los_r: Arr, el: Arr,
+                      valid: npt.NDArray[np.bool_], t: GpsTime, dt: float) -> None:
+    """Start or end the static hold from the time-differenced phase displacement (see onboard.rtk.standstill),
+    after this epoch's time update: motion re-opens the position at once, before the measurement update."""
+    o = st.options
+    sd = LAMBDA_L1_M * (rov.cp_cyc - bas.cp_cyc) - (rng_r - rng_b)
+    var = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m)
+    t_ns = t.total_ns
+    disp = st.standstill.update(t_ns, sd, st.x[:3], los_r, var, st.lock, valid)
+    if st.static:
+        if disp is not None and st.standstill.still_since_ns is None:
+            log.info("%s: motion detected (%.3f m over %.0f s, χ² %.0f), leaving static mode", t,
+                     float(np.linalg.norm(disp.d_m)), disp.span_s, disp.chi2)
+            _leave_static(st, dt)
+    elif (o.standstill and disp is not None and disp.sigma_m <= o.standstill_max_sigma_m
+          and st.standstill.still_for_s(t_ns) >= o.standstill_min_s):
+        log.info("%s: standstill for %.0f s, static hold", t, st.standstill.still_for_s(t_ns))
+        st.static = True
+        # zero-velocity update: the velocity is known now, and stays so without process noise
+        h = np.zeros((3, NX))
+        h[:, 3:6] = np.eye(3)
+        st.x, st.p = _kf_update(st.x, st.p, -st.x[3:6], h, np.eye(3) * 1e-8)
+
+
+def _leave_static(st: RtkState, dt: float) -> None:
+    """End the static hold: the velocity unknown again, the position given this epoch's process noise."""
+    o = st.options
+    st.static = False
+    st.p[3:6, :] = 0.0
+    st.p[:, 3:6] = 0.0
+    st.p[3:6, 3:6] = np.eye(3) * o.initial_vel_sigma_m_s**2
+    st.p[:NX0, :NX0] += _process_noise(st, dt, st.x[:3])
 
 
 def bias_process_noise_cyc2_s(o: RtkOptions, rover_pos: Arr, base_pos: Arr | None) -> float:
@@ -581,15 +617,17 @@ def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver,
     """Fault exclusion under a hold: the one satellite whose phase, left out of the update from the prior
     state, lets every other phase double difference fit (post-fit within validation_sigma_factor·σ).
 
-    `suspects` (the satellites whose own post-fit residual failed) are tried first: when there is one and
-    leaving it out fits, it is the one. Otherwise every held satellite is tried and the exclusion must be
+    `suspects` (the satellites whose own post-fit residual failed) are tried first: when there is one (held
+    or not) and leaving it out fits, it is the one. Otherwise every held satellite is tried and the exclusion must be
     unique. Returns (slot, (x, P) of that update), or (−1, prior) when no single exclusion fits, when more
     than one does (ambiguous), or when fewer than `min_amb_dd` + 1 held satellites would remain.
     """
     o = st.options
     found: list[tuple[int, tuple[Arr, Arr]]] = []
     held = np.flatnonzero(use_phase & st.held_prns)
-    lone = suspects[np.isin(suspects, held)] if suspects.size == 1 else suspects[:0]
+    # a lone suspect may also be a newcomer not yet held (its float ambiguity still off by a fraction of a
+    # cycle): leaving it out keeps the hold whole
+    lone = suspects[use_phase[suspects]] if suspects.size == 1 else suspects[:0]
     for c in np.concatenate([lone, held[~np.isin(held, lone)]]):
         keep = use_phase.copy()
         keep[c] = False
@@ -800,7 +838,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     _udstate(st, dt, spp.pos_ecef_m, spp.vel_ecef_m_s, base_pos)
 
     rng_b, _, _, _ = _model_range_m(bas, base_pos)
-    rng_r, _, _, el_r = _model_range_m(rov, st.x[:3])
+    rng_r, los_r, _, el_r = _model_range_m(rov, st.x[:3])
     trop_r = rng_r - _range_with_trop_m(rov, st.x[:3], np.zeros(NSAT))[0]
     el = el_r
     common = rov.has & bas.has & (el >= o.elmask_rad) & spp.used
@@ -825,6 +863,8 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     bas = carried
     _udbias(st, rov, bas, rng_r, rng_b, phase_ok, slip)
     st.code_var_scale = code_variance_scale(st, rov, bas, phase_ok, slip, el, dt)
+    if o.standstill or st.static:
+        _watch_standstill(st, rov, bas, rng_r, rng_b, los_r, el, phase_ok & ~slip & ~half, rover.time, dt)
 
     # remember raw data for next epoch's slip tests
     _remember_rover(st, rov, rover.time)

@@ -110,18 +110,37 @@ def test_m8p_static_on_the_raw_lossy_rtcm3_stream_meets_the_fix_targets():
     _assert_m8p_lossy_targets(*_m8p_run(base.epochs, base.antenna_pos_ecef_m))
 
 
-def test_geonet_five_satellite_epochs_stay_float_although_the_held_integers_are_right():
-    """After G19 sets (last 6 epochs) five high satellites remain, PDOP 23-37: the held integers are right (DD
-    phase at the surveyed marker within 1.2 cm of them) yet the fixed position is 8-18 cm off, so Q=1 there would
-    be wrong fixes: max_fix_sigma_m keeps them float (this caps GEONET 0759/3040 at 114 of 120 epochs)."""
+def _geonet_run(options: RtkOptions):
     rover = read_rinex_obs(shared_file("gnss/geonet-0759-3040-20050402/07590920.05o.gz")).epochs
     base = read_rinex_obs(shared_file("gnss/geonet-0759-3040-20050402/30400920.05o.gz")).epochs
     nav = _nav(shared_file("gnss/geonet-0759-3040-20050402/07590920.05n.gz"))
-    st = rtk_init(RtkOptions())
-    sols = [rtk_pos(st, r, b, nav, GEONET_3040_ECEF_M) for r, b in zip(rover, pair_epochs(rover, base))]
+    st = rtk_init(options)
+    return st, [rtk_pos(st, r, b, nav, GEONET_3040_ECEF_M) for r, b in zip(rover, pair_epochs(rover, base))]
+
+
+def test_geonet_five_satellite_epochs_stay_float_when_moving_although_the_held_integers_are_right():
+    """After G19 sets (last 6 epochs) five high satellites remain, PDOP 23-37: the held integers are right (DD
+    phase at the surveyed marker within 1.2 cm of them) yet an epoch-by-epoch (kinematic) position is 8-18 cm
+    off, so Q=1 there would be wrong fixes: max_fix_sigma_m keeps them float when the rover may move
+    (standstill detection off: this capped GEONET 0759/3040 at 114 of 120 epochs)."""
+    st, sols = _geonet_run(RtkOptions(standstill=False))
     assert all(s.q == Q_FIX for s in sols[2:114])
     tail = sols[114:]
     assert [s.ns for s in tail] == [5] * 6 and st.held_prns.sum() == 5
     assert all(s.q != Q_FIX for s in tail)
     err = [float(np.linalg.norm(s.pos_ecef_m - GEONET_0759_ECEF_M)) for s in tail]  # the fixed-integer positions
     assert min(err) > 0.08 and max(err) > 0.15, err
+
+
+def test_geonet_standing_still_keeps_the_five_satellite_tail_fixed_to_millimetres():
+    """The same data with the default standstill detection: the time-differenced phase shows no motion over
+    the first 30 s, the rover is held static from the second epoch, and every epoch adds to one point, so the
+    five-satellite tail stays fixed within 1 cm of the reference (118 of 120 fixed; the first two are float)."""
+    st, sols = _geonet_run(RtkOptions())
+    assert st.static
+    q = [s.q for s in sols]
+    assert Q_FIX not in q[:2] and all(x == Q_FIX for x in q[2:]), q
+    err = np.array([np.linalg.norm(s.pos_ecef_m - GEONET_0759_ECEF_M) for s in sols[2:]])
+    assert err.max() < 0.01, err.max()
+    tail = sols[114:]
+    assert [s.ns for s in tail] == [5] * 6

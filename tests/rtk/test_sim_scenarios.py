@@ -89,3 +89,22 @@ def test_undetected_slips_2_per_hour_in_a_600_s_flight_keep_most_airborne_epochs
     # the reference alone (not all seven) keeps the flight fixed (71.6 % → 91.1 % airborne on this one)
     r = _run("m8t", duration_s=600.0, undetected_slips_per_h=2.0)
     assert r["wrong"] == 0 and r["air fix %"] >= 90.0 and r["3D RMS cm"] <= 2.0
+
+
+def test_the_rover_is_held_static_on_the_ground_and_released_at_take_off(caplog: pytest.LogCaptureFixture) -> None:
+    """Standstill detection (time-differenced phase) holds the waiting drone static 10 s after the start and
+    lets go at take-off (60 s), once each: no flapping on the ground or in flight, and no wrong fix around it."""
+    import logging
+
+    with caplog.at_level(logging.INFO, logger="onboard.rtk.rtkpos"):
+        r = _run("m8t")
+    tow = {}
+    for rec in caplog.records:
+        msg = rec.getMessage()
+        for key in ("static hold", "leaving static mode"):
+            if key in msg:
+                tow.setdefault(key, []).append(float(msg.split(":")[1]))
+    assert len(tow["static hold"]) == 1 and len(tow["leaving static mode"]) == 1, tow
+    held_s = tow["leaving static mode"][0] - tow["static hold"][0]
+    assert 47.0 <= held_s <= 51.0, held_s  # held from ~10 s to the take-off at ~60 s
+    assert r["wrong"] == 0 and r["air fix %"] >= 99.0

@@ -1,0 +1,134 @@
+"""Standstill detection from time-differenced carrier phase (pure).
+
+A survey drone stands on the ground for minutes before take-off and after landing, and a static receiver's
+solution is better for knowing it: with no position process noise every epoch adds to the same point, which
+is what carries a fix through a stretch of poor geometry (GEONET 0759/3040: its last six epochs have five
+satellites at PDOP 23-37, where an epoch-by-epoch position with the right integers is 8-18 cm off). u-blox
+receivers do the same in their navigation filter ("static hold", CFG-NAV5 staticHoldThresh).
+
+The evidence is the rover's displacement over a sliding window, from single-differenced (rover − base) phase
+minus modelled range at both ends: time-differencing removes the ambiguity, double-differencing the
+receiver clocks, so a satellite tracked without a slip across the window measures the displacement along its
+line of sight to millimetres whatever the state of the ambiguities and the sampling interval. The window's
+ends only enter: the noise does not grow with the window, and a slow creep adds up inside it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+Arr = npt.NDArray[np.float64]
+
+CHI2_3DOF_999 = 16.266
+"""0.999 quantile of χ²(3): a displacement test failing it is motion, not noise."""
+
+
+@dataclass(frozen=True)
+class Displacement:
+    """Rover displacement over the window (ECEF m) with its covariance (m²), from `n_sats` satellites."""
+
+    d_m: Arr
+    cov_m2: Arr
+    span_s: float
+    n_sats: int
+
+    @property
+    def chi2(self) -> float:
+        """Mahalanobis square of the displacement against zero (static hypothesis)."""
+        try:
+            return float(self.d_m @ np.linalg.solve(self.cov_m2, self.d_m))
+        except np.linalg.LinAlgError:
+            return float("inf")
+
+    @property
+    def sigma_m(self) -> float:
+        """3D standard deviation (m): √trace of the covariance."""
+        return float(np.sqrt(max(np.trace(self.cov_m2), 0.0)))
+
+
+def tdcp_displacement(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m: Arr, los_now: Arr,
+                      var_sd_m2: Arr, usable: npt.NDArray[np.bool_], min_sats: int = 5) -> Displacement | None:
+    """Displacement (ECEF m) of the rover between two epochs from time-differenced double differences.
+
+    `sd_*_m` per satellite slot: λ(φ_rover − φ_base) − (modelled rover range from `pos_*_m` − base range);
+    `los_now` unit lines of sight (rover → satellite, one row per slot), `var_sd_m2` the single-difference
+    phase variance of one epoch, `usable` the slots tracked without a slip from one epoch to the other. With
+    fewer than `min_sats` (one redundant) satellites, None.
+    """
+    k = np.flatnonzero(usable & np.isfinite(sd_then_m) & np.isfinite(sd_now_m))
+    if k.size < min_sats:
+        return None
+    # λφ − ρ(x_a) = −e·(x − x_a) + ambiguity + clocks: the time difference keeps −e·(Δx − Δx_a) + Δclocks
+    y = sd_now_m[k] - sd_then_m[k]
+    e = los_now[k]
+    var = 2.0 * var_sd_m2[k]
+    ref = int(np.argmin(var))  # the best-determined satellite (highest) as reference
+    others = np.delete(np.arange(k.size), ref)
+    dd_y = y[others] - y[ref]
+    a = -(e[others] - e[ref])
+    cov_y = np.diag(var[others]) + var[ref]
+    w = np.linalg.inv(cov_y)
+    n = a.T @ w @ a
+    try:
+        cov_u = np.linalg.inv(n)
+    except np.linalg.LinAlgError:
+        return None
+    u = cov_u @ (a.T @ w @ dd_y)
+    return Displacement(u + (np.asarray(pos_now_m) - np.asarray(pos_then_m)), cov_u, 0.0, int(k.size))
+
+
+@dataclass
+class StandstillMonitor:
+    """Sliding-window standstill test over a rover's relative epochs (pure; one `update` per epoch)."""
+
+    window_s: float = 10.0
+    max_anchor_age_s: float = 120.0
+    """Sparse data (30 s epochs): the previous epoch still serves as the window's start up to this age."""
+    epochs: int = 0
+    hist: list[tuple[int, int, Arr, Arr, npt.NDArray[np.int64]]] = field(default_factory=list)
+    """(time ns, epoch number, SD phase − range per slot (m), position used (ECEF m), lock counts), oldest first."""
+    still_since_ns: int | None = None
+    """Start of the current run of windows that passed the test (ns), None while moving or unknown."""
+
+    def update(self, t_ns: int, sd_m: Arr, pos_m: Arr, los: Arr, var_sd_m2: Arr,
+               lock: npt.NDArray[np.int64], valid: npt.NDArray[np.bool_]) -> Displacement | None:
+        """Add an epoch and return the displacement since the window's start (None when it cannot be told).
+
+        `lock` the per-slot count of consecutive epochs with phase (reset to 0 by a slip), after this epoch's
+        bookkeeping: a slot is continuous over the window when its count grew by the number of epochs since.
+        """
+        self.epochs += 1
+        hist = self.hist
+        if hist and (t_ns == hist[-1][0] or abs(t_ns - hist[-1][0]) / 1e9 > self.max_anchor_age_s):
+            hist.clear()  # a repeated epoch or a long gap: start afresh (time runs backward in a backward pass)
+            self.still_since_ns = None
+        anchor = None
+        for entry in hist:
+            if abs(t_ns - entry[0]) / 1e9 <= self.window_s:
+                anchor = entry
+                break
+        if anchor is None and hist:
+            anchor = hist[-1]
+        disp = None
+        if anchor is not None:
+            t_a, ep_a, sd_a, pos_a, lock_a = anchor
+            continuous = valid & (lock - lock_a == self.epochs - ep_a)
+            disp = tdcp_displacement(sd_a, pos_a, sd_m, pos_m, los, var_sd_m2, continuous)
+            if disp is not None:
+                disp = Displacement(disp.d_m, disp.cov_m2, abs(t_ns - t_a) / 1e9, disp.n_sats)
+        hist.append((t_ns, self.epochs, np.where(valid, sd_m, np.nan), np.array(pos_m, float), lock.copy()))
+        # keep the newest entry older than the window (the next anchor) and everything inside it
+        while len(hist) > 2 and abs(t_ns - hist[1][0]) / 1e9 > self.window_s:
+            hist.pop(0)
+        if disp is None or disp.chi2 > CHI2_3DOF_999:
+            self.still_since_ns = None
+        elif self.still_since_ns is None:
+            self.still_since_ns = anchor[0] if anchor is not None else t_ns
+        return disp
+
+    def still_for_s(self, t_ns: int) -> float:
+        """How long (s) the windows up to `t_ns` have shown no motion; 0 when the last one did or was unknown."""
+        return 0.0 if self.still_since_ns is None else abs(t_ns - self.still_since_ns) / 1e9
