@@ -39,6 +39,8 @@ NSAT = 32
 NX0 = 6
 NX = NX0 + NSAT
 _CHI2_3DOF_999 = 16.27
+RATIO_CAP = 999.9
+"""Largest AR ratio reported (RTKLIB's .pos column): LAMBDA stops searching once the ratio provably exceeds it."""
 _NO_TIME_NS = np.iinfo(np.int64).min
 _PRNS = np.arange(1, NSAT + 1, dtype=np.int16)
 _PRNS.flags.writeable = False  # shared by every epoch's SatState
@@ -194,7 +196,7 @@ def _solution(t: GpsTime, pos: Arr, vel: Arr, q: int, ns: int, cov: Arr, covv: A
               ratio: float) -> Solution:
     return Solution(time=t, pos_ecef_m=np.array(pos, float), vel_ecef_m_s=np.array(vel, float), q=q, ns=ns,
                     cov_pos_m2=np.array(cov, float), cov_vel_m2_s2=np.array(covv, float), age_s=age,
-                    ratio=min(ratio, 999.9))
+                    ratio=min(ratio, RATIO_CAP))
 
 
 def _reset_amb(st: RtkState, k: npt.NDArray[np.int64]) -> None:
@@ -659,7 +661,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         qa = d @ p[np.ix_(ja, ja)] @ d.T
         qba = p[:3, ja] @ d.T
         try:
-            res = mlambda(a, qa)
+            res = mlambda(a, qa, ratio_cap=RATIO_CAP)
         except LambdaError:
             return None
         ratio = res.ratio
