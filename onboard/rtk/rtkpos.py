@@ -24,7 +24,7 @@ import numpy.typing as npt
 
 from onboard.gnsstime import GpsTime
 from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
-from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states
+from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states_batch
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.mlambda import LambdaError, mlambda
 from onboard.rtk.models import CodeScatter, median_of_few, phase_variance_m2, saastamoinen_m
@@ -139,8 +139,26 @@ def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkStat
     return st
 
 
-def _slots(obs: ObsEpoch, store: EphemerisStore) -> _Receiver:
-    """Scatter a GPS epoch onto 32 PRN slots and compute satellite states at its own time tag (satposs)."""
+def slot_pseudoranges(obs: ObsEpoch) -> Arr:
+    """The epoch's GPS pseudoranges (m) on the 32 PRN slots, NaN where absent."""
+    g = obs.gps_only()
+    pr = np.full(NSAT, np.nan)
+    pr[g.sv_id.astype(int) - 1] = g.pr_m
+    return pr
+
+
+def epoch_satellites(epochs: list[ObsEpoch], store: EphemerisStore) -> list[SatState]:
+    """Satellite states on the 32 slots of every epoch (satposs at each epoch's own time tag), in one batch:
+    what _slots computes per epoch, for rtk_pos's `sats` when the epochs are known ahead (post-processing)."""
+    if not epochs:
+        return []
+    prs = np.array([slot_pseudoranges(e) for e in epochs])
+    return satellite_states_batch(store, _PRNS, [e.time.total_ns for e in epochs], prs)
+
+
+def _slots(obs: ObsEpoch, store: EphemerisStore, sats: SatState | None = None) -> _Receiver:
+    """Scatter a GPS epoch onto 32 PRN slots and compute satellite states at its own time tag (satposs),
+    unless given (`sats`, from epoch_satellites)."""
     g = obs.gps_only()
     idx = g.sv_id.astype(int) - 1
     pr = np.full(NSAT, np.nan)
@@ -149,8 +167,9 @@ def _slots(obs: ObsEpoch, store: EphemerisStore) -> _Receiver:
     lli = np.zeros(NSAT, np.uint8)
     pr[idx], cp[idx], dop[idx], lli[idx] = g.pr_m, g.cp_cyc, g.dop_hz, g.lli
     has = np.isfinite(pr)
-    # straight onto the 32 slots: satellite_states leaves slots without a pseudorange zero and not ok
-    sats = satellite_states(store, _PRNS, g.time, pr)
+    if sats is None:
+        # straight onto the 32 slots: a batch of one leaves slots without a pseudorange zero and not ok
+        sats = satellite_states_batch(store, _PRNS, [g.time.total_ns], pr.reshape(1, NSAT))[0]
     return _Receiver(pr, cp, dop, lli, sats, has & sats.ok)
 
 
@@ -752,14 +771,16 @@ def _holdamb(st: RtkState, fix: _Fix) -> None:
 
 
 def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
-            base_pos_ecef_m: Arr | None) -> Solution:
+            base_pos_ecef_m: Arr | None, sats: tuple[SatState | None, SatState | None] = (None, None)) -> Solution:
     """Process one rover epoch (RTKLIB rtkpos()/relpos()); returns the epoch's Solution.
 
     `base` is the base epoch paired with this rover epoch (latest at or before it, see postpro.pair_epochs);
     `base_pos_ecef_m` the base antenna L1 phase centre. Without base data a single-point solution (Q=5).
+    `sats`: the rover's and the base epoch's satellite states when already computed (epoch_satellites),
+    else None (computed here).
     """
     o = st.options
-    rov = _slots(rover, nav.store)
+    rov = _slots(rover, nav.store, sats[0])
     nan3 = np.full(3, np.nan)
     spp = pntpos(rov.pr_m, rov.sats, rover.time.tow_s, o.elmask_rad, rov.dop_hz, nav.iono,
                  x0_ecef_m=st.x[:3] if st.initialized else None, outlier_m=o.spp_outlier_m,
@@ -794,7 +815,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     if st.base_cache is not None and st.base_cache[0] == base.time:
         bas = st.base_cache[1]
     else:
-        bas = _slots(base, nav.store)
+        bas = _slots(base, nav.store, sats[1])
         st.base_cache = (base.time, bas)
     base_pos = np.asarray(base_pos_ecef_m, float)
 

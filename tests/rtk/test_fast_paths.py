@@ -131,3 +131,28 @@ def test_lambda_skips_the_search_only_when_the_ratio_provably_reaches_the_cap() 
             searched += 1
             assert np.array_equal(fast.fixed, full.fixed) and np.array_equal(fast.sq_dist, full.sq_dist)
     assert skipped > 30 and searched > 30  # both branches exercised
+
+
+def test_satellite_states_of_all_epochs_in_one_batch_equal_the_per_epoch_calls() -> None:
+    """Post-processing computes every epoch's satellites before the filter (epoch_satellites): the batch must
+    give each epoch exactly what the one-epoch call (the real-time path) gives, ephemeris choice included."""
+    from onboard.rtk.rtkpos import epoch_satellites, slot_pseudoranges
+
+    nav = read_rinex_nav(shared_file(M8P + "rover-20181004-1237.nav.gz"))
+    obs = read_rinex_obs(shared_file(M8P + "rover-20181004-1237.obs.gz"))
+    store = EphemerisStore(nav.ephemerides)
+    epochs = [e.gps_only() for e in obs.epochs[::7]]
+    batch = epoch_satellites(epochs, store)
+    assert len(batch) == len(epochs)
+    for ep, b in zip(epochs, batch):
+        one = satellite_states(store, np.arange(1, 33), ep.time, slot_pseudoranges(ep))
+        for name in ("pos_m", "vel_m_s", "clock_s", "drift_s_s", "var_m2", "ok"):
+            assert np.array_equal(getattr(b, name), getattr(one, name)), name
+        assert b.ok.sum() >= 5
+    # an ephemeris added later is seen by the next batch (the store's table is rebuilt)
+    late = EphemerisStore(nav.ephemerides[: len(nav.ephemerides) // 2])
+    before = epoch_satellites(epochs[:3], late)[0].ok.sum()
+    for e in nav.ephemerides[len(nav.ephemerides) // 2:]:
+        late.add(e)
+    assert epoch_satellites(epochs[:3], late)[0].ok.sum() >= before
+    assert np.array_equal(epoch_satellites(epochs[:3], late)[0].pos_m, batch[0].pos_m)
