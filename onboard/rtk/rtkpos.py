@@ -579,14 +579,21 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     return _DD(v, h, r, kinds, slots, ref_phase), e
 
 
-def _kf_update(x: Arr, p: Arr, v: Arr, h: Arr, r: Arr) -> tuple[Arr, Arr]:
-    """Kalman measurement update on the active states only (zero-variance states are left alone)."""
+def _innovation(p: Arr, h: Arr, r: Arr) -> tuple[npt.NDArray[np.int64], Arr, Arr, Arr]:
+    """(active states, P on them, P·Hᵀ, innovation covariance S = H·P·Hᵀ + R) over the active states."""
     act = (p.diagonal() > 0).nonzero()[0]
-    rows, cols = act[:, None], act[None, :]  # np.ix_ without its per-call overhead
+    pa = p[act[:, None], act[None, :]]  # np.ix_ without its per-call overhead
     ha = h[:, act]
-    pa = p[rows, cols]
     ph = pa @ ha.T
-    s = ha @ ph + r
+    return act, pa, ph, ha @ ph + r
+
+
+def _kf_update(x: Arr, p: Arr, v: Arr, h: Arr, r: Arr,
+               innov: tuple[npt.NDArray[np.int64], Arr, Arr, Arr] | None = None) -> tuple[Arr, Arr]:
+    """Kalman measurement update on the active states only (zero-variance states are left alone).
+    `innov` = _innovation(p, h, r) when the caller already has it (gating)."""
+    act, pa, ph, s = _innovation(p, h, r) if innov is None else innov
+    rows, cols = act[:, None], act[None, :]
     k = np.linalg.solve(s, ph.T).T
     x = x.copy()
     x[act] += k @ v
@@ -866,15 +873,14 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         dd, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, o.use_doppler, trop_r)
         if dd.v.size == 0:
             break
-        # innovation gating with the innovation covariance
-        act = np.flatnonzero(np.diag(st.p) > 0)
-        s = dd.h[:, act] @ st.p[np.ix_(act, act)] @ dd.h[:, act].T + dd.r
-        norm = np.abs(dd.v) / np.sqrt(np.diag(s))
+        # innovation gating with the innovation covariance (the one the update then uses)
+        innov = _innovation(st.p, dd.h, dd.r)
+        norm = np.abs(dd.v) / np.sqrt(np.diag(innov[-1]))
         bad = norm > 6.0
         bad &= ~((dd.kind == 0) & (np.abs(dd.v) < o.max_innovation_phase_m * 0.1))
         if not bad.any():
             x_prior, p_prior = st.x, st.p
-            x_post, p_post = _kf_update(st.x, st.p, dd.v, dd.h, dd.r)
+            x_post, p_post = _kf_update(st.x, st.p, dd.v, dd.h, dd.r, innov)
             break
         worst = int(np.argmax(np.where(bad, norm, -1)))
         kind, slot = int(dd.kind[worst]), int(dd.slot[worst])
