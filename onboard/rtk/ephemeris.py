@@ -104,11 +104,13 @@ class EphemerisStore:
     def __init__(self, ephemerides: Iterable[Ephemeris] = ()) -> None:
         self._by_prn: dict[int, list[Ephemeris]] = {}
         self._toe_ns: dict[int, list[int]] = {}  # toe (ns since the GPS epoch) of each _by_prn entry
+        self._table: _EphTable | None = None
         for eph in ephemerides:
             self.add(eph)
 
     def add(self, eph: Ephemeris) -> bool:
         """Store `eph`; returns False when an identical (prn, iode, toe) set is already held."""
+        self._table = None  # the batched evaluation's parameter table is rebuilt on next use
         lst = self._by_prn.setdefault(eph.prn, [])
         for i, old in enumerate(lst):
             if old.toe == eph.toe and old.iode == eph.iode:
@@ -151,6 +153,13 @@ class EphemerisStore:
         """Every held ephemeris, by PRN then toe."""
         return [e for prn in sorted(self._by_prn) for e in self._by_prn[prn]]
 
+    def table(self) -> _EphTable:
+        """Every held ephemeris as parameter arrays for the batched evaluation (rebuilt after add())."""
+        table = getattr(self, "_table", None)  # a store unpickled from an older version has none
+        if table is None:
+            table = self._table = _EphTable.of(self._by_prn)
+        return table
+
 
 _EPH_FIELDS = ("sqrt_a", "e", "i0_rad", "omega0_rad", "omega_rad", "m0_rad", "delta_n_rad_s", "omega_dot_rad_s",
                "idot_rad_s", "cuc_rad", "cus_rad", "crc_m", "crs_m", "cic_rad", "cis_rad", "af0_s", "af1_s_s",
@@ -184,34 +193,112 @@ def _batch_position(p: npt.NDArray[np.float64], tk: npt.NDArray[np.float64],
 
 
 @dataclass
-class _EphBatch:
-    """Per-epoch constants of an ephemeris list for the vectorised evaluation: `params` (19, 2n) parameter rows
-    in _EPH_FIELDS order, twice over (columns n.. evaluate the +1 ms point of the velocity difference),
-    `toe_s` (2n,) toe seconds of week, `toe_ns`/`toc_ns` (n,) toe/toc in ns since the GPS epoch, `ura_var_m2`."""
+class _EphTable:
+    """A store's ephemerides as columns: `params` (19, N) parameter rows in _EPH_FIELDS order, `toe_s` (N,) toe
+    seconds of week, `toe_ns`/`toc_ns` (N,) toe/toc in ns since the GPS epoch, `ura_var_m2` (N,), `healthy`
+    (N,); `span[prn]` = the (start, stop) columns of that PRN, by toe as EphemerisStore keeps them."""
 
     params: npt.NDArray[np.float64]
     toe_s: npt.NDArray[np.float64]
     toe_ns: npt.NDArray[np.int64]
     toc_ns: npt.NDArray[np.int64]
     ura_var_m2: npt.NDArray[np.float64]
+    healthy: npt.NDArray[np.bool_]
+    span: dict[int, tuple[int, int]]
+
+    @staticmethod
+    def of(by_prn: dict[int, list[Ephemeris]]) -> _EphTable:
+        ephs: list[Ephemeris] = []
+        span: dict[int, tuple[int, int]] = {}
+        for prn in sorted(by_prn):
+            span[prn] = (len(ephs), len(ephs) + len(by_prn[prn]))
+            ephs.extend(by_prn[prn])
+        return _EphTable(np.array([[getattr(e, f) for e in ephs] for f in _EPH_FIELDS]).reshape(len(_EPH_FIELDS), -1),
+                         np.array([e.toe_s for e in ephs], float), np.array([e.toe.total_ns for e in ephs], np.int64),
+                         np.array([e.toc.total_ns for e in ephs], np.int64),
+                         np.array([ura_sigma_m(e.ura_index) ** 2 for e in ephs], float),
+                         np.array([e.health == 0 for e in ephs], bool), span)
 
 
-def _eph_batch(store: EphemerisStore, ephs: list[Ephemeris]) -> _EphBatch:
-    """The _EphBatch of a list of ephemerides, cached on the store (the selected set changes every ~2 h)."""
-    key = tuple(id(e) for e in ephs)
-    cache: dict[tuple[int, ...], _EphBatch] = store.__dict__.setdefault("_batch_cache", {})
-    batch = cache.get(key)
-    if batch is None:
-        if len(cache) > 64:
-            cache.clear()
-        arr = np.array([[getattr(e, f) for e in ephs] for f in _EPH_FIELDS])
-        toe_s = np.array([e.toe_s for e in ephs])
-        batch = _EphBatch(np.concatenate([arr, arr], axis=1), np.concatenate([toe_s, toe_s]),
-                          np.array([e.toe.total_ns for e in ephs], np.int64),
-                          np.array([e.toc.total_ns for e in ephs], np.int64),
-                          np.array([ura_sigma_m(e.ura_index) ** 2 for e in ephs]))
-        cache[key] = batch
-    return batch
+def _select_columns(table: _EphTable, prns: npt.NDArray[np.int16], t_ns: npt.NDArray[np.int64],
+                    have: npt.NDArray[np.bool_]) -> npt.NDArray[np.int64]:
+    """EphemerisStore.select_ns for every (epoch, satellite) at once: the table column of the ephemeris whose
+    toe is nearest `t_ns` (E, n) within MAX_EPH_AGE_S, the later one on a tie; −1 where none or not `have`."""
+    col = np.full(t_ns.shape, -1, np.int64)
+    for j, prn in enumerate(prns.tolist()):
+        lo_hi = table.span.get(prn)
+        rows = have[:, j].nonzero()[0]
+        if lo_hi is None or rows.size == 0:
+            continue
+        lo, hi = lo_hi
+        # |t − toe| in s as select_ns computes it (ns difference, then ÷ 1e9: exact below 2^53 ns)
+        dt = np.abs(t_ns[rows, j][:, None] - table.toe_ns[None, lo:hi]) / NS_PER_S
+        last = hi - lo - 1 - np.argmin(dt[:, ::-1], axis=1)  # the later of equally near toes
+        near = dt[np.arange(rows.size), last] <= MAX_EPH_AGE_S
+        col[rows[near], j] = lo + last[near]
+    return col
+
+
+def satellite_states_batch(store: EphemerisStore, prns: npt.ArrayLike, t_rx_ns: npt.ArrayLike,
+                           pr_m: npt.ArrayLike) -> list[SatState]:
+    """satellite_states() of E epochs at once: receiver times `t_rx_ns` (E,) in ns since the GPS epoch,
+    pseudoranges `pr_m` (E, n) (m, NaN where absent) for the same `prns` (n,). One vectorised pass over every
+    (epoch, satellite) pair; the same formulas, element by element, as the one-epoch call (which is this one
+    with E = 1), so post-processing can compute every epoch's satellites before the filter runs."""
+    prn_arr = np.asarray(prns, dtype=np.int16)
+    t_rx = np.asarray(t_rx_ns, dtype=np.int64)
+    pr = np.asarray(pr_m, dtype=float).reshape(t_rx.shape[0], prn_arr.shape[0])
+    n_ep, n = pr.shape
+    pos = np.zeros((n_ep, n, 3))
+    vel = np.zeros((n_ep, n, 3))
+    clk = np.zeros((n_ep, n))
+    drift = np.zeros((n_ep, n))
+    var = np.zeros((n_ep, n))
+    ok = np.zeros((n_ep, n), dtype=bool)
+    have = np.isfinite(pr)
+    if have.any() and len(store):
+        table = store.table()
+        # ephemeris choice at t_rx − pr/c (GpsTime.add_s's rounding to the ns: half to even, as round())
+        t_tx_ns = t_rx[:, None] + np.rint(np.where(have, -pr, 0.0) / CLIGHT_M_S * NS_PER_S).astype(np.int64)
+        col = _select_columns(table, prn_arr, t_tx_ns, have)
+        use = col >= 0
+        use[use] = table.healthy[col[use]]
+        ep, sat = use.nonzero()
+        if ep.size:
+            c = col[ep, sat]
+            m = c.size
+            p = table.params[:, c]
+            af0, af1, af2, tgd = p[15], p[16], p[17], p[18]
+            t_ep = t_rx[ep]
+            rx_toe = (t_ep - table.toe_ns[c]) / 1e9
+            rx_toc = (t_ep - table.toc_ns[c]) / 1e9
+            tau = pr[ep, sat] / CLIGHT_M_S
+
+            def clock(dt: npt.NDArray[np.float64], k: int) -> npt.NDArray[np.float64]:
+                a0, a1, a2 = af0[:k], af1[:k], af2[:k]
+                for _ in range(2):  # as eph_clock_s: the polynomial evaluated at t − dts
+                    dt = dt - (a0 + a1 * dt + a2 * dt * dt)
+                return a0 + a1 * dt + a2 * dt * dt
+
+            off = -tau - clock(rx_toc - tau, m)  # t_tx − t_rx (s)
+            step = 1e-3
+            # both points of the velocity/drift difference in one vectorised pass (columns m.. are t + step)
+            p2 = np.concatenate([p, p], axis=1)
+            af0, af1, af2 = p2[15], p2[16], p2[17]
+            tk0 = rx_toe + off
+            toe_s = table.toe_s[c]
+            p01, rel01 = _batch_position(p2, np.concatenate([tk0, tk0 + step]), np.concatenate([toe_s, toe_s]))
+            t0 = rx_toc + off
+            c01 = clock(np.concatenate([t0, t0 + step]), 2 * m) + rel01
+            p0, p1 = p01[:m], p01[m:]
+            c0, c1 = c01[:m], c01[m:]
+            pos[ep, sat] = p0
+            vel[ep, sat] = (p1 - p0) / step
+            clk[ep, sat] = c0 - tgd
+            drift[ep, sat] = (c1 - c0) / step
+            var[ep, sat] = table.ura_var_m2[c]
+            ok[ep, sat] = True
+    return [SatState(prn_arr, pos[k], vel[k], clk[k], drift[k], var[k], ok[k]) for k in range(n_ep)]
 
 
 def satellite_states(
@@ -221,62 +308,11 @@ def satellite_states(
 
     Transmission time = t_rx − pr/c − satellite clock (RTKLIB satposs()); the result is in the ECEF frame
     of the transmission instant (the caller rotates for Earth rotation during travel, see geometric_range).
-    Vectorised over satellites: the same formulas as eph_position / eph_position_velocity.
+    Vectorised over satellites (satellite_states_batch with one epoch): the same formulas as eph_position /
+    eph_position_velocity.
     """
-    prn_arr = np.asarray(prns, dtype=np.int16)
     pr = np.asarray(pr_m, dtype=float)
-    n = prn_arr.shape[0]
-    pos = np.zeros((n, 3))
-    vel = np.zeros((n, 3))
-    clk = np.zeros(n)
-    drift = np.zeros(n)
-    var = np.zeros(n)
-    ok = np.zeros(n, dtype=bool)
-    ephs: list[Ephemeris] = []
-    rows: list[int] = []
-    t_rx_ns = t_rx.total_ns
-    # ephemeris choice at t_rx − pr/c (ns arithmetic of GpsTime.add_s/diff_s without building GpsTime objects)
-    for i, (prn, p_i) in enumerate(zip(prn_arr.tolist(), pr.tolist())):
-        if not math.isfinite(p_i):
-            continue
-        eph = store.select_ns(prn, t_rx_ns + round(-p_i / CLIGHT_M_S * NS_PER_S))
-        if eph is None or eph.health != 0:
-            continue
-        ephs.append(eph)
-        rows.append(i)
-    if not rows:
-        return SatState(prn_arr, pos, vel, clk, drift, var, ok)
-    idx = np.array(rows)
-    m = len(rows)
-    b = _eph_batch(store, ephs)
-    p = b.params
-    af0, af1, af2, tgd = p[15], p[16], p[17], p[18]
-    rx_toe = (t_rx_ns - b.toe_ns) / 1e9
-    rx_toc = (t_rx_ns - b.toc_ns) / 1e9
-    tau = pr[idx] / CLIGHT_M_S
-
-    def clock(dt: npt.NDArray[np.float64], k: int) -> npt.NDArray[np.float64]:
-        a0, a1, a2 = af0[:k], af1[:k], af2[:k]
-        for _ in range(2):  # as eph_clock_s: the polynomial evaluated at t − dts
-            dt = dt - (a0 + a1 * dt + a2 * dt * dt)
-        return a0 + a1 * dt + a2 * dt * dt
-
-    off = -tau - clock(rx_toc - tau, m)  # t_tx − t_rx (s)
-    step = 1e-3
-    # both points of the velocity/drift difference in one vectorised pass (columns m.. are t + step)
-    tk0 = rx_toe + off
-    p01, rel01 = _batch_position(p, np.concatenate([tk0, tk0 + step]), b.toe_s)
-    t0 = rx_toc + off
-    c01 = clock(np.concatenate([t0, t0 + step]), 2 * m) + rel01
-    p0, p1 = p01[:m], p01[m:]
-    c0, c1 = c01[:m], c01[m:]
-    pos[idx] = p0
-    vel[idx] = (p1 - p0) / step
-    clk[idx] = c0 - tgd[:m]
-    drift[idx] = (c1 - c0) / step
-    var[idx] = b.ura_var_m2
-    ok[idx] = True
-    return SatState(prn_arr, pos, vel, clk, drift, var, ok)
+    return satellite_states_batch(store, prns, [t_rx.total_ns], pr.reshape(1, -1))[0]
 
 
 def geometric_range(

@@ -117,6 +117,38 @@ def search(lmat_a: Arr, d_a: Arr, zs_a: Arr, m: int = 2) -> tuple[Arr, Arr]:
     return _search_lists(lmat_a.tolist(), d_a.tolist(), zs_a.tolist(), m)
 
 
+def _babai_bound(lmat: list[list[float]], d: list[float], zs: list[float]) -> tuple[list[float], float, float]:
+    """The search's first leaf (sequential rounding from the last ambiguity down, the bootstrapped / Babai
+    point) with its squared distance, and a lower bound of the squared distance of every other integer vector.
+
+    Any other vector first differs from the leaf at some level k (counting from the top); above k it follows the
+    leaf's path, so its distance is at least the path's distance above k plus (1 − |yₖ|)²/Dₖ, yₖ the leaf's
+    rounding residual at k (the conditional mean is the leaf's, the integer at least 1 − |yₖ| from it). The
+    minimum over k bounds the second-best distance from below. Same arithmetic as _search_lists' first descent.
+    """
+    n = len(d)
+    s_prev = [0.0] * n
+    z = [0.0] * n
+    dist = 0.0
+    bound = float("inf")
+    k = n - 1
+    zb = zs[k]
+    while True:
+        z[k] = float(round(zb))
+        y = zb - z[k]
+        miss = 1.0 - abs(y)
+        bound = min(bound, dist + miss * miss / d[k])
+        dist = dist + y * y / d[k]
+        if k == 0:
+            return z, dist, bound
+        k -= 1
+        dz = z[k + 1] - zb
+        lrow = lmat[k + 1]
+        s_row = [s_prev[i] + dz * lrow[i] for i in range(k + 1)]
+        zb = zs[k] + s_row[k]
+        s_prev = s_row
+
+
 def _search_lists(lmat: list[list[float]], d: list[float], zs: list[float], m: int) -> tuple[Arr, Arr]:
     """search() on lists."""
     n = len(d)
@@ -200,10 +232,19 @@ class LambdaResult:
         return float(self.sq_dist[1] / max(self.sq_dist[0], 1e-12))
 
 
-def mlambda(a_float: Arr, q: Arr, m: int = 2) -> LambdaResult:
+_BOUND_MARGIN = 1.0 + 1e-9
+"""Relative margin on the second-best bound against the rounding of the distance sums (~1e-16 relative)."""
+
+
+def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None) -> LambdaResult:
     """Integer least-squares estimates of float ambiguities `a_float` (n,) with covariance `q` (n,n).
 
     Follows RTKLIB lambda(): z = Zᵀa is searched in the decorrelated space, F = Z⁻ᵀE mapped back.
+
+    `ratio_cap`: when the search's first leaf provably has a ratio of at least `ratio_cap` (a float next to
+    an integer set held for minutes: most fixed epochs), the search is skipped: `fixed` holds that best vector
+    alone (n, 1) and `sq_dist[1]` is the lower bound of the second-best distance, so `ratio` ≥ `ratio_cap`
+    instead of the exact value. For callers that report the ratio capped there (a .pos file's 999.9).
     """
     a = np.asarray(a_float, float)
     n = a.shape[0]
@@ -213,6 +254,12 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2) -> LambdaResult:
     lmat, d, z_list = _reduction_lists(lmat0, d0)
     z: Arr = np.array(z_list, dtype=float)
     zs = z.T @ a
-    e, s = _search_lists(lmat, d, zs.tolist(), m)
+    zs_list = zs.tolist()
+    if ratio_cap is not None:
+        leaf, dist, bound = _babai_bound(lmat, d, zs_list)
+        if bound >= ratio_cap * max(dist, 1e-12) * _BOUND_MARGIN:
+            f = np.linalg.solve(z.T, np.array(leaf).reshape(n, 1))
+            return LambdaResult(np.round(f), np.array([dist, bound]), np.array(d))
+    e, s = _search_lists(lmat, d, zs_list, m)
     f = np.linalg.solve(z.T, e)
     return LambdaResult(np.round(f), s, np.array(d))

@@ -48,7 +48,7 @@ def klobuchar_m(t_tow_s: float, lat_rad: float, lon_rad: float, az_rad: Arr, el_
     elsc = el / np.pi
     psi = 0.0137 / (elsc + 0.11) - 0.022
     phi = lat_rad / np.pi + psi * np.cos(az)
-    phi = np.clip(phi, -0.416, 0.416)
+    phi = np.minimum(np.maximum(phi, -0.416), 0.416)  # np.clip to the bit, without its dispatch overhead
     lam = lon_rad / np.pi + psi * np.sin(az) / np.cos(phi * np.pi)
     phi = phi + 0.064 * np.cos((lam - 1.617) * np.pi)
     tt = 43200.0 * lam + t_tow_s

@@ -24,7 +24,7 @@ import numpy.typing as npt
 
 from onboard.gnsstime import GpsTime
 from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
-from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states
+from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states_batch
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.mlambda import LambdaError, mlambda
 from onboard.rtk.models import CodeScatter, median_of_few, phase_variance_m2, saastamoinen_m
@@ -40,6 +40,8 @@ NSAT = 32
 NX0 = 6
 NX = NX0 + NSAT
 _CHI2_3DOF_999 = 16.27
+RATIO_CAP = 999.9
+"""Largest AR ratio reported (RTKLIB's .pos column): LAMBDA stops searching once the ratio provably exceeds it."""
 _NO_TIME_NS = np.iinfo(np.int64).min
 _PRNS = np.arange(1, NSAT + 1, dtype=np.int16)
 _PRNS.flags.writeable = False  # shared by every epoch's SatState
@@ -139,8 +141,26 @@ def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkStat
     return st
 
 
-def _slots(obs: ObsEpoch, store: EphemerisStore) -> _Receiver:
-    """Scatter a GPS epoch onto 32 PRN slots and compute satellite states at its own time tag (satposs)."""
+def slot_pseudoranges(obs: ObsEpoch) -> Arr:
+    """The epoch's GPS pseudoranges (m) on the 32 PRN slots, NaN where absent."""
+    g = obs.gps_only()
+    pr = np.full(NSAT, np.nan)
+    pr[g.sv_id.astype(int) - 1] = g.pr_m
+    return pr
+
+
+def epoch_satellites(epochs: list[ObsEpoch], store: EphemerisStore) -> list[SatState]:
+    """Satellite states on the 32 slots of every epoch (satposs at each epoch's own time tag), in one batch:
+    what _slots computes per epoch, for rtk_pos's `sats` when the epochs are known ahead (post-processing)."""
+    if not epochs:
+        return []
+    prs = np.array([slot_pseudoranges(e) for e in epochs])
+    return satellite_states_batch(store, _PRNS, [e.time.total_ns for e in epochs], prs)
+
+
+def _slots(obs: ObsEpoch, store: EphemerisStore, sats: SatState | None = None) -> _Receiver:
+    """Scatter a GPS epoch onto 32 PRN slots and compute satellite states at its own time tag (satposs),
+    unless given (`sats`, from epoch_satellites)."""
     g = obs.gps_only()
     idx = g.sv_id.astype(int) - 1
     pr = np.full(NSAT, np.nan)
@@ -149,8 +169,9 @@ def _slots(obs: ObsEpoch, store: EphemerisStore) -> _Receiver:
     lli = np.zeros(NSAT, np.uint8)
     pr[idx], cp[idx], dop[idx], lli[idx] = g.pr_m, g.cp_cyc, g.dop_hz, g.lli
     has = np.isfinite(pr)
-    # straight onto the 32 slots: satellite_states leaves slots without a pseudorange zero and not ok
-    sats = satellite_states(store, _PRNS, g.time, pr)
+    if sats is None:
+        # straight onto the 32 slots: a batch of one leaves slots without a pseudorange zero and not ok
+        sats = satellite_states_batch(store, _PRNS, [g.time.total_ns], pr.reshape(1, NSAT))[0]
     return _Receiver(pr, cp, dop, lli, sats, has & sats.ok)
 
 
@@ -196,7 +217,7 @@ def _solution(t: GpsTime, pos: Arr, vel: Arr, q: int, ns: int, cov: Arr, covv: A
               ratio: float) -> Solution:
     return Solution(time=t, pos_ecef_m=np.array(pos, float), vel_ecef_m_s=np.array(vel, float), q=q, ns=ns,
                     cov_pos_m2=np.array(cov, float), cov_vel_m2_s2=np.array(covv, float), age_s=age,
-                    ratio=min(ratio, 999.9))
+                    ratio=min(ratio, RATIO_CAP))
 
 
 def _reset_amb(st: RtkState, k: npt.NDArray[np.int64]) -> None:
@@ -594,14 +615,21 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     return _DD(v, h, r, kinds, slots, ref_phase), e
 
 
-def _kf_update(x: Arr, p: Arr, v: Arr, h: Arr, r: Arr) -> tuple[Arr, Arr]:
-    """Kalman measurement update on the active states only (zero-variance states are left alone)."""
+def _innovation(p: Arr, h: Arr, r: Arr) -> tuple[npt.NDArray[np.int64], Arr, Arr, Arr]:
+    """(active states, P on them, P·Hᵀ, innovation covariance S = H·P·Hᵀ + R) over the active states."""
     act = (p.diagonal() > 0).nonzero()[0]
-    rows, cols = act[:, None], act[None, :]  # np.ix_ without its per-call overhead
+    pa = p[act[:, None], act[None, :]]  # np.ix_ without its per-call overhead
     ha = h[:, act]
-    pa = p[rows, cols]
     ph = pa @ ha.T
-    s = ha @ ph + r
+    return act, pa, ph, ha @ ph + r
+
+
+def _kf_update(x: Arr, p: Arr, v: Arr, h: Arr, r: Arr,
+               innov: tuple[npt.NDArray[np.int64], Arr, Arr, Arr] | None = None) -> tuple[Arr, Arr]:
+    """Kalman measurement update on the active states only (zero-variance states are left alone).
+    `innov` = _innovation(p, h, r) when the caller already has it (gating)."""
+    act, pa, ph, s = _innovation(p, h, r) if innov is None else innov
+    rows, cols = act[:, None], act[None, :]
     k = np.linalg.solve(s, ph.T).T
     x = x.copy()
     x[act] += k @ v
@@ -697,7 +725,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         qa = d @ p[np.ix_(ja, ja)] @ d.T
         qba = p[:3, ja] @ d.T
         try:
-            res = mlambda(a, qa)
+            res = mlambda(a, qa, ratio_cap=RATIO_CAP)
         except LambdaError:
             return None
         ratio = res.ratio
@@ -788,14 +816,16 @@ def _holdamb(st: RtkState, fix: _Fix) -> None:
 
 
 def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
-            base_pos_ecef_m: Arr | None) -> Solution:
+            base_pos_ecef_m: Arr | None, sats: tuple[SatState | None, SatState | None] = (None, None)) -> Solution:
     """Process one rover epoch (RTKLIB rtkpos()/relpos()); returns the epoch's Solution.
 
     `base` is the base epoch paired with this rover epoch (latest at or before it, see postpro.pair_epochs);
     `base_pos_ecef_m` the base antenna L1 phase centre. Without base data a single-point solution (Q=5).
+    `sats`: the rover's and the base epoch's satellite states when already computed (epoch_satellites),
+    else None (computed here).
     """
     o = st.options
-    rov = _slots(rover, nav.store)
+    rov = _slots(rover, nav.store, sats[0])
     nan3 = np.full(3, np.nan)
     spp = pntpos(rov.pr_m, rov.sats, rover.time.tow_s, o.elmask_rad, rov.dop_hz, nav.iono,
                  x0_ecef_m=st.x[:3] if st.initialized else None, outlier_m=o.spp_outlier_m,
@@ -830,7 +860,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     if st.base_cache is not None and st.base_cache[0] == base.time:
         bas = st.base_cache[1]
     else:
-        bas = _slots(base, nav.store)
+        bas = _slots(base, nav.store, sats[1])
         st.base_cache = (base.time, bas)
     base_pos = np.asarray(base_pos_ecef_m, float)
 
@@ -883,15 +913,14 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         dd, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, o.use_doppler, trop_r)
         if dd.v.size == 0:
             break
-        # innovation gating with the innovation covariance
-        act = np.flatnonzero(np.diag(st.p) > 0)
-        s = dd.h[:, act] @ st.p[np.ix_(act, act)] @ dd.h[:, act].T + dd.r
-        norm = np.abs(dd.v) / np.sqrt(np.diag(s))
+        # innovation gating with the innovation covariance (the one the update then uses)
+        innov = _innovation(st.p, dd.h, dd.r)
+        norm = np.abs(dd.v) / np.sqrt(np.diag(innov[-1]))
         bad = norm > 6.0
         bad &= ~((dd.kind == 0) & (np.abs(dd.v) < o.max_innovation_phase_m * 0.1))
         if not bad.any():
             x_prior, p_prior = st.x, st.p
-            x_post, p_post = _kf_update(st.x, st.p, dd.v, dd.h, dd.r)
+            x_post, p_post = _kf_update(st.x, st.p, dd.v, dd.h, dd.r, innov)
             break
         worst = int(np.argmax(np.where(bad, norm, -1)))
         kind, slot = int(dd.kind[worst]), int(dd.slot[worst])

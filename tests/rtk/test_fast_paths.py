@@ -102,3 +102,57 @@ def test_gps_only_epoch_is_itself_and_mixed_epochs_are_filtered() -> None:
     assert g is not mixed and (g.gnss_id == 0).all() and len(g) < len(mixed)
     assert g.gps_only() is g
     assert g.time == GpsTime(mixed.time.week, mixed.time.tow_ns)
+
+
+def test_lambda_skips_the_search_only_when_the_ratio_provably_reaches_the_cap() -> None:
+    """mlambda(..., ratio_cap) returns the full search's best integers and distance (to the bit) and a ratio of
+    at least the cap whenever it skips the search; otherwise it is the full search, unchanged."""
+    rng = np.random.default_rng(11)
+    cap = 999.9
+    skipped = searched = 0
+    for trial in range(300):
+        n = int(rng.integers(2, 12))
+        g = rng.normal(size=(n, n))
+        # from a held set (σ ~ 1e-3 cycles, floats within a few σ of integers) to a code-level float (σ ~ 1 cycle)
+        scale = 10.0 ** rng.uniform(-7, 0)
+        q = g @ g.T * scale + np.eye(n) * scale * 0.05
+        ints = rng.integers(-50, 50, n).astype(float)
+        a = ints + rng.multivariate_normal(np.zeros(n), q) * rng.uniform(0.2, 3.0)
+        full = mlambda(a, q)
+        fast = mlambda(a, q, ratio_cap=cap)
+        assert np.array_equal(fast.fixed[:, 0], full.fixed[:, 0]), trial
+        assert fast.sq_dist[0] == full.sq_dist[0], trial
+        assert np.array_equal(fast.cond_var, full.cond_var)
+        if fast.fixed.shape[1] == 1:
+            skipped += 1
+            assert full.ratio >= cap and fast.ratio >= cap, trial
+            assert fast.sq_dist[1] <= full.sq_dist[1] * (1 + 1e-12), trial  # a lower bound of the second best
+        else:
+            searched += 1
+            assert np.array_equal(fast.fixed, full.fixed) and np.array_equal(fast.sq_dist, full.sq_dist)
+    assert skipped > 30 and searched > 30  # both branches exercised
+
+
+def test_satellite_states_of_all_epochs_in_one_batch_equal_the_per_epoch_calls() -> None:
+    """Post-processing computes every epoch's satellites before the filter (epoch_satellites): the batch must
+    give each epoch exactly what the one-epoch call (the real-time path) gives, ephemeris choice included."""
+    from onboard.rtk.rtkpos import epoch_satellites, slot_pseudoranges
+
+    nav = read_rinex_nav(shared_file(M8P + "rover-20181004-1237.nav.gz"))
+    obs = read_rinex_obs(shared_file(M8P + "rover-20181004-1237.obs.gz"))
+    store = EphemerisStore(nav.ephemerides)
+    epochs = [e.gps_only() for e in obs.epochs[::7]]
+    batch = epoch_satellites(epochs, store)
+    assert len(batch) == len(epochs)
+    for ep, b in zip(epochs, batch):
+        one = satellite_states(store, np.arange(1, 33), ep.time, slot_pseudoranges(ep))
+        for name in ("pos_m", "vel_m_s", "clock_s", "drift_s_s", "var_m2", "ok"):
+            assert np.array_equal(getattr(b, name), getattr(one, name)), name
+        assert b.ok.sum() >= 5
+    # an ephemeris added later is seen by the next batch (the store's table is rebuilt)
+    late = EphemerisStore(nav.ephemerides[: len(nav.ephemerides) // 2])
+    before = epoch_satellites(epochs[:3], late)[0].ok.sum()
+    for e in nav.ephemerides[len(nav.ephemerides) // 2:]:
+        late.add(e)
+    assert epoch_satellites(epochs[:3], late)[0].ok.sum() >= before
+    assert np.array_equal(epoch_satellites(epochs[:3], late)[0].pos_m, batch[0].pos_m)
