@@ -15,7 +15,7 @@ ends only enter: the noise does not grow with the window, and a slow creep adds 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -32,16 +32,15 @@ class Displacement:
 
     d_m: Arr
     cov_m2: Arr
+    info_m2: Arr
+    """Inverse of the covariance (1/m²)."""
     span_s: float
     n_sats: int
 
     @property
     def chi2(self) -> float:
         """Mahalanobis square of the displacement against zero (static hypothesis)."""
-        try:
-            return float(self.d_m @ np.linalg.solve(self.cov_m2, self.d_m))
-        except np.linalg.LinAlgError:
-            return float("inf")
+        return float(self.d_m @ self.info_m2 @ self.d_m)
 
     @property
     def sigma_m(self) -> float:
@@ -66,18 +65,22 @@ def tdcp_displacement(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m:
     e = los_now[k]
     var = 2.0 * var_sd_m2[k]
     ref = int(np.argmin(var))  # the best-determined satellite (highest) as reference
-    others = np.delete(np.arange(k.size), ref)
+    others = np.arange(k.size) != ref
     dd_y = y[others] - y[ref]
     a = -(e[others] - e[ref])
-    cov_y = np.diag(var[others]) + var[ref]
-    w = np.linalg.inv(cov_y)
-    n = a.T @ w @ a
+    # weights of the DD rows: the inverse of diag(var_others) + var_ref·11ᵀ (Sherman-Morrison, no m×m inverse)
+    inv_d = 1.0 / var[others]
+    g = var[ref] / (1.0 + var[ref] * float(inv_d.sum()))
+    aw = a.T * inv_d
+    aw1 = aw.sum(axis=1)
+    normal = aw @ a - g * np.outer(aw1, aw1)
+    rhs = aw @ dd_y - g * aw1 * float(inv_d @ dd_y)
     try:
-        cov_u = np.linalg.inv(n)
+        cov_u = np.linalg.inv(normal)
     except np.linalg.LinAlgError:
         return None
-    u = cov_u @ (a.T @ w @ dd_y)
-    return Displacement(u + (np.asarray(pos_now_m) - np.asarray(pos_then_m)), cov_u, 0.0, int(k.size))
+    u = cov_u @ rhs
+    return Displacement(u + (np.asarray(pos_now_m) - np.asarray(pos_then_m)), cov_u, normal, 0.0, int(k.size))
 
 
 @dataclass
@@ -118,7 +121,7 @@ class StandstillMonitor:
             continuous = valid & (lock - lock_a == self.epochs - ep_a)
             disp = tdcp_displacement(sd_a, pos_a, sd_m, pos_m, los, var_sd_m2, continuous)
             if disp is not None:
-                disp = Displacement(disp.d_m, disp.cov_m2, abs(t_ns - t_a) / 1e9, disp.n_sats)
+                disp = replace(disp, span_s=abs(t_ns - t_a) / 1e9)
         hist.append((t_ns, self.epochs, np.where(valid, sd_m, np.nan), np.array(pos_m, float), lock.copy()))
         # keep the newest entry older than the window (the next anchor) and everything inside it
         while len(hist) > 2 and abs(t_ns - hist[1][0]) / 1e9 > self.window_s:
