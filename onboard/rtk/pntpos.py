@@ -44,13 +44,18 @@ class SppSolution:
 
 
 def sat_az_el(rcv_ecef_m: Arr, e_ecef: Arr, llh: Arr | None = None) -> tuple[Arr, Arr]:
-    """Azimuth/elevation (rad) from unit line-of-sight vectors (n,3) at receiver position (3,).
+    """Azimuth/elevation (rad) from unit line-of-sight vectors (n,3) at receiver position (3,); or of k
+    receivers at once: positions (k,3), LOS (k,n,3), results (k,n).
 
-    `llh` = ecef_to_llh(rcv_ecef_m) when the caller already has it (saves the conversion)."""
-    lat, lon, _ = ecef_to_llh(rcv_ecef_m) if llh is None else llh
-    enu = e_ecef @ enu_rotation(lat, lon).T
-    up = np.minimum(np.maximum(enu[:, 2], -1.0), 1.0)  # np.clip to the bit, without its dispatch overhead
-    return np.arctan2(enu[:, 0], enu[:, 1]) % (2 * np.pi), np.arcsin(up)
+    `llh` = ecef_to_llh(rcv_ecef_m) when the caller already has it (saves the conversion), (k,3) for k."""
+    if e_ecef.ndim == 3:
+        lat_lon = np.array([ecef_to_llh(p) for p in rcv_ecef_m]) if llh is None else llh
+        enu = e_ecef @ np.stack([enu_rotation(a, b).T for a, b, _ in lat_lon.tolist()])
+    else:
+        lat, lon, _ = ecef_to_llh(rcv_ecef_m) if llh is None else llh
+        enu = e_ecef @ enu_rotation(lat, lon).T
+    up = np.minimum(np.maximum(enu[..., 2], -1.0), 1.0)  # np.clip to the bit, without its dispatch overhead
+    return np.arctan2(enu[..., 0], enu[..., 1]) % (2 * np.pi), np.arcsin(up)
 
 
 _MIN_WEIGHT_EL_RAD = float(np.radians(5.0))
@@ -81,8 +86,9 @@ def _least_squares(h: Arr, y: Arr) -> Arr:
         return np.array([np.linalg.lstsq(h[k], y[k], rcond=None)[0] for k in range(h.shape[0])])
 
 
-def _atmosphere_m(llh: Arr, az: Arr, el: Arr, tow_s: float, iono: tuple | None) -> Arr:
-    """Troposphere + ionosphere delays (m) at geodetic position `llh` (rad, rad, m)."""
+def _atmosphere_m(llh: Arr, az: Arr, el: Arr, tow_s: float | Arr, iono: tuple | None) -> Arr:
+    """Troposphere + ionosphere delays (m) at geodetic position `llh` (rad, rad, m); or of k receivers at
+    once: `llh` (3, k, 1), az/el (k, n), `tow_s` (k, 1)."""
     lat, lon, h = llh
     alpha, beta = (iono if iono is not None else (None, None))
     return saastamoinen_m(lat, h, el) + klobuchar_m(tow_s, lat, lon, az, el, alpha, beta)
@@ -148,12 +154,13 @@ def _pntpos_batch(pr: Arr, sats: list[SatState], tow_s: Arr, elmask_rad: float, 
         # the atmosphere and elevations change negligibly within 50 m: evaluate them once there
         norm = np.sqrt(np.add.reduce(xs * xs, axis=1))
         moved = np.sqrt(np.add.reduce((xs - corr_at[ks]) ** 2, axis=1))
-        for j in np.flatnonzero((norm > 1e6) & ~(moved <= 50.0)).tolist():
-            k = int(ks[j])
-            llh = ecef_to_llh(xs[j])
-            az[k], el[k] = sat_az_el(xs[j], e[j], llh)
-            corr[k] = _atmosphere_m(llh, az[k], el[k], float(tow_s[k]), iono)
-            corr_at[k] = xs[j]
+        due = np.flatnonzero((norm > 1e6) & ~(moved <= 50.0))
+        if due.size:
+            kd = ks[due]
+            llh = np.array([ecef_to_llh(p) for p in xs[due]])  # (k, 3)
+            az[kd], el[kd] = sat_az_el(xs[due], e[due], llh)
+            corr[kd] = _atmosphere_m(llh.T[:, :, None], az[kd], el[kd], tow_s[kd, None], iono)
+            corr_at[kd] = xs[due]
         return r + sagnac, e
 
     todo = np.arange(n_ep)
@@ -170,11 +177,11 @@ def _pntpos_batch(pr: Arr, sats: list[SatState], tow_s: Arr, elmask_rad: float, 
             has_corr = np.isfinite(corr_at[act, 0])
             mask = use & ((el[act] >= elmask_rad) | ~has_corr[:, None])
             count = mask.sum(axis=1)
-            for j in np.flatnonzero(count < 4).tolist():
-                fail(int(act[j]), mask[j], f"only {int(count[j])} usable satellites")
             keep = count >= 4
-            act, r, e, mask, has_corr = act[keep], r[keep], e[keep], mask[keep], has_corr[keep]
-            todo = todo[np.isin(todo, act) | converged[todo]]
+            if not keep.all():
+                for j in np.flatnonzero(~keep).tolist():
+                    fail(int(act[j]), mask[j], f"only {int(count[j])} usable satellites")
+                act, r, e, mask, has_corr = act[keep], r[keep], e[keep], mask[keep], has_corr[keep]
             res = pr[act] - (r + x[act, 3:4] - sclk[act] + corr[act])
             w = np.where(mask, np.sin(np.maximum(el[act], _MIN_WEIGHT_EL_RAD)) / ERR_CODE_BASE_M, 0.0)
             dx = _least_squares(np.where(mask[:, :, None], _design(e) * w[:, :, None], 0.0), np.where(mask, res, 0.0) * w)
@@ -182,6 +189,7 @@ def _pntpos_batch(pr: Arr, sats: list[SatState], tow_s: Arr, elmask_rad: float, 
             done = (np.sqrt(np.add.reduce(dx * dx, axis=1)) < 1e-4) & has_corr
             converged[act[done]] = True
             act = act[~done]
+        todo = todo[[out[k] is None for k in todo.tolist()]]  # less the epochs that failed
         if todo.size == 0:
             break
         # the solution of each epoch still to decide: residuals, GDOP, RMS at its final position
