@@ -196,7 +196,8 @@ def _batch_position(p: npt.NDArray[np.float64], tk: npt.NDArray[np.float64],
 class _EphTable:
     """A store's ephemerides as columns: `params` (19, N) parameter rows in _EPH_FIELDS order, `toe_s` (N,) toe
     seconds of week, `toe_ns`/`toc_ns` (N,) toe/toc in ns since the GPS epoch, `ura_var_m2` (N,), `healthy`
-    (N,); `span[prn]` = the (start, stop) columns of that PRN, by toe as EphemerisStore keeps them."""
+    (N,); per PRN p (0 = none), `by_prn_col[p]` its columns by toe as EphemerisStore keeps them, padded with −1,
+    and `by_prn_toe_ns[p]` their toe, padded with a time no epoch comes near."""
 
     params: npt.NDArray[np.float64]
     toe_s: npt.NDArray[np.float64]
@@ -204,20 +205,30 @@ class _EphTable:
     toc_ns: npt.NDArray[np.int64]
     ura_var_m2: npt.NDArray[np.float64]
     healthy: npt.NDArray[np.bool_]
-    span: dict[int, tuple[int, int]]
+    by_prn_col: npt.NDArray[np.int64]
+    by_prn_toe_ns: npt.NDArray[np.int64]
 
     @staticmethod
     def of(by_prn: dict[int, list[Ephemeris]]) -> _EphTable:
         ephs: list[Ephemeris] = []
-        span: dict[int, tuple[int, int]] = {}
+        width = max((len(v) for v in by_prn.values()), default=0) or 1
+        top = max(max(by_prn, default=0), 32) + 1
+        cols = np.full((top, width), -1, np.int64)
+        toes = np.full((top, width), _FAR_NS, np.int64)
         for prn in sorted(by_prn):
-            span[prn] = (len(ephs), len(ephs) + len(by_prn[prn]))
+            k = len(by_prn[prn])
+            cols[prn, :k] = np.arange(len(ephs), len(ephs) + k)
+            toes[prn, :k] = [e.toe.total_ns for e in by_prn[prn]]
             ephs.extend(by_prn[prn])
         return _EphTable(np.array([[getattr(e, f) for e in ephs] for f in _EPH_FIELDS]).reshape(len(_EPH_FIELDS), -1),
                          np.array([e.toe_s for e in ephs], float), np.array([e.toe.total_ns for e in ephs], np.int64),
                          np.array([e.toc.total_ns for e in ephs], np.int64),
                          np.array([ura_sigma_m(e.ura_index) ** 2 for e in ephs], float),
-                         np.array([e.health == 0 for e in ephs], bool), span)
+                         np.array([e.health == 0 for e in ephs], bool), cols, toes)
+
+
+_FAR_NS = 2**62
+"""A toe (ns) no receiver time comes within MAX_EPH_AGE_S of (year ~2100 + 100; the difference stays in int64)."""
 
 
 def _select_columns(table: _EphTable, prns: npt.NDArray[np.int16], t_ns: npt.NDArray[np.int64],
@@ -225,17 +236,15 @@ def _select_columns(table: _EphTable, prns: npt.NDArray[np.int16], t_ns: npt.NDA
     """EphemerisStore.select_ns for every (epoch, satellite) at once: the table column of the ephemeris whose
     toe is nearest `t_ns` (E, n) within MAX_EPH_AGE_S, the later one on a tie; −1 where none or not `have`."""
     col = np.full(t_ns.shape, -1, np.int64)
-    for j, prn in enumerate(prns.tolist()):
-        lo_hi = table.span.get(prn)
-        rows = have[:, j].nonzero()[0]
-        if lo_hi is None or rows.size == 0:
-            continue
-        lo, hi = lo_hi
-        # |t − toe| in s as select_ns computes it (ns difference, then ÷ 1e9: exact below 2^53 ns)
-        dt = np.abs(t_ns[rows, j][:, None] - table.toe_ns[None, lo:hi]) / NS_PER_S
-        last = hi - lo - 1 - np.argmin(dt[:, ::-1], axis=1)  # the later of equally near toes
-        near = dt[np.arange(rows.size), last] <= MAX_EPH_AGE_S
-        col[rows[near], j] = lo + last[near]
+    ep, sat = have.nonzero()
+    prn = prns[sat].astype(np.int64)
+    known = (prn >= 0) & (prn < table.by_prn_col.shape[0])
+    ep, sat, prn = ep[known], sat[known], prn[known]
+    # |t − toe| in s as select_ns computes it (ns difference, then ÷ 1e9: exact below 2^53 ns)
+    dt = np.abs(t_ns[ep, sat][:, None] - table.by_prn_toe_ns[prn]) / NS_PER_S
+    last = dt.shape[1] - 1 - np.argmin(dt[:, ::-1], axis=1)  # the later of equally near toes
+    near = dt[np.arange(ep.size), last] <= MAX_EPH_AGE_S
+    col[ep[near], sat[near]] = table.by_prn_col[prn[near], last[near]]
     return col
 
 

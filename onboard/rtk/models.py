@@ -20,8 +20,12 @@ KLOBUCHAR_DEFAULT_BETA = (0.1167e06, -0.2294e06, -0.1311e06, 0.1049e07)
 
 
 def saastamoinen_m(lat_rad: float, h_m: float, el_rad: Arr, humidity: float = 0.7) -> Arr:
-    """Slant tropospheric delay (m) by Saastamoinen with a standard atmosphere (RTKLIB tropmodel)."""
+    """Slant tropospheric delay (m) by Saastamoinen with a standard atmosphere (RTKLIB tropmodel); `lat_rad`
+    and `h_m` may be (k, 1) for k receivers, `el_rad` (k, n) (a row each)."""
     el = np.asarray(el_rad, dtype=float)
+    if np.ndim(h_m):
+        return np.array([saastamoinen_m(float(a), float(h), row, humidity)
+                         for a, h, row in zip(np.ravel(lat_rad), np.ravel(h_m), el)]).reshape(el.shape)
     out = np.zeros_like(el)
     if h_m < -100.0 or h_m > 1e4:
         return out

@@ -44,13 +44,18 @@ class SppSolution:
 
 
 def sat_az_el(rcv_ecef_m: Arr, e_ecef: Arr, llh: Arr | None = None) -> tuple[Arr, Arr]:
-    """Azimuth/elevation (rad) from unit line-of-sight vectors (n,3) at receiver position (3,).
+    """Azimuth/elevation (rad) from unit line-of-sight vectors (n,3) at receiver position (3,); or of k
+    receivers at once: positions (k,3), LOS (k,n,3), results (k,n).
 
-    `llh` = ecef_to_llh(rcv_ecef_m) when the caller already has it (saves the conversion)."""
-    lat, lon, _ = ecef_to_llh(rcv_ecef_m) if llh is None else llh
-    enu = e_ecef @ enu_rotation(lat, lon).T
-    up = np.minimum(np.maximum(enu[:, 2], -1.0), 1.0)  # np.clip to the bit, without its dispatch overhead
-    return np.arctan2(enu[:, 0], enu[:, 1]) % (2 * np.pi), np.arcsin(up)
+    `llh` = ecef_to_llh(rcv_ecef_m) when the caller already has it (saves the conversion), (k,3) for k."""
+    if e_ecef.ndim == 3:
+        lat_lon = np.array([ecef_to_llh(p) for p in rcv_ecef_m]) if llh is None else llh
+        enu = e_ecef @ np.stack([enu_rotation(a, b).T for a, b, _ in lat_lon.tolist()])
+    else:
+        lat, lon, _ = ecef_to_llh(rcv_ecef_m) if llh is None else llh
+        enu = e_ecef @ enu_rotation(lat, lon).T
+    up = np.minimum(np.maximum(enu[..., 2], -1.0), 1.0)  # np.clip to the bit, without its dispatch overhead
+    return np.arctan2(enu[..., 0], enu[..., 1]) % (2 * np.pi), np.arcsin(up)
 
 
 _MIN_WEIGHT_EL_RAD = float(np.radians(5.0))
@@ -62,25 +67,28 @@ def _norm(v: Arr) -> float:
 
 
 def _design(e: Arr) -> Arr:
-    """Design matrix [−LOS | 1] (n,4) of position + receiver clock (np.c_ costs more than the arithmetic)."""
-    h = np.empty((e.shape[0], 4))
-    np.negative(e, out=h[:, :3])
-    h[:, 3] = 1.0
+    """Design matrix [−LOS | 1] (…, n, 4) of position + receiver clock from LOS vectors (…, n, 3)."""
+    h = np.empty(e.shape[:-1] + (4,))
+    np.negative(e, out=h[..., :3])
+    h[..., 3] = 1.0
     return h
 
 
 def _least_squares(h: Arr, y: Arr) -> Arr:
-    """Least-squares solution of h·x ≈ y (h (n,4) full column rank) through the 4×4 normal equations: a
-    fraction of np.linalg.lstsq's cost (SVD, per-call set-up) for a well-conditioned SPP design (GDOP ≤ 30);
-    lstsq only where the normal matrix is singular."""
+    """Least-squares solutions of h·x ≈ y per epoch, `h` (k, n, 4), `y` (k, n) (zero rows for unused
+    satellites), through the 4×4 normal equations: a fraction of np.linalg.lstsq's cost for well-conditioned
+    SPP designs (GDOP ≤ 30); lstsq for an epoch whose normal matrix is singular."""
+    nmat = np.einsum("kni,knj->kij", h, h)
+    rhs = np.einsum("kni,kn->ki", h, y)
     try:
-        return np.linalg.solve(h.T @ h, h.T @ y)
+        return np.linalg.solve(nmat, rhs[:, :, None])[:, :, 0]
     except np.linalg.LinAlgError:
-        return np.linalg.lstsq(h, y, rcond=None)[0]
+        return np.array([np.linalg.lstsq(h[k], y[k], rcond=None)[0] for k in range(h.shape[0])])
 
 
-def _atmosphere_m(llh: Arr, az: Arr, el: Arr, tow_s: float, iono: tuple | None) -> Arr:
-    """Troposphere + ionosphere delays (m) at geodetic position `llh` (rad, rad, m)."""
+def _atmosphere_m(llh: Arr, az: Arr, el: Arr, tow_s: float | Arr, iono: tuple | None) -> Arr:
+    """Troposphere + ionosphere delays (m) at geodetic position `llh` (rad, rad, m); or of k receivers at
+    once: `llh` (3, k, 1), az/el (k, n), `tow_s` (k, 1)."""
     lat, lon, h = llh
     alpha, beta = (iono if iono is not None else (None, None))
     return saastamoinen_m(lat, h, el) + klobuchar_m(tow_s, lat, lon, az, el, alpha, beta)
@@ -93,108 +101,183 @@ def pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: A
 
     `tow_s` receiver time (s of week) for the ionosphere model, `iono` (alpha, beta) Klobuchar coefficients.
     Follows RTKLIB pntpos() estpos()/raim_fde(): drops the satellite with the largest normalised residual
-    while the residual RMS exceeds `outlier_m`/… and at least 5 remain.
+    while the residual RMS exceeds `outlier_m`/… and at least 5 remain. pntpos_batch with one epoch.
     """
-    n = pr_m.shape[0]
-    base_ok = sats.ok & np.isfinite(pr_m)
+    x0 = None if x0_ecef_m is None else np.append(x0_ecef_m, clock0_m).reshape(1, 4)
+    return pntpos_batch(pr_m.reshape(1, -1), [sats], [tow_s], elmask_rad,
+                        None if dop_hz is None else dop_hz.reshape(1, -1), iono, x0, max_iter, outlier_m,
+                        max_gdop)[0]
+
+
+def pntpos_batch(pr_m: Arr, sats: list[SatState], tow_s: npt.ArrayLike, elmask_rad: float,
+                 dop_hz: Arr | None = None, iono: tuple | None = None, x0: Arr | None = None,
+                 max_iter: int = 10, outlier_m: float = 60.0, max_gdop: float = 30.0) -> list[SppSolution]:
+    """pntpos() of E epochs at once: pseudoranges `pr_m` (E, n) (m, NaN where absent), their satellite states
+    (E of n), receiver times `tow_s` (E,), Doppler `dop_hz` (E, n) or None; `x0` (E, 4) start position (ECEF m)
+    and clock (m), zeros when None. The least-squares iterations, the RAIM-like exclusion and the Doppler
+    velocity run on every epoch still iterating at once (post-processing solves all rover epochs before the
+    filter); each epoch's atmosphere (Klobuchar + Saastamoinen) and elevations are evaluated at its first
+    iterate away from the Earth's centre and again whenever it moves more than 50 m."""
     with np.errstate(invalid="ignore", divide="ignore"):  # slots without a satellite give NaN, never used
-        return _pntpos(pr_m, sats, tow_s, elmask_rad, dop_hz, iono, x0_ecef_m, max_iter, outlier_m, max_gdop,
-                       n, base_ok, clock0_m)
+        return _pntpos_batch(np.asarray(pr_m, float), sats, np.asarray(tow_s, float), elmask_rad, dop_hz, iono,
+                             x0, max_iter, outlier_m, max_gdop)
 
 
-def _pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: Arr | None,
-            iono: tuple | None, x0_ecef_m: Arr | None, max_iter: int, outlier_m: float, max_gdop: float,
-            n: int, base_ok: npt.NDArray[np.bool_], clock0_m: float = 0.0) -> SppSolution:
-    # work on the satellites with data only; results are scattered back to the caller's n slots
-    idx = base_ok.nonzero()[0]
-    m = idx.size
-    pr = pr_m[idx]
-    spos = sats.pos_m[idx]
-    sclk = CLIGHT_M_S * sats.clock_s[idx]
-    x = np.zeros(4) if x0_ecef_m is None else np.append(x0_ecef_m, clock0_m)  # np.r_ costs more
-    excluded = np.zeros(m, bool)
-    az = np.zeros(m)
-    el = np.full(m, np.pi / 2)
-    corr = np.zeros(m)
-    corr_at: Arr | None = None  # position where az/el/atmosphere were last evaluated
+def _pntpos_batch(pr: Arr, sats: list[SatState], tow_s: Arr, elmask_rad: float, dop_hz: Arr | None,
+                  iono: tuple | None, x0: Arr | None, max_iter: int, outlier_m: float,
+                  max_gdop: float) -> list[SppSolution]:
+    n_ep, n = pr.shape
+    spos = np.stack([s.pos_m for s in sats]).reshape(n_ep, n, 3)
+    sclk = CLIGHT_M_S * np.stack([s.clock_s for s in sats]).reshape(n_ep, n)
+    valid = np.stack([s.ok for s in sats]).reshape(n_ep, n) & np.isfinite(pr)
+    x = np.zeros((n_ep, 4)) if x0 is None else np.array(x0, float).reshape(n_ep, 4)
+    excluded = np.zeros((n_ep, n), bool)
+    az = np.zeros((n_ep, n))
+    el = np.full((n_ep, n), np.pi / 2)
+    corr = np.zeros((n_ep, n))
+    corr_at = np.full((n_ep, 3), np.nan)  # where each epoch's az/el/atmosphere were last evaluated
+    out: list[SppSolution | None] = [None] * n_ep
 
-    def full(a: np.ndarray, fill: float | bool) -> np.ndarray:
-        out = np.full(n, fill, dtype=a.dtype)
-        out[idx] = a
-        return out
+    def fail(k: int, mask: npt.NDArray[np.bool_], message: str) -> None:
+        out[k] = SppSolution(x[k, :3].copy(), float(x[k, 3]), np.full(3, np.nan), np.nan, mask.copy(),
+                             np.where(valid[k], az[k], 0.0), np.where(valid[k], el[k], 0.0), False, np.inf, np.inf,
+                             message)
 
-    def geometry(xx: Arr) -> tuple[Arr, Arr]:
-        nonlocal az, el, corr, corr_at
-        r, e = geometric_range(spos, xx[:3])
+    def geometry(ks: npt.NDArray[np.int64]) -> tuple[Arr, Arr]:
+        """Ranges with Sagnac (k, n) and LOS (k, n, 3) at the epochs' current positions (geometric_range)."""
+        xs = x[ks, :3]
+        sp = spos[ks]
+        d = sp - xs[:, None, :]
+        r = np.sqrt(np.add.reduce(d * d, axis=2))
+        e = d / r[:, :, None]
+        sagnac = OMEGA_E_RAD_S * (sp[:, :, 0] * xs[:, 1:2] - sp[:, :, 1] * xs[:, 0:1]) / CLIGHT_M_S
         # the atmosphere and elevations change negligibly within 50 m: evaluate them once there
-        if _norm(xx[:3]) > 1e6 and (corr_at is None or _norm(xx[:3] - corr_at) > 50.0):
-            llh = ecef_to_llh(xx[:3])
-            az, el = sat_az_el(xx[:3], e, llh)
-            corr = _atmosphere_m(llh, az, el, tow_s, iono)
-            corr_at = xx[:3].copy()
-        return r, e
+        norm = np.sqrt(np.add.reduce(xs * xs, axis=1))
+        moved = np.sqrt(np.add.reduce((xs - corr_at[ks]) ** 2, axis=1))
+        due = np.flatnonzero((norm > 1e6) & ~(moved <= 50.0))
+        if due.size:
+            kd = ks[due]
+            llh = np.array([ecef_to_llh(p) for p in xs[due]])  # (k, 3)
+            az[kd], el[kd] = sat_az_el(xs[due], e[due], llh)
+            corr[kd] = _atmosphere_m(llh.T[:, :, None], az[kd], el[kd], tow_s[kd, None], iono)
+            corr_at[kd] = xs[due]
+        return r + sagnac, e
 
-    for _attempt in range(m):
-        use = ~excluded
-        converged = False
-        for _it in range(max_iter):
-            r, e = geometry(x)
-            mask = use & (el >= elmask_rad) if corr_at is not None else use
-            if np.count_nonzero(mask) < 4:
-                return SppSolution(x[:3], x[3], np.full(3, np.nan), np.nan, full(mask, False), full(az, 0.0),
-                                   full(el, 0.0), False, np.inf, np.inf, f"only {int(mask.sum())} usable satellites")
-            res = pr - (r + x[3] - sclk + corr)
-            h = _design(e)[mask]
-            w = np.sin(np.maximum(el[mask], _MIN_WEIGHT_EL_RAD)) / ERR_CODE_BASE_M
-            dx = _least_squares(h * w[:, None], res[mask] * w)
-            x = x + dx
-            if _norm(dx) < 1e-4 and corr_at is not None:
-                converged = True
-                break
-        r, e = geometry(x)
-        mask = use & (el >= elmask_rad)
-        res = pr - (r + x[3] - sclk + corr)
-        h = _design(e)[mask]
-        try:
-            gdop = float(np.sqrt(np.trace(np.linalg.inv(h.T @ h))))
-        except np.linalg.LinAlgError:
-            gdop = np.inf
-        n_used = np.count_nonzero(mask)
-        # √(mean of squares) as np.mean computes it (sum, then ÷ count), without its dispatch
-        rms = math.sqrt(np.add.reduce(res[mask] ** 2) / n_used) if n_used else np.inf
-        dof = n_used - 4
-        if converged and (rms <= outlier_m / 3.0 or dof < 2):
-            e_full = np.zeros((n, 3))
-            e_full[idx] = e
-            mask_full = full(mask, False)
-            vel, drift = doppler_velocity(dop_hz, sats, e_full, x[:3], mask_full)
-            ok = gdop <= max_gdop and rms <= outlier_m
-            return SppSolution(x[:3].copy(), float(x[3]), vel, drift, mask_full, full(az, 0.0), full(el, 0.0), ok,
-                               gdop, rms, "" if ok else f"gdop {gdop:.1f} / rms {rms:.1f} m too large")
-        if dof < 2:
+    todo = np.arange(n_ep)
+    for _attempt in range(n + 1):
+        if todo.size == 0:
             break
-        # RAIM-like: exclude the worst residual and try again
-        worst = np.flatnonzero(mask)[np.argmax(np.abs(res[mask]) * np.sin(el[mask]))]
-        excluded[worst] = True
-    return SppSolution(x[:3], float(x[3]), np.full(3, np.nan), np.nan, np.zeros(n, bool), full(az, 0.0),
-                       full(el, 0.0), False, np.inf, np.inf, "no consistent solution")
+        converged = np.zeros(n_ep, bool)
+        act = todo
+        for _it in range(max_iter):
+            if act.size == 0:
+                break
+            r, e = geometry(act)
+            use = valid[act] & ~excluded[act]
+            has_corr = np.isfinite(corr_at[act, 0])
+            mask = use & ((el[act] >= elmask_rad) | ~has_corr[:, None])
+            count = mask.sum(axis=1)
+            keep = count >= 4
+            if not keep.all():
+                for j in np.flatnonzero(~keep).tolist():
+                    fail(int(act[j]), mask[j], f"only {int(count[j])} usable satellites")
+                act, r, e, mask, has_corr = act[keep], r[keep], e[keep], mask[keep], has_corr[keep]
+            res = pr[act] - (r + x[act, 3:4] - sclk[act] + corr[act])
+            w = np.where(mask, np.sin(np.maximum(el[act], _MIN_WEIGHT_EL_RAD)) / ERR_CODE_BASE_M, 0.0)
+            dx = _least_squares(np.where(mask[:, :, None], _design(e) * w[:, :, None], 0.0), np.where(mask, res, 0.0) * w)
+            x[act] += dx
+            done = (np.sqrt(np.add.reduce(dx * dx, axis=1)) < 1e-4) & has_corr
+            converged[act[done]] = True
+            act = act[~done]
+        todo = todo[[out[k] is None for k in todo.tolist()]]  # less the epochs that failed
+        if todo.size == 0:
+            break
+        # the solution of each epoch still to decide: residuals, GDOP, RMS at its final position
+        r, e = geometry(todo)
+        mask = valid[todo] & ~excluded[todo] & (el[todo] >= elmask_rad)
+        res = pr[todo] - (r + x[todo, 3:4] - sclk[todo] + corr[todo])
+        h = np.where(mask[:, :, None], _design(e), 0.0)  # empty slots have NaN LOS
+        gdop = _gdop(h)
+        n_used = mask.sum(axis=1)
+        rms = np.where(n_used > 0, np.sqrt(np.add.reduce(np.where(mask, res, 0.0) ** 2, axis=1)
+                                           / np.maximum(n_used, 1)), np.inf)
+        dof = n_used - 4
+        good = converged[todo] & ((rms <= outlier_m / 3.0) | (dof < 2))
+        if good.any():
+            ks = todo[good]
+            masks = np.zeros((ks.size, n), bool)
+            masks[:] = mask[good]
+            vel, drift = _doppler_batch(None if dop_hz is None else dop_hz[ks], [sats[k] for k in ks.tolist()],
+                                        e[good], x[ks, :3], masks)
+            for j, k in enumerate(ks.tolist()):
+                g, rm = float(gdop[good][j]), float(rms[good][j])
+                ok = g <= max_gdop and rm <= outlier_m
+                out[k] = SppSolution(x[k, :3].copy(), float(x[k, 3]), vel[j], float(drift[j]), masks[j],
+                                     np.where(valid[k], az[k], 0.0), np.where(valid[k], el[k], 0.0), ok, g, rm,
+                                     "" if ok else f"gdop {g:.1f} / rms {rm:.1f} m too large")
+        stuck = ~good & (dof < 2)
+        for j in np.flatnonzero(stuck).tolist():
+            fail(int(todo[j]), np.zeros(n, bool), "no consistent solution")
+        # RAIM-like: exclude each remaining epoch's worst residual and try again
+        again = ~good & ~stuck
+        for j in np.flatnonzero(again).tolist():
+            cand = np.flatnonzero(mask[j])
+            excluded[todo[j], cand[np.argmax(np.abs(res[j, cand]) * np.sin(el[todo[j], cand]))]] = True
+        todo = todo[again]
+    for k in todo.tolist():
+        fail(k, np.zeros(n, bool), "no consistent solution")
+    return [s for s in out if s is not None] if all(s is not None for s in out) else _missing(out)
+
+
+def _missing(out: list[SppSolution | None]) -> list[SppSolution]:
+    raise AssertionError(f"SPP left {sum(s is None for s in out)} epochs without a result")
+
+
+def _gdop(h: Arr) -> Arr:
+    """GDOP √trace((HᵀH)⁻¹) per epoch of designs `h` (k, n, 4) (rows of unused satellites zero); inf where
+    singular."""
+    nmat = np.einsum("kni,knj->kij", h, h)
+    try:
+        return np.sqrt(np.trace(np.linalg.inv(nmat), axis1=1, axis2=2))
+    except np.linalg.LinAlgError:
+        out = np.full(h.shape[0], np.inf)
+        for k in range(h.shape[0]):
+            try:
+                out[k] = np.sqrt(np.trace(np.linalg.inv(nmat[k])))
+            except np.linalg.LinAlgError:
+                pass
+        return out
 
 
 def doppler_velocity(dop_hz: Arr | None, sats: SatState, e: Arr, pos: Arr,
                      mask: npt.NDArray[np.bool_]) -> tuple[Arr, float]:
     """Receiver velocity (ECEF m/s) and clock drift (m/s) from Doppler (RTKLIB estvel/resdop), NaN if < 4."""
-    dop = dop_hz
-    if dop is None:
-        return np.full(3, np.nan), np.nan
-    m = mask & np.isfinite(dop)
-    if m.sum() < 4:
-        return np.full(3, np.nan), np.nan
-    rate_obs = -LAMBDA_L1_M * dop[m]
-    vs = sats.vel_m_s[m]
+    vel, drift = _doppler_batch(None if dop_hz is None else dop_hz.reshape(1, -1), [sats], e.reshape(1, -1, 3),
+                                pos.reshape(1, 3), mask.reshape(1, -1))
+    return vel[0], float(drift[0])
+
+
+def _doppler_batch(dop_hz: Arr | None, sats: list[SatState], e: Arr, pos: Arr,
+                   mask: npt.NDArray[np.bool_]) -> tuple[Arr, Arr]:
+    """doppler_velocity() of k epochs: Doppler (k, n) Hz, LOS (k, n, 3), positions (k, 3), masks (k, n);
+    velocities (k, 3) and drifts (k,), NaN where fewer than 4 Dopplers."""
+    k, n = mask.shape
+    vel = np.full((k, 3), np.nan)
+    drift = np.full(k, np.nan)
+    if dop_hz is None or k == 0:
+        return vel, drift
+    m = mask & np.isfinite(dop_hz)
+    enough = m.sum(axis=1) >= 4
+    if not enough.any():
+        return vel, drift
+    vs = np.stack([s.vel_m_s for s in sats]).reshape(k, n, 3)
+    sdrift = np.stack([s.drift_s_s for s in sats]).reshape(k, n)
+    rate_obs = -LAMBDA_L1_M * dop_hz
     # range-rate model incl. Sagnac rate (RTKLIB resdop())
-    sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, 1] * pos[0] - vs[:, 0] * pos[1])
-    em = e[m]
-    h = _design(em)
-    y = rate_obs - (np.einsum("ij,ij->i", em, vs) + sag - CLIGHT_M_S * sats.drift_s_s[m])
-    x = _least_squares(h, y)
-    return x[:3], float(x[3])
+    sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, :, 1] * pos[:, 0:1] - vs[:, :, 0] * pos[:, 1:2])
+    y = rate_obs - (np.add.reduce(e * vs, axis=2) + sag - CLIGHT_M_S * sdrift)
+    sel = np.flatnonzero(enough)
+    sol = _least_squares(np.where(m[sel][:, :, None], _design(e[sel]), 0.0), np.where(m[sel], y[sel], 0.0))
+    vel[sel] = sol[:, :3]
+    drift[sel] = sol[:, 3]
+    return vel, drift

@@ -29,7 +29,7 @@ from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.mlambda import LambdaError, mlambda
 from onboard.rtk.models import CodeScatter, median_of_few, phase_variance_m2, saastamoinen_m
 from onboard.rtk.options import RtkOptions
-from onboard.rtk.pntpos import pntpos, sat_az_el
+from onboard.rtk.pntpos import SppSolution, pntpos, pntpos_batch, sat_az_el
 from onboard.rtk.standstill import StandstillMonitor
 from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP, Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, ObsEpoch, Solution
 
@@ -156,6 +156,31 @@ def epoch_satellites(epochs: list[ObsEpoch], store: EphemerisStore) -> list[SatS
         return []
     prs = np.array([slot_pseudoranges(e) for e in epochs])
     return satellite_states_batch(store, _PRNS, [e.time.total_ns for e in epochs], prs)
+
+
+def epoch_spp(epochs: list[ObsEpoch], sats: list[SatState], nav: NavData, o: RtkOptions) -> list[SppSolution]:
+    """Single-point solutions of every epoch in one batch (pntpos_batch), for rtk_pos's `spp` when the epochs
+    are known ahead (post-processing). All start from the first solvable epoch's solution, as rtk_pos starts
+    each epoch's from the filter position: the same start for a receiver within kilometres (a survey site, a
+    drone flight); the solution does not depend on it (sub-mm), the point where the atmosphere is evaluated
+    moves by the rover's distance from it (re-evaluated past 50 m)."""
+    if not epochs:
+        return []
+    prs = np.array([slot_pseudoranges(e) for e in epochs])
+    dops = np.full(prs.shape, np.nan)
+    for k, e in enumerate(epochs):
+        g = e.gps_only()
+        dops[k, g.sv_id.astype(int) - 1] = g.dop_hz
+    tows = np.array([e.time.tow_s for e in epochs])
+    args = (o.elmask_rad, dops, nav.iono)
+    kw = {"outlier_m": o.spp_outlier_m, "max_gdop": o.spp_max_gdop}
+    x0 = None
+    for k in range(min(len(epochs), 10)):  # a start point: the first epoch with a cold-start solution
+        first = pntpos_batch(prs[k:k + 1], sats[k:k + 1], tows[k:k + 1], o.elmask_rad, dops[k:k + 1], nav.iono, **kw)[0]
+        if first.ok:
+            x0 = np.tile(np.append(first.pos_ecef_m, first.clock_bias_m), (len(epochs), 1))
+            break
+    return pntpos_batch(prs, sats, tows, *args, x0=x0, **kw)
 
 
 def _slots(obs: ObsEpoch, store: EphemerisStore, sats: SatState | None = None) -> _Receiver:
@@ -816,20 +841,23 @@ def _holdamb(st: RtkState, fix: _Fix) -> None:
 
 
 def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
-            base_pos_ecef_m: Arr | None, sats: tuple[SatState | None, SatState | None] = (None, None)) -> Solution:
+            base_pos_ecef_m: Arr | None, sats: tuple[SatState | None, SatState | None] = (None, None),
+            spp: SppSolution | None = None) -> Solution:
     """Process one rover epoch (RTKLIB rtkpos()/relpos()); returns the epoch's Solution.
 
     `base` is the base epoch paired with this rover epoch (latest at or before it, see postpro.pair_epochs);
     `base_pos_ecef_m` the base antenna L1 phase centre. Without base data a single-point solution (Q=5).
     `sats`: the rover's and the base epoch's satellite states when already computed (epoch_satellites),
-    else None (computed here).
+    else None (computed here); `spp` the rover's single-point solution likewise (epoch_spp).
     """
     o = st.options
     rov = _slots(rover, nav.store, sats[0])
     nan3 = np.full(3, np.nan)
-    spp = pntpos(rov.pr_m, rov.sats, rover.time.tow_s, o.elmask_rad, rov.dop_hz, nav.iono,
-                 x0_ecef_m=st.x[:3] if st.initialized else None, outlier_m=o.spp_outlier_m,
-                 max_gdop=o.spp_max_gdop, clock0_m=st.clock_bias_m)
+    if spp is None or not st.initialized:
+        # the filter starts on this epoch's own solution from a cold start (precomputed ones start elsewhere)
+        spp = pntpos(rov.pr_m, rov.sats, rover.time.tow_s, o.elmask_rad, rov.dop_hz, nav.iono,
+                     x0_ecef_m=st.x[:3] if st.initialized else None, outlier_m=o.spp_outlier_m,
+                     max_gdop=o.spp_max_gdop, clock0_m=st.clock_bias_m)
     if spp.ok:
         st.clock_bias_m = spp.clock_bias_m
     if not spp.ok:
