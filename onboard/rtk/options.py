@@ -43,6 +43,14 @@ class RtkOptions:
     ratio test at every epoch over this span (s). GEONET 0759/3040 (30 s epochs): the bootstrapped rate, a lower bound, stays
     under 0.99 for 510 s while RTKLIB's ratio test is right from the second epoch; hil_sim at 1 Hz: a ratio
     of 3 on a float metres off (correlated code) after 7 s is wrong. Geometry needs time, not epochs."""
+    settled_fix_span_s: float = 60.0
+    """A first-fix candidate that has won the ratio test with the same integer set at every epoch for this long
+    (s) is no longer rejected for lying far from the float position (the Mahalanobis check; its fixed
+    residuals must still fit). u-blox code multipath is correlated over ~30 s static (bench/error_stats.py):
+    a float built on it at 1 Hz is metres off with a decimetre σ, and stays too confident after its error
+    shrinks. hil_sim seed 3 (calibrated error model): the right set won from 25 s on (ratio 3 → 20, fix 3-18 mm
+    off) while the float, 2.9 → 0.6 m off, rejected it at every epoch (Mahalanobis 26-76): no fix in 600 s.
+    0 disables."""
     full_set_confirm_epochs: int = 2
     """A first fix on the full candidate set (no satellite dropped by partial AR) needs the same integer set
     winning the ratio test at this many consecutive epochs instead of over confirm_fix_span_s (and, below

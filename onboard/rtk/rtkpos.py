@@ -404,15 +404,34 @@ def _remember_rover(st: RtkState, rov: _Receiver, t_r: GpsTime) -> None:
 
 
 def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Arr,
-            valid_phase: npt.NDArray[np.bool_], slip: npt.NDArray[np.bool_], count_lock: bool = True) -> None:
+            valid_phase: npt.NDArray[np.bool_], slip: npt.NDArray[np.bool_], count_lock: bool = True,
+            t_r: GpsTime | None = None) -> None:
     """Ambiguity bookkeeping (RTKLIB udbias): reset on slip or long outage, initialise new ones.
 
+    `t_r` the rover epoch (its Doppler bridges the half-cycle step test below; None skips that test).
     New SD ambiguities come from phase − code; with a known rover position (take-off point) from phase −
     modelled range instead (Daakir et al. 2015 eq. 2), which lets the first epoch fix.
     """
     o = st.options
     if count_lock:
         st.outage[~valid_phase] += 1
+        # the half-cycle (parity unknown) flag clearing on the rover: a receiver that resolves the half cycle by
+        # moving the phase ½ cycle and reports no slip (RXM-RAW has no half-cycle-subtracted bit; RAWX data
+        # carry one, which the decoder turns into a slip as RTKLIB does) corrupts the held set with that step
+        # (hil_sim LEA-6T seed 2: a slip at 511 s, parity fixed at 513 s, the wrong satellite excluded, 22
+        # wrong fixes 8-16 cm off). RTKLIB detslp_ll declares a slip at every change of the flag; here only a
+        # step the Doppler sees (phase change minus the Doppler-predicted one, receiver clock removed, over a
+        # quarter cycle) is one: M8P static clears flags without a step (a reset there cost a fixed epoch).
+        half = (rov.lli & LLI_HALF_CYCLE) != 0
+        cleared = valid_phase & st.half_cycle & ~half
+        st.half_cycle = half & valid_phase
+        if cleared.any() and st.prev_time_r is not None and t_r is not None:
+            dt_r = t_r.diff_s(st.prev_time_r)
+            step = (rov.cp_cyc - st.prev_cp_r) + 0.5 * (rov.dop_hz + st.prev_dop_r) * dt_r
+            ok = np.isfinite(step) & valid_phase
+            if ok.sum() >= 3 and 0.0 < dt_r <= 2.0:
+                step = step - median_of_few(step[ok & ~cleared] if (ok & ~cleared).sum() >= 2 else step[ok])
+                slip = slip | (cleared & ok & (np.abs(step) > 0.25))
     lost = (st.outage > o.max_outage_epochs) & (st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
     reset = np.flatnonzero(lost | (slip & valid_phase))
     if reset.size:
@@ -623,6 +642,8 @@ class _Fix:
     ref: int
     ints: Arr
     nb: int
+    settled: bool = False
+    """The same integer set has won the ratio test at every epoch for settled_fix_span_s (see the option)."""
 
 
 def _agrees_with_validated(st: RtkState, ref: int, others: npt.NDArray[np.int64], ints: Arr, min_common: int) -> bool:
@@ -648,6 +669,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
     idx = np.flatnonzero(cand)
     best_ratio = 0.0
     seen_candidate = False
+    settled = False
     for _drop in range(o.max_partial_drop + 1 if o.partial_ar else 1):
         if idx.size < min_dd + 1:
             break
@@ -690,6 +712,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
                 st.pending_fix = (key, t, 0)
             st.pending_fix = (key, st.pending_fix[1], st.pending_fix[2] + 1)
             span = abs(t.diff_s(st.pending_fix[1]))
+            settled = o.settled_fix_span_s > 0 and span >= o.settled_fix_span_s
             # correlated code multipath biases the float for about its correlation time: clean code waits less
             need_span = max(o.confirm_fix_span_min_s, o.confirm_fix_span_s * st.code_var_scale)
             wins = st.pending_fix[2]
@@ -712,7 +735,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             pos = x[:3] - gain @ (a - ints)
             cov = p[:3, :3] - gain @ qba.T
             st.last_ratio = ratio
-            return _Fix(pos, cov, ratio, others, ref, ints, others.size)
+            return _Fix(pos, cov, ratio, others, ref, ints, others.size, settled)
         # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
         # whose ambiguity is still code-level, else mostly the lowest one), not blindly the lowest satellite:
         # one fresh ambiguity would otherwise sink the ratio of a set determined long ago
@@ -823,7 +846,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     # the variance of what the rate misses; raw base data (young, or no history, e.g. processed backward) as before
     st.base_age_var_m2 = (o.base_age_sigma_m_s * age) ** 2 if carried is not bas else 0.0
     bas = carried
-    _udbias(st, rov, bas, rng_r, rng_b, phase_ok, slip)
+    _udbias(st, rov, bas, rng_r, rng_b, phase_ok, slip, t_r=rover.time)
     st.code_var_scale = code_variance_scale(st, rov, bas, phase_ok, slip, el, dt)
 
     # remember raw data for next epoch's slip tests
@@ -947,7 +970,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             use_fix[fix.ref] = True
             dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False, trop_r)
             valid = _valid_residuals(dd_fix, o.validation_sigma_factor)
-            if maha <= _CHI2_3DOF_999 and valid.all():
+            if (maha <= _CHI2_3DOF_999 or fix.settled) and valid.all():
                 break
             log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", rover.time, maha, bool(valid.all()))
             # a second look at this epoch: without the one satellite whose phase does not fit the fixed solution

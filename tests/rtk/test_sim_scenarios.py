@@ -89,3 +89,21 @@ def test_undetected_slips_2_per_hour_in_a_600_s_flight_keep_most_airborne_epochs
     # the reference alone (not all seven) keeps the flight fixed (71.6 % → 91.1 % airborne on this one)
     r = _run("m8t", duration_s=600.0, undetected_slips_per_h=2.0)
     assert r["wrong"] == 0 and r["air fix %"] >= 90.0 and r["3D RMS cm"] <= 2.0
+
+
+def test_lea6t_half_cycle_resolved_after_a_slip_makes_no_wrong_fix() -> None:
+    # seed 2: rover PRN 27 slips at 510.7 s, its half cycle is resolved (phase moved ½ cycle, RXM-RAW reports
+    # no slip) at 513 s; kept, that step made the held set exclude the wrong satellite: 22 fixes 8-16 cm off
+    r = _run("lea6t", duration_s=600.0, seed=2)
+    assert r["wrong"] == 0
+    q = r["q"]
+    assert np.all(q[505:560] == Q_FIX)  # the held fix carries on through the slip and the parity fix
+
+
+def test_a_cold_start_fixes_when_the_right_set_keeps_winning_against_an_overconfident_float() -> None:
+    # seed 3 (measured u-blox error model): the right integer set wins the ratio test from 25 s on while the
+    # float, built on 60 s of static correlated code multipath, stays 0.6-2.9 m off and rejects it at every
+    # epoch for its Mahalanobis distance (no fix in 600 s); once it has won for settled_fix_span_s it fixes
+    r = _run("m8t", duration_s=600.0, seed=3)
+    assert r["wrong"] == 0 and r["stale fixed"] == 0
+    assert r["first fix s"] <= 90.0 and r["air fix %"] >= 90.0 and r["3D RMS cm"] <= 2.0
