@@ -111,6 +111,8 @@ class RtkState:
     fail_count: int = 0
     slips: int = 0
     base_cache: tuple[GpsTime, _Receiver] | None = None
+    baseline_m: float = 0.0
+    """Rover–base distance (m) at the previous epoch's position (the partial-fix confirmation grows with it)."""
     base_age_var_m2: float = 0.0
     """Variance (m²) of this epoch's carried-forward base phase (atmosphere/clock drift the correction rate
     does not follow): (base_age_sigma_m_s · age)², added to every single difference; 0 for raw base data."""
@@ -715,6 +717,10 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             settled = o.settled_fix_span_s > 0 and span >= o.settled_fix_span_s
             # correlated code multipath biases the float for about its correlation time: clean code waits less
             need_span = max(o.confirm_fix_span_min_s, o.confirm_fix_span_s * st.code_var_scale)
+            cs = st.code_scatter
+            if cs.epochs >= o.code_scatter_min_epochs and st.code_var_scale >= 0.5:
+                # measured u-blox-like code: the differential ionosphere biases its float for minutes
+                need_span += o.confirm_fix_span_per_km_s * st.baseline_m / 1000.0
             wins = st.pending_fix[2]
             trusted = bool(st.held_prns.any() or st.known_amb[idx].all()) \
                 or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_amb_dd + 1)
@@ -818,6 +824,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         bas = _slots(base, nav.store)
         st.base_cache = (base.time, bas)
     base_pos = np.asarray(base_pos_ecef_m, float)
+    st.baseline_m = float(np.linalg.norm(st.x[:3] - base_pos)) if st.initialized else 0.0
 
     dt = rover.time.diff_s(st.time) if st.time is not None else 0.0
     _udstate(st, dt, spp.pos_ecef_m, spp.vel_ecef_m_s, base_pos)

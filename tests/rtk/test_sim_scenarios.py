@@ -104,6 +104,14 @@ def test_a_cold_start_fixes_when_the_right_set_keeps_winning_against_an_overconf
     # seed 3 (measured u-blox error model): the right integer set wins the ratio test from 25 s on while the
     # float, built on 60 s of static correlated code multipath, stays 0.6-2.9 m off and rejects it at every
     # epoch for its Mahalanobis distance (no fix in 600 s); once it has won for settled_fix_span_s it fixes
+    # (52 s: on the ground, before the take-off at 60 s)
     r = _run("m8t", duration_s=600.0, seed=3)
     assert r["wrong"] == 0 and r["stale fixed"] == 0
-    assert r["first fix s"] <= 90.0 and r["air fix %"] >= 90.0 and r["3D RMS cm"] <= 2.0
+    assert r["first fix s"] <= 60.0 and r["air fix %"] >= 99.0 and r["3D RMS cm"] <= 2.0
+
+
+def test_a_partial_set_at_5_km_waits_longer_for_its_confirmation() -> None:
+    # seed 7: a partial set 1.5 m off won the ratio test (3.1-3.5) for 30 s and was fixed for 3 epochs; the
+    # differential ionosphere keeps a u-blox float off for minutes: 6 s per km more (confirm_fix_span_per_km_s)
+    r = _run("m8t", duration_s=600.0, baseline_m=5000.0, seed=7)
+    assert r["wrong"] == 0 and r["air fix %"] >= 70.0
