@@ -126,7 +126,16 @@ class RtkOptions:
     hold_sigma_cyc: float = 0.001
     max_outage_epochs: int = 5
     slip_threshold_cyc: float = 2.0
-    """Doppler-predicted phase jump beyond which a slip is declared (cycles, scaled with the gap)."""
+    """Doppler-predicted phase jump beyond which a slip is declared (cycles, scaled with the gap), while no
+    fix is held."""
+    slip_threshold_held_cyc: float = 0.85
+    """The same while a fix is held: below one cycle so that a 1-cycle slip without LLI (1.0 ± the Doppler's
+    ~0.1 cycle over 1 s) is caught before the hold absorbs it. With 2.0, hil_sim seed 6 (undetected slips
+    2/h) held a rover PRN 17 +1-cycle slip at 331 s to the end, 18 cm off (268 wrong epochs, on main too; 0
+    with 0.85). Not before the first fix: the Doppler misses the phase by up to a cycle across hil_sim's
+    steps of acceleration, and the false slips restarted converging floats (seeds 2 and 7: first fix 96 →
+    120 s, 93 → 117 s with 0.85 throughout). Real sets fix the same with 0.7-2.0 forward; M8P static
+    processed backward loses 1.7 points with 0.7 throughout (81.9 → 80.2 %), none with 0.85."""
     max_innovation_phase_m: float = 0.5
     max_innovation_code_m: float = 30.0
     validation_sigma_factor: float = 4.0

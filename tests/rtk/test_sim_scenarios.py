@@ -115,3 +115,18 @@ def test_a_partial_set_at_5_km_waits_longer_for_its_confirmation() -> None:
     # differential ionosphere keeps a u-blox float off for minutes: 6 s per km more (confirm_fix_span_per_km_s)
     r = _run("m8t", duration_s=600.0, baseline_m=5000.0, seed=7)
     assert r["wrong"] == 0 and r["air fix %"] >= 70.0
+
+
+def test_one_cycle_base_slips_are_caught_by_the_base_geometry_check() -> None:
+    # seed 3, undetected slips 2/h: base PRN 11 and 17 slip by -1 cycle (no LLI) at 256.8 and 260.6 s, under a
+    # held fix; a 1.0-cycle threshold on the base's phase - range step let both through and the hold settled
+    # 21 cm off to the end of the flight (338 wrong epochs)
+    r = _run("m8t", duration_s=600.0, undetected_slips_per_h=2.0, seed=3)
+    assert r["wrong"] == 0 and r["air fix %"] >= 95.0 and r["3D RMS cm"] <= 2.0
+
+
+def test_a_one_cycle_rover_slip_under_a_held_fix_is_caught_by_the_doppler() -> None:
+    # seed 6, undetected slips 2/h: rover PRN 17 slips +1 cycle (no LLI) at 330.7 s under a held fix; the
+    # Doppler test at 2 cycles let it through and the hold settled 18 cm off (268 wrong epochs, main too)
+    r = _run("m8t", duration_s=600.0, undetected_slips_per_h=2.0, seed=6)
+    assert r["wrong"] == 0 and r["air fix %"] >= 95.0 and r["3D RMS cm"] <= 2.0
