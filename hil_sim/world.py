@@ -37,9 +37,12 @@ time t (GPS time):
   Gauss–Markov per satellite σ 20 %, τ 30 min, common) + a differential gradient: per satellite a random
   horizontal direction, magnitude `iono_gradient_mm_per_km` (1 mm/km) of slant delay per km of horizontal
   rover–base separation × the Klobuchar obliquity factor. Code delayed, phase advanced.
-- Receiver errors, per receiver and satellite: white code σ 0.5 m, phase σ 3 mm, Doppler σ 0.05 Hz, each
+- Receiver errors, per receiver and satellite: white code σ 0.15 m, phase σ 1 mm, Doppler σ 0.05 Hz, each
   ÷ sin(el); first-order Gauss–Markov multipath, code σ 0.5 m, phase σ 1 mm (÷ sin(el)), τ 30 s
-  (process sampled every 1 s, linearly interpolated); C/N0 = 35 + 15·sin(el) dB-Hz + 1 dB white noise.
+  (process sampled every 1 s, linearly interpolated); while the rover moves faster than MOVING_SPEED_M_S its
+  code multipath is another process, τ `mp_tau_moving_s` (a moving antenna's reflections decorrelate faster);
+  C/N0 = 35 + 15·sin(el) dB-Hz + 1 dB white noise.
+  These defaults are measured on real u-blox data (`bench/error_stats.py`, see ErrorModel's fields).
 - Carrier phase ambiguity N: a random integer (±500 cycles, i.e. phase starts near code/λ as u-blox's
   does) per arc; a new arc when the satellite rises above the receiver mask (5°) or after a cycle slip with
   loss of lock (Poisson, `slip_lli_rate_per_h` per satellite; LLI bit 0 on the next epoch, lock time reset).
@@ -107,6 +110,8 @@ over 20 s. Harmless while base and rover observe at the same instant (the errors
 rover epoch is differenced with an older base epoch (radio gaps), where real broadcast-model errors drift
 smoothly (travelling ionospheric disturbances: ≤ 1 TECU over 10-60 min, millimetres of curvature in 20 s)."""
 AMBIGUITY_RANGE_CYC = 500
+MOVING_SPEED_M_S = 0.5
+"""Rover speed above which its code multipath follows the moving-antenna process (ErrorModel.mp_tau_moving_s)."""
 LEAP_S_2010 = 15
 
 # Purposes of the random streams (part of every seed so streams never overlap).
@@ -317,6 +322,8 @@ class World:
         self._clock: dict[str, _Clock] = {}
         self._tracks: dict[str, list[_Track | None]] = {}
         self._model = models
+        # the moving rover's code multipath: its own process (new reflection geometry at every metre)
+        self._mp_code_moving = _gauss_markov(_rng(seed, _P_MP, 0, 2), nf, N_PRN, FAST_DT_S, em.mp_tau_moving_s)
         for r_idx, rcv in enumerate(RECEIVERS):
             self._mp_code[rcv] = _gauss_markov(_rng(seed, _P_MP, r_idx, 0), nf, N_PRN, FAST_DT_S, em.mp_tau_s)
             self._mp_phase[rcv] = _gauss_markov(_rng(seed, _P_MP, r_idx, 1), nf, N_PRN, FAST_DT_S, em.mp_tau_s)
@@ -557,7 +564,9 @@ class World:
                                     el - el_rate * h_step, d_enu - vel_enu * h_step, col)
         atmo_rate = ((tp - ip) - (tm - im)) / (2 * h_step)
 
-        mp_code = em.mp_code_sigma_zenith_m / sin_el * self._fast.interp(self._mp_code[receiver], t)[col]
+        moving = receiver == "rover" and float(np.linalg.norm(rcv_vel)) > MOVING_SPEED_M_S
+        mp_src = self._mp_code_moving if moving else self._mp_code[receiver]
+        mp_code = em.mp_code_sigma_zenith_m / sin_el * self._fast.interp(mp_src, t)[col]
         mp_phase = em.mp_phase_sigma_zenith_m / sin_el * self._fast.interp(self._mp_phase[receiver], t)[col]
         eps_code = em.code_sigma_zenith_m / sin_el * noise[0, col]
         eps_phase = em.phase_sigma_zenith_m / sin_el * noise[1, col]

@@ -37,12 +37,30 @@ class RtkOptions:
     has: Septentrio fixes 71.7 % with 10 s, 1.4 % with 30 s; M8P and GLW1 lose nothing at 30 s (97.8 / 99.1 %).
     Full sets: see full_set_confirm_epochs."""
     confirm_fix_span_min_s: float = 10.0
+    confirm_fix_span_per_km_s: float = 6.0
+    """Added to the partial-set confirmation span per km of baseline (s/km) once the code scatter has been
+    measured u-blox-like (code_variance_scale ≥ 0.5): the L1 double differences keep the differential
+    ionosphere (hil_sim: 1 mm/km of slant delay per satellite, quiet to moderate days' 1-4 mm/km), a few
+    hundredths of a cycle that keep the float of noisy, correlated code consistently off for minutes. hil_sim
+    5 km seed 7 (calibrated): a partial set 1.5 m off won the ratio test (3.1-3.5) for 30 s and was fixed
+    (3 wrong epochs); 60 s at 5 km: 0 wrong, 5 km seeds 1-8 0 wrong. Geodetic code (GEONET, Septentrio: scale
+    ≈ 0.1-0.2, or not yet measured) keeps confirm_fix_span_s, which 60 s there would cost (92.5 / 71.1 %)."""
     """Floor of the partial-set confirmation span (s) for the cleanest code."""
     consistent_fix_span_s: float = 60.0
     """Below min_success_rate a fix on a partial set is still accepted when the same integer set has passed the
     ratio test at every epoch over this span (s). GEONET 0759/3040 (30 s epochs): the bootstrapped rate, a lower bound, stays
     under 0.99 for 510 s while RTKLIB's ratio test is right from the second epoch; hil_sim at 1 Hz: a ratio
     of 3 on a float metres off (correlated code) after 7 s is wrong. Geometry needs time, not epochs."""
+    settled_fix_span_s: float = 30.0
+    """A first-fix candidate that has won the ratio test with the same integer set at every epoch for this long
+    (s) is no longer rejected for lying far from the float position (the Mahalanobis check; its fixed
+    residuals must still fit). u-blox code multipath is correlated over ~30 s static (bench/error_stats.py):
+    a float built on it at 1 Hz is metres off with a decimetre σ, and stays too confident after its error
+    shrinks. hil_sim seed 3 (calibrated error model): the right set won from 25 s on (ratio 3 → 20, fix 3-18 mm
+    off) while the float, 2.9 → 0.6 m off, rejected it at every epoch (Mahalanobis 26-76): no fix in 600 s;
+    first fix at 82 s with 60 here, 52 s with 30 (seed 2: 126 / 96 s). As confirm_fix_span_s, the span
+    outlasts the code multipath's correlation time. hil_sim seeds 1-8, nominal and 5 km: 0 wrong with 30.
+    Real sets unchanged (every candidate there is near its float). 0 disables."""
     full_set_confirm_epochs: int = 2
     """A first fix on the full candidate set (no satellite dropped by partial AR) needs the same integer set
     winning the ratio test at this many consecutive epochs instead of over confirm_fix_span_s (and, below
@@ -108,7 +126,16 @@ class RtkOptions:
     hold_sigma_cyc: float = 0.001
     max_outage_epochs: int = 5
     slip_threshold_cyc: float = 2.0
-    """Doppler-predicted phase jump beyond which a slip is declared (cycles, scaled with the gap)."""
+    """Doppler-predicted phase jump beyond which a slip is declared (cycles, scaled with the gap), while no
+    fix is held."""
+    slip_threshold_held_cyc: float = 0.85
+    """The same while a fix is held: below one cycle so that a 1-cycle slip without LLI (1.0 ± the Doppler's
+    ~0.1 cycle over 1 s) is caught before the hold absorbs it. With 2.0, hil_sim seed 6 (undetected slips
+    2/h) held a rover PRN 17 +1-cycle slip at 331 s to the end, 18 cm off (268 wrong epochs, on main too; 0
+    with 0.85). Not before the first fix: the Doppler misses the phase by up to a cycle across hil_sim's
+    steps of acceleration, and the false slips restarted converging floats (seeds 2 and 7: first fix 96 →
+    120 s, 93 → 117 s with 0.85 throughout). Real sets fix the same with 0.7-2.0 forward; M8P static
+    processed backward loses 1.7 points with 0.7 throughout (81.9 → 80.2 %), none with 0.85."""
     max_innovation_phase_m: float = 0.5
     max_innovation_code_m: float = 30.0
     validation_sigma_factor: float = 4.0

@@ -114,6 +114,8 @@ class RtkState:
     fail_count: int = 0
     slips: int = 0
     base_cache: tuple[GpsTime, _Receiver] | None = None
+    baseline_m: float = 0.0
+    """Rover–base distance (m) at the previous epoch's position (the partial-fix confirmation grows with it)."""
     base_age_var_m2: float = 0.0
     """Variance (m²) of this epoch's carried-forward base phase (atmosphere/clock drift the correction rate
     does not follow): (base_age_sigma_m_s · age)², added to every single difference; 0 for raw base data."""
@@ -370,7 +372,10 @@ def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t
             ok = np.isfinite(d) & common
             if ok.sum() >= 3:
                 d = d - median_of_few(d[ok])
-                thr = 1.0 + 0.05 * dtb  # cycles: atmosphere/orbit changes grow with the gap
+                # cycles: atmosphere/orbit changes grow with the gap. Half a cycle, not one: a 1-cycle base
+                # slip reads 1.0 ± millimetres and slipped under a 1.0 threshold (hil_sim seed 3, undetected
+                # slips: two 1-cycle base slips at 257-261 s held 21 cm off to the end, 338 wrong epochs)
+                thr = 0.5 + 0.05 * dtb
                 slip |= ok & (np.abs(d) > thr)
     return slip
 
@@ -399,7 +404,10 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
                 clean = ok & ~slip
                 rate = d / np.where(ok, dt_all, 1.0)
                 d = d - median_of_few(rate[clean] if clean.sum() >= 2 else rate[ok]) * dt_all
-                thr = o.slip_threshold_cyc * np.maximum(1.0, np.abs(np.nan_to_num(dt_all, nan=1.0)))
+                # a held set absorbs a missed slip (wrong fixes): tighter then; before a fix a false alarm
+                # only restarts a float
+                thr_cyc = o.slip_threshold_held_cyc if st.held_prns.any() else o.slip_threshold_cyc
+                thr = thr_cyc * np.maximum(1.0, np.abs(np.nan_to_num(dt_all, nan=1.0)))
                 slip |= ok & (np.abs(d) > thr)
                 bridged = ok
         # a phase gap the Doppler could not bridge: receivers do not always flag a loss of lock inside the
@@ -486,15 +494,34 @@ def _remember_rover(st: RtkState, rov: _Receiver, t_r: GpsTime) -> None:
 
 
 def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Arr,
-            valid_phase: npt.NDArray[np.bool_], slip: npt.NDArray[np.bool_], count_lock: bool = True) -> None:
+            valid_phase: npt.NDArray[np.bool_], slip: npt.NDArray[np.bool_], count_lock: bool = True,
+            t_r: GpsTime | None = None) -> None:
     """Ambiguity bookkeeping (RTKLIB udbias): reset on slip or long outage, initialise new ones.
 
+    `t_r` the rover epoch (its Doppler bridges the half-cycle step test below; None skips that test).
     New SD ambiguities come from phase − code; with a known rover position (take-off point) from phase −
     modelled range instead (Daakir et al. 2015 eq. 2), which lets the first epoch fix.
     """
     o = st.options
     if count_lock:
         st.outage[~valid_phase] += 1
+        # the half-cycle (parity unknown) flag clearing on the rover: a receiver that resolves the half cycle by
+        # moving the phase ½ cycle and reports no slip (RXM-RAW has no half-cycle-subtracted bit; RAWX data
+        # carry one, which the decoder turns into a slip as RTKLIB does) corrupts the held set with that step
+        # (hil_sim LEA-6T seed 2: a slip at 511 s, parity fixed at 513 s, the wrong satellite excluded, 22
+        # wrong fixes 8-16 cm off). RTKLIB detslp_ll declares a slip at every change of the flag; here only a
+        # step the Doppler sees (phase change minus the Doppler-predicted one, receiver clock removed, over a
+        # quarter cycle) is one: M8P static clears flags without a step (a reset there cost a fixed epoch).
+        half = (rov.lli & LLI_HALF_CYCLE) != 0
+        cleared = valid_phase & st.half_cycle & ~half
+        st.half_cycle = half & valid_phase
+        if cleared.any() and st.prev_time_r is not None and t_r is not None:
+            dt_r = t_r.diff_s(st.prev_time_r)
+            step = (rov.cp_cyc - st.prev_cp_r) + 0.5 * (rov.dop_hz + st.prev_dop_r) * dt_r
+            ok = np.isfinite(step) & valid_phase
+            if ok.sum() >= 3 and 0.0 < dt_r <= 2.0:
+                step = step - median_of_few(step[ok & ~cleared] if (ok & ~cleared).sum() >= 2 else step[ok])
+                slip = slip | (cleared & ok & (np.abs(step) > 0.25))
     lost = (st.outage > o.max_outage_epochs) & (st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
     reset = np.flatnonzero(lost | (slip & valid_phase))
     if reset.size:
@@ -714,6 +741,8 @@ class _Fix:
     ref: int
     ints: Arr
     nb: int
+    settled: bool = False
+    """The same integer set has won the ratio test at every epoch for settled_fix_span_s (see the option)."""
 
 
 def _agrees_with_validated(st: RtkState, ref: int, others: npt.NDArray[np.int64], ints: Arr, min_common: int) -> bool:
@@ -739,6 +768,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
     idx = np.flatnonzero(cand)
     best_ratio = 0.0
     seen_candidate = False
+    settled = False
     for _drop in range(o.max_partial_drop + 1 if o.partial_ar else 1):
         if idx.size < min_dd + 1:
             break
@@ -781,8 +811,13 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
                 st.pending_fix = (key, t, 0)
             st.pending_fix = (key, st.pending_fix[1], st.pending_fix[2] + 1)
             span = abs(t.diff_s(st.pending_fix[1]))
+            settled = o.settled_fix_span_s > 0 and span >= o.settled_fix_span_s
             # correlated code multipath biases the float for about its correlation time: clean code waits less
             need_span = max(o.confirm_fix_span_min_s, o.confirm_fix_span_s * st.code_var_scale)
+            cs = st.code_scatter
+            if cs.epochs >= o.code_scatter_min_epochs and st.code_var_scale >= 0.5:
+                # measured u-blox-like code: the differential ionosphere biases its float for minutes
+                need_span += o.confirm_fix_span_per_km_s * st.baseline_m / 1000.0
             wins = st.pending_fix[2]
             trusted = bool(st.held_prns.any() or st.known_amb[idx].all()) \
                 or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_amb_dd + 1)
@@ -803,7 +838,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             pos = x[:3] - gain @ (a - ints)
             cov = p[:3, :3] - gain @ qba.T
             st.last_ratio = ratio
-            return _Fix(pos, cov, ratio, others, ref, ints, others.size)
+            return _Fix(pos, cov, ratio, others, ref, ints, others.size, settled)
         # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
         # whose ambiguity is still code-level, else mostly the lowest one), not blindly the lowest satellite:
         # one fresh ambiguity would otherwise sink the ratio of a set determined long ago
@@ -891,6 +926,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         bas = _slots(base, nav.store, sats[1])
         st.base_cache = (base.time, bas)
     base_pos = np.asarray(base_pos_ecef_m, float)
+    st.baseline_m = float(np.linalg.norm(st.x[:3] - base_pos)) if st.initialized else 0.0
 
     dt = rover.time.diff_s(st.time) if st.time is not None else 0.0
     _udstate(st, dt, spp.pos_ecef_m, spp.vel_ecef_m_s, base_pos)
@@ -919,7 +955,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     # the variance of what the rate misses; raw base data (young, or no history, e.g. processed backward) as before
     st.base_age_var_m2 = (o.base_age_sigma_m_s * age) ** 2 if carried is not bas else 0.0
     bas = carried
-    _udbias(st, rov, bas, rng_r, rng_b, phase_ok, slip)
+    _udbias(st, rov, bas, rng_r, rng_b, phase_ok, slip, t_r=rover.time)
     st.code_var_scale = code_variance_scale(st, rov, bas, phase_ok, slip, el, dt)
     if o.standstill or st.static:
         _watch_standstill(st, rov, bas, rng_r, rng_b, los_r, el, phase_ok & ~slip & ~half, rover.time, dt)
@@ -1044,7 +1080,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             use_fix[fix.ref] = True
             dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False, trop_r)
             valid = _valid_residuals(dd_fix, o.validation_sigma_factor)
-            if maha <= _CHI2_3DOF_999 and valid.all():
+            if (maha <= _CHI2_3DOF_999 or fix.settled) and valid.all():
                 break
             log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", rover.time, maha, bool(valid.all()))
             # a second look at this epoch: without the one satellite whose phase does not fit the fixed solution

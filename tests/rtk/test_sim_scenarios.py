@@ -108,3 +108,44 @@ def test_the_rover_is_held_static_on_the_ground_and_released_at_take_off(caplog:
     held_s = tow["leaving static mode"][0] - tow["static hold"][0]
     assert 47.0 <= held_s <= 51.0, held_s  # held from ~10 s to the take-off at ~60 s
     assert r["wrong"] == 0 and r["air fix %"] >= 99.0
+
+
+def test_lea6t_half_cycle_resolved_after_a_slip_makes_no_wrong_fix() -> None:
+    # seed 2: rover PRN 27 slips at 510.7 s, its half cycle is resolved (phase moved ½ cycle, RXM-RAW reports
+    # no slip) at 513 s; kept, that step made the held set exclude the wrong satellite: 22 fixes 8-16 cm off
+    r = _run("lea6t", duration_s=600.0, seed=2)
+    assert r["wrong"] == 0
+    q = r["q"]
+    assert np.all(q[505:560] == Q_FIX)  # the held fix carries on through the slip and the parity fix
+
+
+def test_a_cold_start_fixes_when_the_right_set_keeps_winning_against_an_overconfident_float() -> None:
+    # seed 3 (measured u-blox error model): the right integer set wins the ratio test from 25 s on while the
+    # float, built on 60 s of static correlated code multipath, stays 0.6-2.9 m off and rejects it at every
+    # epoch for its Mahalanobis distance (no fix in 600 s); once it has won for settled_fix_span_s it fixes
+    # (52 s: on the ground, before the take-off at 60 s)
+    r = _run("m8t", duration_s=600.0, seed=3)
+    assert r["wrong"] == 0 and r["stale fixed"] == 0
+    assert r["first fix s"] <= 60.0 and r["air fix %"] >= 99.0 and r["3D RMS cm"] <= 2.0
+
+
+def test_a_partial_set_at_5_km_waits_longer_for_its_confirmation() -> None:
+    # seed 7: a partial set 1.5 m off won the ratio test (3.1-3.5) for 30 s and was fixed for 3 epochs; the
+    # differential ionosphere keeps a u-blox float off for minutes: 6 s per km more (confirm_fix_span_per_km_s)
+    r = _run("m8t", duration_s=600.0, baseline_m=5000.0, seed=7)
+    assert r["wrong"] == 0 and r["air fix %"] >= 70.0
+
+
+def test_one_cycle_base_slips_are_caught_by_the_base_geometry_check() -> None:
+    # seed 3, undetected slips 2/h: base PRN 11 and 17 slip by -1 cycle (no LLI) at 256.8 and 260.6 s, under a
+    # held fix; a 1.0-cycle threshold on the base's phase - range step let both through and the hold settled
+    # 21 cm off to the end of the flight (338 wrong epochs)
+    r = _run("m8t", duration_s=600.0, undetected_slips_per_h=2.0, seed=3)
+    assert r["wrong"] == 0 and r["air fix %"] >= 95.0 and r["3D RMS cm"] <= 2.0
+
+
+def test_a_one_cycle_rover_slip_under_a_held_fix_is_caught_by_the_doppler() -> None:
+    # seed 6, undetected slips 2/h: rover PRN 17 slips +1 cycle (no LLI) at 330.7 s under a held fix; the
+    # Doppler test at 2 cycles let it through and the hold settled 18 cm off (268 wrong epochs, main too)
+    r = _run("m8t", duration_s=600.0, undetected_slips_per_h=2.0, seed=6)
+    assert r["wrong"] == 0 and r["air fix %"] >= 95.0 and r["3D RMS cm"] <= 2.0

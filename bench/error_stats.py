@@ -1,0 +1,450 @@
+"""Receiver error statistics of real u-blox data next to hil_sim's: the evidence for hil_sim's ErrorModel.
+
+Code: code minus carrier (CMC = P − λ·L) per receiver and satellite arc is free of geometry, clocks and
+troposphere; it holds code noise + code multipath − phase errors (negligible) + 2·ionosphere + a constant (the
+ambiguity). Per arc (split at LLI, gaps > 10 s or a jump > 5 m) a low-order polynomial in time (degree 2, +1
+per 400 s of arc) removes the constant and the slow ionospheric divergence; the residuals, multiplied by
+sin(el) ("zenith-equivalent", the scaling hil_sim uses), give the autocovariance C(k) at lags of k whole
+seconds (pairs within an arc, so 3-4 s base sampling works). A first-order Gauss–Markov fit
+C(k) = σ_c²·exp(−k/τ) over k = 1 s … (where C falls to 1/e², at most 120 s) gives the correlated (multipath)
+part σ_c, τ; the white part σ_w² = C(0) − σ_c². The polynomial also removes multipath correlated over
+hundreds of seconds, for the real and simulated series alike (hil_sim is run through the same code; its
+input values are printed for comparison: the estimator's own bias is visible there).
+Raw (not elevation-scaled) RMS per elevation and per C/N0 bin, and the mean C/N0 per elevation bin, check the
+1/sin(el) law and the C/N0 model.
+
+Phase: double-differenced (between receivers and against the highest satellite) carrier phase minus DD
+geometric range at the known antenna positions (satellites at their transmission time from the pseudorange,
+Sagnac; the 0.33 m and 197 m baselines leave no atmosphere), per DD arc minus its mean (the ambiguity).
+Zenith-equivalent per-receiver σ: the DD variance is Σ over its 4 one-way terms of σ²/sin²(el), solved for σ
+by least squares (both receivers assumed alike: true for M8P/M8P and hil_sim; for M8P/GLW1 it is the mean of
+the two).
+
+Real data (../shared/data/gnss): u-blox M8P static rover 20181004-1237 (RINEX 3, 1 Hz, 20 min) against the M8P
+base (0.33 m, RAWX every 3-4 s) and the GLW1 CORS (Leica GR30, 197 m, 5 s); the M8P walking rover 1532 (moving,
+under trees: an upper bound for a moving antenna); the 2008 u-blox RXM-RAW log (LEA-4T era, 4 min, ../ubx) and a NEO-6P RXM-RAW log (u-blox 6,
+9 min at ~2 s).
+hil_sim: the base (static ground antenna, 1200 s) and the rover's flight (take-off at 60 s, airborne after
+84 s) of the standard scenario, LEA-6T and M8T, seed 1.
+
+Run: `.venv/bin/python bench/error_stats.py [--no-sim] [--seed N]` (about 1 min).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from onboard.formats.rinex_nav import read_rinex_nav
+from onboard.formats.rinex_obs import read_rinex_obs
+from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M
+from onboard.rtk.ephemeris import EphemerisStore, geometric_range, satellite_states
+from onboard.rtk.pntpos import sat_az_el
+from onboard.rtk.types import GNSS_GPS, LLI_HALF_CYCLE, LLI_SLIP, ObsEpoch
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+M8P = DATA / "gnss" / "ublox-m8p-galway-2018"
+ROVER_1237_ECEF_M = np.array([3774088.9931, -601661.8217, 5089321.3853])
+"""Static rover, mean of the M8P's fixed epochs (frame of the M8P base; dataset README)."""
+BASE_1236_ECEF_M = np.array([3774089.2120, -601661.6157, 5089321.2474])
+ROVER_1237_GLW1_FRAME_ECEF_M = np.array([3774088.6821, -601663.0350, 5089318.2304])
+"""The same antenna in the GLW1 frame (dataset README)."""
+TOKYO_APPROX_ECEF_M = np.array([-3869302.2, 3436557.8, 3717357.2])
+MASK_RAD = math.radians(15.0)
+MAX_LAG_S = 120
+EL_BINS_DEG = (15, 30, 45, 60, 90)
+CN0_BINS_DBHZ = (0, 35, 40, 45, 60)
+
+
+@dataclass
+class Series:
+    """One receiver's per-satellite observables on its epochs: time (s), P, L (cycles), C/N0, el (rad), LLI."""
+
+    t_s: list[float] = field(default_factory=list)
+    prn: list[int] = field(default_factory=list)
+    pr_m: list[float] = field(default_factory=list)
+    cp_cyc: list[float] = field(default_factory=list)
+    cn0: list[float] = field(default_factory=list)
+    el: list[float] = field(default_factory=list)
+    lli: list[int] = field(default_factory=list)
+    rng_m: list[float] = field(default_factory=list)
+    """Geometric range minus c·satellite clock at the known antenna position (NaN when moving/unknown)."""
+    t_tag_s: list[float] = field(default_factory=list)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {k: np.asarray(v) for k, v in self.__dict__.items()}
+
+
+def series_from_epochs(epochs: list[ObsEpoch], store: EphemerisStore,
+                       pos_of: Callable[[int], np.ndarray | None], approx_ecef_m: np.ndarray) -> Series:
+    """Observables of GPS satellites above the 15° mask with phase; `pos_of(k)` the known antenna (or None)."""
+    s = Series()
+    t0 = epochs[0].time
+    for k, ep in enumerate(epochs):
+        g = ep.gnss_id == GNSS_GPS
+        prn = ep.sv_id[g].astype(int)
+        pr = ep.pr_m[g]
+        if prn.size == 0:
+            continue
+        sats = satellite_states(store, prn, ep.time, pr)
+        pos = pos_of(k)
+        at = approx_ecef_m if pos is None else pos
+        r, e = geometric_range(sats.pos_m, at)
+        _, el = sat_az_el(at, e)
+        rng = r - CLIGHT_M_S * sats.clock_s if pos is not None else np.full(prn.size, np.nan)
+        t = ep.time.diff_s(t0)
+        for j in range(prn.size):
+            if not sats.ok[j] or not np.isfinite(ep.cp_cyc[g][j]) or el[j] < MASK_RAD:
+                continue
+            s.t_s.append(t)
+            s.prn.append(int(prn[j]))
+            s.pr_m.append(float(pr[j]))
+            s.cp_cyc.append(float(ep.cp_cyc[g][j]))
+            s.cn0.append(float(ep.cn0_dbhz[g][j]))
+            s.el.append(float(el[j]))
+            s.lli.append(int(ep.lli[g][j]))
+            s.rng_m.append(float(rng[j]))
+            s.t_tag_s.append(t)
+    return s
+
+
+def _arcs(t: np.ndarray, lli: np.ndarray, y: np.ndarray, jump: float, max_gap_s: float = 10.0) -> list[np.ndarray]:
+    """Index arrays of continuous arcs of one satellite (sorted by time): split at LLI, gaps and jumps."""
+    if t.size == 0:
+        return []
+    brk = np.zeros(t.size, bool)
+    brk[1:] = (np.diff(t) > max_gap_s) | ((lli[1:] & (LLI_SLIP | LLI_HALF_CYCLE)) != 0) | \
+        (np.abs(np.diff(y)) > jump)
+    starts = np.flatnonzero(brk | (np.arange(t.size) == 0))
+    ends = np.append(starts[1:], t.size)
+    return [np.arange(a, b) for a, b in zip(starts, ends)]
+
+
+def _detrend(t: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """y minus a polynomial in t: degree 2, +1 per 400 s of arc (ambiguity + ionospheric divergence)."""
+    deg = min(5, 2 + int((t[-1] - t[0]) / 400.0))
+    tt = (t - t.mean()) / max(1.0, float(np.ptp(t)))
+    return y - np.polyval(np.polyfit(tt, y, deg), tt)
+
+
+@dataclass
+class Residuals:
+    """Detrended residuals, arc by arc: time (s), zenith-equivalent value (m), raw value (m), el, C/N0."""
+
+    arcs: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+    raw: list[np.ndarray] = field(default_factory=list)
+    el: list[np.ndarray] = field(default_factory=list)
+    cn0: list[np.ndarray] = field(default_factory=list)
+
+
+def cmc_residuals(s: Series, min_arc_s: float = 120.0) -> Residuals:
+    """Per-satellite code-minus-carrier arcs, detrended (see module docstring)."""
+    a = s.arrays()
+    out = Residuals()
+    cmc = a["pr_m"] - LAMBDA_L1_M * a["cp_cyc"]
+    for prn in np.unique(a["prn"]):
+        m = np.flatnonzero(a["prn"] == prn)
+        m = m[np.argsort(a["t_s"][m])]
+        for idx in _arcs(a["t_s"][m], a["lli"][m], cmc[m], 5.0):
+            ii = m[idx]
+            t = a["t_s"][ii]
+            if t.size < 20 or t[-1] - t[0] < min_arc_s:
+                continue
+            r = _detrend(t, cmc[ii])
+            keep = np.abs(r) < 6.0 * np.std(r) + 1e-9  # a rare code outlier would dominate C(0)
+            out.arcs.append((t[keep], (r * np.sin(a["el"][ii]))[keep]))
+            out.raw.append(r[keep])
+            out.el.append(a["el"][ii][keep])
+            out.cn0.append(a["cn0"][ii][keep])
+    return out
+
+
+def dd_phase_residuals(rov: Series, base: Series, pair_tol_s: float = 0.2) -> tuple[Residuals, list[np.ndarray]]:
+    """DD phase minus DD range per DD arc (reference: highest common satellite), minus the arc mean.
+
+    Returns the residuals (m; `arcs` values NOT elevation-scaled here) and, per arc, the summed one-way
+    1/sin²(el) of its four terms (for the zenith-equivalent fit)."""
+    ra, ba = rov.arrays(), base.arrays()
+    b_times = np.unique(ba["t_s"])
+    by_t_r: dict[float, np.ndarray] = {}
+    for tt in np.unique(ra["t_s"]):
+        by_t_r[tt] = np.flatnonzero(ra["t_s"] == tt)
+    rows: dict[tuple[int, int], list[tuple[float, float, float, int]]] = {}
+    for tt, ir in by_t_r.items():
+        j = int(np.argmin(np.abs(b_times - tt)))
+        if abs(b_times[j] - tt) > pair_tol_s:
+            continue
+        ib = np.flatnonzero(ba["t_s"] == b_times[j])
+        common = sorted(set(ra["prn"][ir].tolist()) & set(ba["prn"][ib].tolist()))
+        if len(common) < 2:
+            continue
+        sd: dict[int, tuple[float, float, int]] = {}
+        for p in common:
+            kr = ir[ra["prn"][ir] == p][0]
+            kb = ib[ba["prn"][ib] == p][0]
+            v = (LAMBDA_L1_M * ra["cp_cyc"][kr] - ra["rng_m"][kr]) - (LAMBDA_L1_M * ba["cp_cyc"][kb] - ba["rng_m"][kb])
+            w = 1.0 / math.sin(ra["el"][kr]) ** 2 + 1.0 / math.sin(ba["el"][kb]) ** 2
+            sd[p] = (v, w, int(ra["lli"][kr] | ba["lli"][kb]), float(ra["el"][kr]))
+        ref = max(common, key=lambda p: sd[p][3])
+        for p in common:
+            if p == ref:
+                continue
+            rows.setdefault((ref, p), []).append(
+                (tt, sd[p][0] - sd[ref][0], sd[p][1] + sd[ref][1], sd[p][2] | sd[ref][2]))
+    out = Residuals()
+    weights: list[np.ndarray] = []
+    for (_, p), lst in rows.items():
+        arr = np.array(lst)
+        t, y, w, lli = arr[:, 0], arr[:, 1], arr[:, 2], arr[:, 3].astype(int)
+        for idx in _arcs(t, lli, y, 0.05):
+            if idx.size < 20:
+                continue
+            r = y[idx] - y[idx].mean()
+            r = r - np.polyval(np.polyfit(t[idx] - t[idx].mean(), r, 1), t[idx] - t[idx].mean())
+            out.arcs.append((t[idx], r))
+            weights.append(w[idx])
+    return out, weights
+
+
+def autocov(arcs: list[tuple[np.ndarray, np.ndarray]], max_lag_s: int = MAX_LAG_S) -> tuple[np.ndarray, np.ndarray]:
+    """Autocovariance C(k), k = 0 … max_lag_s whole seconds, over all pairs within arcs, and pair counts."""
+    acc = np.zeros(max_lag_s + 1)
+    cnt = np.zeros(max_lag_s + 1)
+    for t, y in arcs:
+        ti = np.round(t).astype(int)
+        for lag in range(max_lag_s + 1):
+            if lag == 0:
+                acc[0] += float(y @ y)
+                cnt[0] += y.size
+                continue
+            # pairs (i, j) with t_j − t_i == lag (times strictly increasing)
+            j = np.searchsorted(ti, ti + lag)
+            ok = j < ti.size
+            ok[ok] = ti[j[ok]] == ti[ok] + lag
+            acc[lag] += float(y[ok] @ y[j[ok]])
+            cnt[lag] += int(ok.sum())
+    with np.errstate(invalid="ignore"):
+        return acc / cnt, cnt
+
+
+def gauss_markov_fit(c: np.ndarray, cnt: np.ndarray) -> tuple[float, float, float]:
+    """(σ_white, σ_correlated, τ s) from the autocovariance: log-linear fit of C(k) for k ≥ 1 down to C(1)/e²."""
+    c0 = float(c[0])
+    ks = [k for k in range(1, c.size) if cnt[k] > 50 and np.isfinite(c[k]) and c[k] > 0]
+    ks2: list[int] = []
+    for k in ks:  # the first contiguous stretch above C(1)/e²
+        if ks2 and k != ks2[-1] + 1:
+            break
+        if c[k] < c[ks[0]] * math.exp(-2.0):
+            break
+        ks2.append(k)
+    if len(ks2) < 3:
+        return math.sqrt(max(c0, 0.0)), 0.0, float("nan")
+    k = np.array(ks2, float)
+    slope, icpt = np.polyfit(k, np.log(c[ks2]), 1, w=np.sqrt(cnt[ks2]))
+    tau = -1.0 / slope if slope < 0 else float("inf")
+    sc2 = min(math.exp(icpt), c0)
+    return math.sqrt(max(c0 - sc2, 0.0)), math.sqrt(sc2), tau
+
+
+def binned_rms(vals: list[np.ndarray], key: list[np.ndarray], edges: tuple[float, ...], scale: float = 1.0) -> str:
+    """RMS of `vals` per bin of `key` (e.g. elevation in degrees), as 'lo-hi:rms' text."""
+    v = np.concatenate(vals) if vals else np.zeros(0)
+    k = np.concatenate(key) * scale if key else np.zeros(0)
+    parts = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        m = (k >= lo) & (k < hi)
+        parts.append(f"{lo}-{hi}:{np.sqrt(np.mean(v[m] ** 2)):.2f}({m.sum()})" if m.sum() > 30 else f"{lo}-{hi}:  - ")
+    return " ".join(parts)
+
+
+def binned_mean(vals: list[np.ndarray], key: list[np.ndarray], edges: tuple[float, ...], scale: float) -> str:
+    v = np.concatenate(vals) if vals else np.zeros(0)
+    k = np.concatenate(key) * scale if key else np.zeros(0)
+    parts = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        m = (k >= lo) & (k < hi)
+        parts.append(f"{lo}-{hi}:{np.mean(v[m]):.1f}" if m.sum() > 30 else f"{lo}-{hi}: - ")
+    return " ".join(parts)
+
+
+def report_code(label: str, s: Series, truth: str = "") -> None:
+    res = cmc_residuals(s)
+    if not res.arcs:
+        print(f"{label:34s} no arcs")
+        return
+    c, cnt = autocov(res.arcs)
+    sw, sc, tau = gauss_markov_fit(c, cnt)
+    n = sum(a[0].size for a in res.arcs)
+    print(f"{label:34s} {len(res.arcs):4d} arcs {n:6d} pts  zenith-eq total {math.sqrt(c[0]):.3f} m  "
+          f"white {sw:.3f} m  multipath {sc:.3f} m  tau {tau:5.1f} s   C(k)/C(0) k=1,2,10,30: {c[1] / c[0]:.2f} "
+          f"{c[2] / c[0]:.2f} {c[10] / c[0]:.2f} "
+          f"{c[30] / c[0]:.2f}{truth}")
+    deg = [e * 180 / math.pi for e in res.el]
+    print(f"{'':34s} raw RMS (m) by el deg  {binned_rms(res.raw, deg, EL_BINS_DEG)}")
+    print(f"{'':34s} raw RMS (m) by C/N0    {binned_rms(res.raw, res.cn0, CN0_BINS_DBHZ)}")
+    print(f"{'':34s} mean C/N0 by el deg    {binned_mean(res.cn0, deg, EL_BINS_DEG, 1.0)}")
+
+
+def report_sd_code(label: str, rov: Series, base: Series, pair_tol_s: float = 0.2) -> None:
+    """Between-receiver single difference of code minus carrier (what the engine's CodeScatter sees), per
+    satellite arc at paired epochs, detrended and zenith-equivalent as above: its RMS against the two
+    receivers' own RMS tells whether their multipath is independent (SD² = sum of both) or shared."""
+    ra, ba = rov.arrays(), base.arrays()
+    cr = ra["pr_m"] - LAMBDA_L1_M * ra["cp_cyc"]
+    cb = ba["pr_m"] - LAMBDA_L1_M * ba["cp_cyc"]
+    bt = np.unique(ba["t_s"])
+    sd = Series()
+    for k in range(ra["t_s"].size):
+        j = int(np.argmin(np.abs(bt - ra["t_s"][k])))
+        if abs(bt[j] - ra["t_s"][k]) > pair_tol_s:
+            continue
+        m = np.flatnonzero((ba["t_s"] == bt[j]) & (ba["prn"] == ra["prn"][k]))
+        if m.size == 0:
+            continue
+        sd.t_s.append(float(ra["t_s"][k]))
+        sd.prn.append(int(ra["prn"][k]))
+        sd.pr_m.append(float(cr[k] - cb[m[0]]))
+        sd.cp_cyc.append(0.0)
+        sd.cn0.append(float(ra["cn0"][k]))
+        sd.el.append(float(ra["el"][k]))
+        sd.lli.append(int(ra["lli"][k] | ba["lli"][m[0]]))
+        sd.rng_m.append(0.0)
+        sd.t_tag_s.append(float(ra["t_s"][k]))
+    res = cmc_residuals(sd, min_arc_s=60.0)
+    if not res.arcs:
+        print(f"{label:34s} no arcs")
+        return
+    y = np.concatenate([a[1] for a in res.arcs])
+    print(f"{label:34s} {len(res.arcs):4d} arcs {y.size:6d} pts  SD code-minus-carrier zenith-eq RMS "
+          f"{math.sqrt(float(np.mean(y * y))):.3f} m")
+
+
+def report_phase(label: str, rov: Series, base: Series, truth: str = "") -> None:
+    res, w = dd_phase_residuals(rov, base)
+    if not res.arcs:
+        print(f"{label:34s} no DD arcs")
+        return
+    y = np.concatenate([a[1] for a in res.arcs])
+    ww = np.concatenate(w)
+    # E[r²] = σ0²·Σ 1/sin²: least squares for σ0² (the per-arc mean removal costs a little: ignored)
+    s0 = math.sqrt(float(np.sum(y * y * ww) / np.sum(ww * ww)))
+    zen = [(t, r / np.sqrt(wi / 4.0)) for (t, r), wi in zip(res.arcs, w)]  # → one-way zenith-equivalent
+    c, cnt = autocov(zen, 60)
+    sw, sc, tau = gauss_markov_fit(c, cnt)
+    print(f"{label:34s} {len(res.arcs):4d} DD arcs {y.size:6d} pts  DD RMS {1000 * math.sqrt(np.mean(y * y)):.1f} mm"
+          f"  one-way zenith-eq {1000 * s0:.2f} mm (white {1000 * sw / 2:.2f}, correlated {1000 * sc / 2:.2f} mm, "
+          f"tau {tau:.0f} s){truth}")
+
+
+def _nav_store(*paths: Path) -> EphemerisStore:
+    store = EphemerisStore()
+    for p in paths:
+        for e in read_rinex_nav(p).ephemerides:
+            store.add(e)
+    return store
+
+
+def real() -> None:
+    print("== real receivers ==")
+    nav = _nav_store(M8P / "rinex/rover-20181004-1237.nav.gz", M8P / "rinex/base-20181004-1236.nav.gz")
+    rov = read_rinex_obs(M8P / "rinex/rover-20181004-1237.obs.gz").epochs
+    bas = read_rinex_obs(M8P / "rinex/base-20181004-1236.rawx.obs.gz").epochs
+    t0 = rov[0].time
+    bas = [e for e in bas if e.time.diff_s(t0) >= -1.0]
+    s_r = series_from_epochs(rov, nav, lambda k: ROVER_1237_ECEF_M, ROVER_1237_ECEF_M)
+    s_b = series_from_epochs(bas, nav, lambda k: BASE_1236_ECEF_M, BASE_1236_ECEF_M)
+    _shift(s_b, bas[0].time.diff_s(t0))
+    report_code("M8P static rover (1 Hz)", s_r)
+    report_code("M8P base (RAWX every 3-4 s)", s_b)
+    report_phase("DD phase M8P/M8P 0.33 m", s_r, s_b)
+    report_sd_code("SD code M8P-M8P 0.33 m", s_r, s_b)
+    glw = read_rinex_obs(M8P / "cors-glw1/glw1277m.18o.gz")
+    glw_epochs = [e for e in glw.epochs if e.time.diff_s(t0) >= -1.0]
+    glw_pos = glw.header.antenna_position_ecef_m()
+    s_g = series_from_epochs(glw_epochs, nav, lambda k: glw_pos, glw_pos)
+    _shift(s_g, glw_epochs[0].time.diff_s(t0))
+    s_r2 = series_from_epochs(rov, nav, lambda k: ROVER_1237_GLW1_FRAME_ECEF_M, ROVER_1237_GLW1_FRAME_ECEF_M)
+    report_code("GLW1 Leica GR30 (5 s, geodetic)", s_g)
+    report_phase("DD phase M8P/GLW1 197 m", s_r2, s_g)
+    walk = read_rinex_obs(M8P / "rinex/rover-20181004-1532.obs.gz").epochs
+    nav2 = _nav_store(M8P / "rinex/rover-20181004-1532.nav.gz")
+    report_code("M8P walking rover, trees (1 Hz)", series_from_epochs(walk, nav2, lambda k: None, BASE_1236_ECEF_M))
+    from onboard.convert import collect
+    raw = (DATA / "ubx" / "rtklib_ubx_20080526.ubx").read_bytes()
+    col = collect(iter([raw]))
+    report_code("u-blox RXM-RAW 2008 static (1 Hz)",
+                series_from_epochs(col.epochs, EphemerisStore(col.ephemerides), lambda k: None, TOKYO_APPROX_ECEF_M))
+    col = collect(iter([(DATA / "ubx" / "pyublox_6P-raw-PPP.ubx").read_bytes()]))
+    report_code("u-blox NEO-6P RXM-RAW static (~2 s)",
+                series_from_epochs(col.epochs, EphemerisStore(col.ephemerides), lambda k: None,
+                                   np.array(col.fixes_ecef_m[0])))
+
+
+def _shift(s: Series, dt_s: float) -> None:
+    """Re-reference a series' times (s since its first epoch) to another series' first epoch."""
+    s.t_s = [t + dt_s for t in s.t_s]
+
+
+def sim(seed: int) -> None:
+    from hil_sim.scenario import Scenario
+    from hil_sim.world import World
+
+    for model in ("lea6t", "m8t"):
+        sc = Scenario.default(model, duration_s=1300.0, seed=seed)
+        em = sc.errors
+        truth = (f"   [model: white {em.code_sigma_zenith_m}, multipath {em.mp_code_sigma_zenith_m} m, "
+                 f"tau {em.mp_tau_s} s]")
+        ptruth = f"   [model: white {1000 * em.phase_sigma_zenith_m}, multipath {1000 * em.mp_phase_sigma_zenith_m} mm]"
+        world = World(sc)
+        series = {}
+        for rcv in ("rover", "base"):
+            s = Series()
+            for k in range(1290):
+                ep, d = world.observe_detailed(rcv, sc.start.add_s(k))
+                if rcv == "rover" and not world.truth(d["timing"].t_true)["armed"]:
+                    continue
+                if rcv == "rover" and k >= 600:  # the flight ends (landing) at about 560 s
+                    break
+                # the atmosphere too (the flying rover is up to 100 m above the base: centimetres of troposphere
+                # the real 0.33 m / 197 m pairs do not have)
+                rng = d["rho_m"] - CLIGHT_M_S * d["sat_clock_s"] + d["tropo_m"] - d["iono_m"]
+                for j in range(len(ep)):
+                    if d["el_rad"][j] < MASK_RAD or not np.isfinite(ep.cp_cyc[j]):
+                        continue
+                    s.t_s.append(float(k))
+                    s.prn.append(int(ep.sv_id[j]))
+                    s.pr_m.append(float(ep.pr_m[j]))
+                    s.cp_cyc.append(float(ep.cp_cyc[j]))
+                    s.cn0.append(float(ep.cn0_dbhz[j]))
+                    s.el.append(float(d["el_rad"][j]))
+                    s.lli.append(int(ep.lli[j]))
+                    s.rng_m.append(float(rng[j]))
+                    s.t_tag_s.append(float(k))
+            series[rcv] = s
+        report_code(f"hil_sim {model} base, ground, 1290 s", series["base"], truth)
+        report_code(f"hil_sim {model} rover, airborne", series["rover"], truth)
+        report_phase(f"DD phase hil_sim {model} (truth pos)", series["rover"], series["base"], ptruth)
+        report_sd_code(f"SD code hil_sim {model} rover-base", series["rover"], series["base"])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--no-sim", action="store_true")
+    ap.add_argument("--no-real", action="store_true")
+    ap.add_argument("--seed", type=int, default=1)
+    args = ap.parse_args()
+    if not args.no_real:
+        real()
+    if not args.no_sim:
+        print(f"== hil_sim (seed {args.seed}) ==")
+        sim(args.seed)
+
+
+if __name__ == "__main__":
+    main()
