@@ -252,24 +252,20 @@ def gauss_markov_fit(c: np.ndarray, cnt: np.ndarray) -> tuple[float, float, floa
     return math.sqrt(max(c0 - sc2, 0.0)), math.sqrt(sc2), tau
 
 
-def binned_rms(vals: list[np.ndarray], key: list[np.ndarray], edges: tuple[float, ...], scale: float = 1.0) -> str:
-    """RMS of `vals` per bin of `key` (e.g. elevation in degrees), as 'lo-hi:rms' text."""
+def binned(vals: list[np.ndarray], key: list[np.ndarray], edges: tuple[float, ...], stat: str = "rms") -> str:
+    """RMS (`stat` "rms", as 'lo-hi:rms(count)') or mean ("mean", as 'lo-hi:mean') of `vals` per bin of `key`
+    (e.g. elevation in degrees); bins with 30 values or fewer print as '-'."""
     v = np.concatenate(vals) if vals else np.zeros(0)
-    k = np.concatenate(key) * scale if key else np.zeros(0)
+    k = np.concatenate(key) if key else np.zeros(0)
     parts = []
     for lo, hi in zip(edges[:-1], edges[1:]):
         m = (k >= lo) & (k < hi)
-        parts.append(f"{lo}-{hi}:{np.sqrt(np.mean(v[m] ** 2)):.2f}({m.sum()})" if m.sum() > 30 else f"{lo}-{hi}:  - ")
-    return " ".join(parts)
-
-
-def binned_mean(vals: list[np.ndarray], key: list[np.ndarray], edges: tuple[float, ...], scale: float) -> str:
-    v = np.concatenate(vals) if vals else np.zeros(0)
-    k = np.concatenate(key) * scale if key else np.zeros(0)
-    parts = []
-    for lo, hi in zip(edges[:-1], edges[1:]):
-        m = (k >= lo) & (k < hi)
-        parts.append(f"{lo}-{hi}:{np.mean(v[m]):.1f}" if m.sum() > 30 else f"{lo}-{hi}: - ")
+        if m.sum() <= 30:
+            parts.append(f"{lo}-{hi}:  - " if stat == "rms" else f"{lo}-{hi}: - ")
+        elif stat == "rms":
+            parts.append(f"{lo}-{hi}:{np.sqrt(np.mean(v[m] ** 2)):.2f}({m.sum()})")
+        else:
+            parts.append(f"{lo}-{hi}:{np.mean(v[m]):.1f}")
     return " ".join(parts)
 
 
@@ -286,9 +282,9 @@ def report_code(label: str, s: Series, truth: str = "") -> None:
           f"{c[2] / c[0]:.2f} {c[10] / c[0]:.2f} "
           f"{c[30] / c[0]:.2f}{truth}")
     deg = [e * 180 / math.pi for e in res.el]
-    print(f"{'':34s} raw RMS (m) by el deg  {binned_rms(res.raw, deg, EL_BINS_DEG)}")
-    print(f"{'':34s} raw RMS (m) by C/N0    {binned_rms(res.raw, res.cn0, CN0_BINS_DBHZ)}")
-    print(f"{'':34s} mean C/N0 by el deg    {binned_mean(res.cn0, deg, EL_BINS_DEG, 1.0)}")
+    print(f"{'':34s} raw RMS (m) by el deg  {binned(res.raw, deg, EL_BINS_DEG)}")
+    print(f"{'':34s} raw RMS (m) by C/N0    {binned(res.raw, res.cn0, CN0_BINS_DBHZ)}")
+    print(f"{'':34s} mean C/N0 by el deg    {binned(res.cn0, deg, EL_BINS_DEG, 'mean')}")
 
 
 def report_sd_code(label: str, rov: Series, base: Series, pair_tol_s: float = 0.2) -> None:
