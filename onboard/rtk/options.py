@@ -51,7 +51,7 @@ class RtkOptions:
     ratio test at every epoch over this span (s). GEONET 0759/3040 (30 s epochs): the bootstrapped rate, a lower bound, stays
     under 0.99 for 510 s while RTKLIB's ratio test is right from the second epoch; hil_sim at 1 Hz: a ratio
     of 3 on a float metres off (correlated code) after 7 s is wrong. Geometry needs time, not epochs."""
-    settled_fix_span_s: float = 30.0
+    settled_fix_span_s: float = 60.0
     """A first-fix candidate that has won the ratio test with the same integer set at every epoch for this long
     (s) is no longer rejected for lying far from the float position (the Mahalanobis check; its fixed
     residuals must still fit). u-blox code multipath is correlated over ~30 s static (bench/error_stats.py):
@@ -60,7 +60,11 @@ class RtkOptions:
     off) while the float, 2.9 → 0.6 m off, rejected it at every epoch (Mahalanobis 26-76): no fix in 600 s;
     first fix at 82 s with 60 here, 52 s with 30 (seed 2: 126 / 96 s). As confirm_fix_span_s, the span
     outlasts the code multipath's correlation time. hil_sim seeds 1-8, nominal and 5 km: 0 wrong with 30.
-    Real sets unchanged (every candidate there is near its float). 0 disables."""
+    60, not 30: on the M8P walk under trees (no truth) 30 fixed 45 epochs (1040-1095, the walker standing)
+    whose sets had won for 30-55 s: 79-82 cm from the M8P's own RTK and 41-42 cm from demo5's fix there, so
+    at least two of the three are wrong and ours, rejected by its own float, is the likeliest; 60 fixes none
+    of them. The other real sets are unchanged either way (every candidate there is near its float). 0
+    disables."""
     full_set_confirm_epochs: int = 2
     """A first fix on the full candidate set (no satellite dropped by partial AR) needs the same integer set
     winning the ratio test at this many consecutive epochs instead of over confirm_fix_span_s (and, below

@@ -122,11 +122,11 @@ def test_lea6t_half_cycle_resolved_after_a_slip_makes_no_wrong_fix() -> None:
 def test_a_cold_start_fixes_when_the_right_set_keeps_winning_against_an_overconfident_float() -> None:
     # seed 3 (measured u-blox error model): the right integer set wins the ratio test from 25 s on while the
     # float, built on 60 s of static correlated code multipath, stays 0.6-2.9 m off and rejects it at every
-    # epoch for its Mahalanobis distance (no fix in 600 s); once it has won for settled_fix_span_s it fixes
-    # (52 s: on the ground, before the take-off at 60 s)
+    # epoch for its Mahalanobis distance (no fix in 600 s); once it has won for settled_fix_span_s (60 s) it
+    # fixes (82 s, 22 s after the take-off)
     r = _run("m8t", duration_s=600.0, seed=3)
     assert r["wrong"] == 0 and r["stale fixed"] == 0
-    assert r["first fix s"] <= 60.0 and r["air fix %"] >= 99.0 and r["3D RMS cm"] <= 2.0
+    assert r["first fix s"] <= 90.0 and r["air fix %"] >= 95.0 and r["3D RMS cm"] <= 2.0
 
 
 def test_a_partial_set_at_5_km_waits_longer_for_its_confirmation() -> None:
@@ -140,8 +140,10 @@ def test_one_cycle_base_slips_are_caught_by_the_base_geometry_check() -> None:
     # seed 3, undetected slips 2/h: base PRN 11 and 17 slip by -1 cycle (no LLI) at 256.8 and 260.6 s, under a
     # held fix; a 1.0-cycle threshold on the base's phase - range step let both through and the hold settled
     # 21 cm off to the end of the flight (338 wrong epochs)
+    # (this seed's cold start fixes at 138 s; the slips come under the held fix after it)
     r = _run("m8t", duration_s=600.0, undetected_slips_per_h=2.0, seed=3)
-    assert r["wrong"] == 0 and r["air fix %"] >= 95.0 and r["3D RMS cm"] <= 2.0
+    assert r["wrong"] == 0 and r["3D RMS cm"] <= 2.0
+    assert np.all(r["q"][250:] == Q_FIX)
 
 
 def test_a_one_cycle_rover_slip_under_a_held_fix_is_caught_by_the_doppler() -> None:
