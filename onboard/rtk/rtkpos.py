@@ -168,11 +168,13 @@ def epoch_spp(epochs: list[ObsEpoch], sats: list[SatState], nav: NavData, o: Rtk
     moves by the rover's distance from it (re-evaluated past 50 m)."""
     if not epochs:
         return []
-    prs = np.array([slot_pseudoranges(e) for e in epochs])
+    prs = np.full((len(epochs), NSAT), np.nan)
     dops = np.full(prs.shape, np.nan)
-    for k, e in enumerate(epochs):
+    for k, e in enumerate(epochs):  # both columns from one pass over each epoch's GPS measurements
         g = e.gps_only()
-        dops[k, g.sv_id.astype(int) - 1] = g.dop_hz
+        idx = g.sv_id.astype(int) - 1
+        prs[k, idx] = g.pr_m
+        dops[k, idx] = g.dop_hz
     tows = np.array([e.time.tow_s for e in epochs])
     args = (o.elmask_rad, dops, nav.iono)
     kw = {"outlier_m": o.spp_outlier_m, "max_gdop": o.spp_max_gdop}
