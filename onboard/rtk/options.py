@@ -149,6 +149,9 @@ class RtkOptions:
     steps of acceleration, and the false slips restarted converging floats (seeds 2 and 7: first fix 96 →
     120 s, 93 → 117 s with 0.85 throughout). Real sets fix the same with 0.7-2.0 forward; M8P static
     processed backward loses 1.7 points with 0.7 throughout (81.9 → 80.2 %), none with 0.85."""
+    fault_exclusion_margin: float = 2.0
+    """Under a hold, when leaving out either of several satellites makes the rest fit, the best exclusion must
+    have a post-fit phase χ² this many times smaller than the next, else the hold is released."""
     max_innovation_phase_m: float = 0.5
     max_innovation_code_m: float = 30.0
     validation_sigma_factor: float = 4.0

@@ -701,13 +701,15 @@ def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver,
     """Fault exclusion under a hold: the one satellite whose phase, left out of the update from the prior
     state, lets every other phase double difference fit (post-fit within validation_sigma_factor·σ).
 
-    `suspects` (the satellites whose own post-fit residual failed) are tried first: when there is one (held
-    or not) and leaving it out fits, it is the one. Otherwise every held satellite is tried and the exclusion must be
-    unique. Returns (slot, (x, P) of that update), or (−1, prior) when no single exclusion fits, when more
-    than one does (ambiguous), or when fewer than `min_amb_dd` + 1 held satellites would remain.
+    Every held satellite is tried, and a lone suspect (the one satellite whose own post-fit residual failed)
+    too when it is a newcomer not yet held. A lone suspect that is not held and fits is the one. Otherwise the
+    exclusion must be unique, or clearly the best: its post-fit phase χ² (vᵀR⁻¹v) at most
+    1 / fault_exclusion_margin of the runner-up's. Returns (slot, (x, P) of that update), or (−1, prior) when no
+    single exclusion fits, when several fit alike (ambiguous), or when fewer than `min_amb_dd` + 1 held
+    satellites would remain.
     """
     o = st.options
-    found: list[tuple[int, tuple[Arr, Arr]]] = []
+    found: list[tuple[float, int, tuple[Arr, Arr]]] = []
     held = np.flatnonzero(use_phase & st.held_prns)
     # a lone suspect may also be a newcomer not yet held (its float ambiguity still off by a fraction of a
     # cycle): leaving it out keeps the hold whole
@@ -723,12 +725,21 @@ def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver,
         x_c, p_c = _kf_update(x_prior, p_prior, dd.v, dd.h, dd.r)
         post, _ = _ddres(st, x_c, rov, bas, rng_b, keep, code_ok, el, False, trop_r)
         if np.all(_valid_residuals(post, o.validation_sigma_factor)):
-            found.append((int(c), (x_c, p_c)))
-            if lone.size and int(c) == int(lone[0]):
-                return found[0]
-            if len(found) > 1:
-                break
-    return found[0] if len(found) == 1 else (-1, (x_prior, p_prior))
+            if lone.size and int(c) == int(lone[0]) and not st.held_prns[c]:
+                return int(c), (x_c, p_c)
+            rows = post.kind == 0
+            v = post.v[rows]
+            chi2 = float(v @ np.linalg.solve(post.r[np.ix_(rows, rows)], v)) if v.size else 0.0
+            found.append((chi2, int(c), (x_c, p_c)))
+    if not found:
+        return -1, (x_prior, p_prior)
+    found.sort(key=lambda f: f[0])
+    # a slip the hold absorbed for an epoch or two (a high-leverage satellite, the Doppler test blind in a
+    # manoeuvre) biases the prior: leaving out an innocent satellite may then "fit" too, but leaves the
+    # slipped one in, with a larger χ² than the true exclusion
+    if len(found) > 1 and found[0][0] * o.fault_exclusion_margin > found[1][0]:
+        return -1, (x_prior, p_prior)
+    return found[0][1], found[0][2]
 
 
 def _valid_residuals(dd: _DD, factor: float) -> npt.NDArray[np.bool_]:
