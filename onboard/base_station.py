@@ -22,6 +22,7 @@ Pure parts: `CorrectionScheduler`, `SurveyIn`, `BaseCore` (decoded items in, fra
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import threading
 from collections.abc import Callable
@@ -45,7 +46,7 @@ from onboard.receiver.rtcm import (
 )
 from onboard.rtk.ephemeris import EphemerisStore, satellite_states
 from onboard.rtk.pntpos import pntpos
-from onboard.rtk.types import LLI_SLIP, Ephemeris, ObsEpoch
+from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP, Ephemeris, ObsEpoch
 from onboard.settings import Settings
 
 log = logging.getLogger(__name__)
@@ -196,6 +197,10 @@ class BaseCore:
         self._next_eph_s: dict[int, float] = {}
         self.encode_errors = 0
         self._lock_track: dict[int, tuple[GpsTime, GpsTime]] = {}
+        self._half_pending: set[int] = set()
+        """PRNs whose carrier phase has an unresolved half cycle: withheld from 1002/1004 until it resolves."""
+        self._arc_start: dict[int, GpsTime] = {}
+        """PRNs whose phase arc restarted at a half-cycle resolution the receiver's lock time does not show."""
 
     def _add_ephemeris(self, eph: Ephemeris) -> None:
         if self.store.add(eph):
@@ -282,23 +287,42 @@ class BaseCore:
         return sent
 
     def _with_lock_times(self, epoch: ObsEpoch) -> ObsEpoch:
-        """The GPS part of `epoch` with a lock time for every satellite (RTCM conveys slips only that way).
+        """The GPS part of `epoch` as 1002/1004 can carry it: a lock time for every satellite (RTCM conveys slips
+        only that way) and no phase with an unresolved half cycle (neither message can flag one).
 
         RXM-RAW (LEA-6T) reports no lock time, only the LLI slip bit: count the time since the satellite was
         first seen, since its last slip or since a gap longer than `LOCK_GAP_S`, so a slip at the base reaches
-        the rover as a lock-time reset. Receiver lock times (RXM-RAWX) are passed on as they are.
+        the rover as a lock-time reset. Receiver lock times (RXM-RAWX) are passed on as they are. Phase flagged
+        with an unresolved half cycle (LLI bit 1) is withheld; when the flag clears, the receiver may move the
+        phase by half a cycle without a slip, so the lock time restarts there and the rover starts a new arc
+        (sent as it was, the rover saw an unflagged half-cycle step in the base phase).
         """
         gps = epoch.gps_only()
         lock = gps.lock_ms.copy()
+        cp = gps.cp_cyc.copy()
         t = epoch.time
         for i, prn in enumerate(gps.sv_id.tolist()):
             start, last = self._lock_track.get(prn, (t, t))
-            if prn not in self._lock_track or (gps.lli[i] & LLI_SLIP) or t.diff_s(last) > LOCK_GAP_S:
+            half = bool(gps.lli[i] & LLI_HALF_CYCLE) and math.isfinite(cp[i])
+            resolved = prn in self._half_pending and not half and math.isfinite(cp[i])
+            new_arc = prn not in self._lock_track or bool(gps.lli[i] & LLI_SLIP) or t.diff_s(last) > LOCK_GAP_S
+            if new_arc or resolved:
                 start = t
             self._lock_track[prn] = (start, t)
+            if half:
+                self._half_pending.add(prn)
+                cp[i] = math.nan
+            elif math.isfinite(cp[i]):
+                self._half_pending.discard(prn)
+            if resolved:
+                self._arc_start[prn] = t
+            elif new_arc:
+                self._arc_start.pop(prn, None)  # the receiver's own lock time restarts too
             if not np.isfinite(lock[i]):
                 lock[i] = t.diff_s(start) * 1e3
-        return replace(gps, lock_ms=lock)
+            elif prn in self._arc_start:
+                lock[i] = min(float(lock[i]), t.diff_s(self._arc_start[prn]) * 1e3)
+        return replace(gps, lock_ms=lock, cp_cyc=cp)
 
     def on_frame(self, frame: Frame, t_s: float) -> list[tuple[str, bytes]]:
         """UBX relay: raw observation frames always, RTCM 1006 (once the position is known) every

@@ -181,3 +181,11 @@ def test_a_slip_the_hold_absorbed_is_excluded_not_an_innocent_satellite() -> Non
     wrong = np.flatnonzero((r["q"] == Q_FIX) & (r["err_m"] > 0.10))
     assert wrong.tolist() == [318, 319]
     assert r["air fix %"] >= 99.0
+
+
+def test_a_base_half_cycle_arc_does_not_reach_the_rover_unflagged() -> None:
+    # seed 10, undetected slips 2/h: base PRN 27 restarts (LLI) with an unresolved half cycle at 372.7 s; sent
+    # in 1004, which cannot flag it, as whole-cycle phase, the held set ended 10-15 cm off (10 fixes, 380-409 s). The base
+    # now withholds such phase and restarts the lock time when the half cycle resolves
+    r = _run("m8t", duration_s=600.0, undetected_slips_per_h=2.0, seed=10)
+    assert r["wrong"] == 0 and r["air fix %"] >= 99.0

@@ -162,6 +162,42 @@ def test_a_slip_at_an_rxm_raw_base_reaches_the_rover_as_a_lock_time_reset() -> N
     assert slips == [25]
 
 
+@pytest.mark.parametrize("receiver_lock", [False, True], ids=["rxm-raw", "rxm-rawx"])
+def test_an_unresolved_half_cycle_at_the_base_is_withheld_and_its_resolution_starts_a_new_arc(
+        receiver_lock: bool) -> None:
+    """1004 cannot flag a half cycle: phase flagged unresolved (LLI bit 1) is not sent, and when the flag clears
+    (the receiver may move the phase half a cycle then) the lock time restarts, so the rover sees a new arc.
+    hil_sim seed 10 (undetected slips): sent as it was, a base half-cycle arc ended in 10 wrong rover fixes."""
+    from onboard.receiver.framing import StreamFramer
+    from onboard.receiver.rtcm import RtcmDecoder
+    from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP
+
+    epochs, _ = _base_data()
+    ep0 = epochs[0]
+    prn = int(ep0.sv_id[2])
+    core = BaseCore(BaseOptions(position_ecef_m=BASE_3040))
+    dec = RtcmDecoder()
+    phase_sent: list[bool] = []
+    slips: list[int] = []
+    for k in range(40):  # the receiver flags an unresolved half cycle on `prn` at k = 10-19, resolved at 20
+        lli = np.zeros(len(ep0), np.uint8)
+        if 10 <= k < 20:
+            lli[2] = LLI_HALF_CYCLE
+        lock = np.full(len(ep0), 600_000.0 + 1000.0 * k) if receiver_lock else np.full(len(ep0), np.nan)
+        ep = replace(ep0, time=ep0.time.add_s(k), lock_ms=lock, lli=lli)
+        for f in StreamFramer().feed(b"".join(f for _, f in core.on_item(ep))):
+            out = dec.decode(f, ep0.time)
+            if out is not None and hasattr(out, "sv_id"):
+                j = int(np.flatnonzero(out.sv_id == prn)[0])
+                phase_sent.append(bool(np.isfinite(out.cp_cyc[j])))
+                if out.lli[j] & LLI_SLIP:
+                    slips.append(k)
+                others = np.arange(len(out)) != j
+                assert np.all(np.isfinite(out.cp_cyc[others])) and np.all(out.lli[others] & LLI_SLIP == 0)
+    assert phase_sent == [not 10 <= k < 20 for k in range(40)]
+    assert slips == [20]
+
+
 def test_radio_sender_drops_when_the_radio_is_stuck_and_logs_only_what_it_queued(tmp_path) -> None:
     import threading
 
