@@ -321,7 +321,7 @@ def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, 
     after this epoch's time update: motion re-opens the position at once, before the measurement update."""
     o = st.options
     sd = LAMBDA_L1_M * (rov.cp_cyc - bas.cp_cyc) - (rng_r - rng_b)
-    var = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m)
+    var = _var_sd_m2(o, rov, el)
     t_ns = t.total_ns
     disp = st.standstill.update(t_ns, sd, st.x[:3], los_r, var, st.lock, valid)
     if st.static:
@@ -392,7 +392,7 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
     if st.prev_time_r is not None:
         seen = st.last_t_r_ns != _NO_TIME_NS
         dt_all = np.where(seen, (t_r.total_ns - np.where(seen, st.last_t_r_ns, 0)) / 1e9, np.nan)
-        if np.any(np.isfinite(dt_all)):
+        if np.isfinite(dt_all).any():
             dop_avg = np.where(np.isfinite(st.prev_dop_r), 0.5 * (rov.dop_hz + st.prev_dop_r), rov.dop_hz)
             d = (rov.cp_cyc - st.prev_cp_r) + dop_avg * dt_all  # RINEX: phase follows range, Doppler = −rate
             d[~(np.abs(dt_all) <= 30.0)] = np.nan
@@ -409,13 +409,13 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
                 # a held set absorbs a missed slip (wrong fixes): tighter then; before a fix a false alarm
                 # only restarts a float
                 thr_cyc = o.slip_threshold_held_cyc if st.held_prns.any() else o.slip_threshold_cyc
-                thr = thr_cyc * np.maximum(1.0, np.abs(np.nan_to_num(dt_all, nan=1.0)))
+                thr = thr_cyc * np.maximum(1.0, np.abs(dt_all))  # NaN (never seen) only where not ok
                 slip |= ok & (np.abs(d) > thr)
                 bridged = ok
         # a phase gap the Doppler could not bridge: receivers do not always flag a loss of lock inside the
         # gap (the Septentrio rover of GEONET 3034 comes back a whole cycle off with LLI 0), so the continuity
         # of such phase is unknown and its ambiguity starts afresh
-        amb_on = st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0
+        amb_on = st.p.diagonal()[NX0:NX0 + NSAT] > 0
         slip |= common & ~st.prev_phase_r & amb_on & ~bridged
     return slip
 
@@ -524,7 +524,7 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
             if ok.sum() >= 3 and 0.0 < dt_r <= 2.0:
                 step = step - median_of_few(step[ok & ~cleared] if (ok & ~cleared).sum() >= 2 else step[ok])
                 slip = slip | (cleared & ok & (np.abs(step) > 0.25))
-    lost = (st.outage > o.max_outage_epochs) & (st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
+    lost = (st.outage > o.max_outage_epochs) & (st.p.diagonal()[NX0:NX0 + NSAT] > 0)
     reset = np.flatnonzero(lost | (slip & valid_phase))
     if reset.size:
         st.slips += int(np.count_nonzero(slip & valid_phase))
@@ -532,7 +532,7 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
     st.outage[valid_phase] = 0
     amb = NX0 + np.arange(NSAT)
     new = valid_phase & (st.p[amb, amb] <= 0)
-    if np.any(new):
+    if new.any():
         if st.init_pos_ecef_m is not None and st.fix_count == 0 and st.p[0, 0] <= (2 * o.init_pos_sigma_m) ** 2:
             sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b)) / LAMBDA_L1_M
             # phase − modelled range keeps the receivers' clock difference (0.5 ms = 150 km on hil_sim), which
@@ -568,13 +568,13 @@ def code_variance_scale(st: RtkState, rov: _Receiver, base: _Receiver, phase_ok:
     o = st.options
     cmc = (rov.pr_m - base.pr_m) - LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc)
     ok = phase_ok & np.isfinite(cmc)
-    var_code = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m) * o.code_phase_ratio**2
+    var_code = _var_sd_m2(o, rov, el) * o.code_phase_ratio**2
     with np.errstate(invalid="ignore"):
         st.code_scatter.update(np.where(ok, cmc, 0.0), var_code, ok, slip, dt)
     cs = st.code_scatter
     if o.code_scatter_reference <= 0.0 or cs.epochs < o.code_scatter_min_epochs or not np.isfinite(cs.ratio):
         return 1.0
-    return float(np.clip(cs.ratio / o.code_scatter_reference, o.code_variance_min_scale, 1.0))
+    return float(min(max(cs.ratio / o.code_scatter_reference, o.code_variance_min_scale), 1.0))
 
 
 def _dd_matrix(idx: npt.NDArray[np.int64], ref: int) -> Arr:
@@ -598,17 +598,24 @@ class _DD:
     ref_phase: int
 
 
+def _var_sd_m2(o: RtkOptions, rov: _Receiver, el: Arr) -> Arr:
+    """Single-difference phase variance (m²) per slot, 2·phase_variance_m2(el), memoised on the rover epoch: the
+    same elevations serve the code scatter, the standstill test and every _ddres call of the epoch. Read-only."""
+    key = ("var_sd", el.tobytes())
+    hit = rov.memo.get(key)
+    if hit is None:
+        var_sd = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m)
+        var_sd.flags.writeable = False
+        hit = rov.memo[key] = (var_sd,)
+    return hit[0]
+
+
 def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, phase_ok: npt.NDArray[np.bool_],
            code_ok: npt.NDArray[np.bool_], el: Arr, with_doppler: bool, trop_r: Arr) -> tuple[_DD, Arr]:
     """Double-difference residuals at state `x` (RTKLIB ddres): phase, code, rover Doppler between satellites."""
     o = st.options
     rng_r, e = _range_with_trop_m(rov, x[:3], trop_r)
-    key = ("var_sd", el.tobytes())  # the same elevations serve every _ddres call of the epoch
-    var_sd = rov.memo.get(key, (None,))[0]
-    if var_sd is None:
-        var_sd = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m)
-        var_sd.flags.writeable = False
-        rov.memo[key] = (var_sd,)
+    var_sd = _var_sd_m2(o, rov, el)
     if st.base_age_var_m2 > 0.0:
         var_sd = var_sd + st.base_age_var_m2
     # groups (kind, reference slot, other slots, zero-difference residual z, per-slot variance), rows i − ref
@@ -619,7 +626,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         idx = ok.nonzero()[0]
         if idx.size < 2:
             continue
-        ref = int(idx[np.argmax(el[idx])])
+        ref = int(idx[el[idx].argmax()])
         if kind == 0:
             ref_phase = ref
             z = LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - drng - LAMBDA_L1_M * x[NX0:]
@@ -631,7 +638,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     if with_doppler:
         idx = (code_ok & np.isfinite(rov.dop_hz)).nonzero()[0]
         if idx.size >= 2:
-            ref = int(idx[np.argmax(el[idx])])
+            ref = int(idx[el[idx].argmax()])
             vs = rov.sats.vel_m_s
             sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, 1] * x[0] - vs[:, 0] * x[1])
             rate_model = np.einsum("ij,ij->i", e, vs - x[3:6]) + sag - CLIGHT_M_S * rov.sats.drift_s_s
@@ -774,7 +781,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
     for _drop in range(o.max_partial_drop + 1 if o.partial_ar else 1):
         if idx.size < min_dd + 1:
             break
-        ref = int(idx[np.argmax(el[idx])])
+        ref = int(idx[el[idx].argmax()])
         others = idx[idx != ref]
         ja = NX0 + idx
         d = _dd_matrix(idx, ref)
@@ -945,7 +952,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     base_zb_cyc = base_zb / LAMBDA_L1_M
     slip = _detect_slips(st, rov, bas, base_zb_cyc, rover.time, base.time, phase_ok)
     if st.pending_slip.any():  # rover slips seen while the base was missing
-        gone = np.flatnonzero(st.pending_slip & ~phase_ok & (st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0))
+        gone = np.flatnonzero(st.pending_slip & ~phase_ok & (st.p.diagonal()[NX0:NX0 + NSAT] > 0))
         if gone.size:
             _reset_amb(st, gone)
             st.slips += int(gone.size)
@@ -999,7 +1006,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
                 # ambiguities afresh rather than keep a possibly slipped one (and a wrong hold) alive
                 log.debug("%s: phase outliers on %d of %d DDs -> all ambiguities reset", rover.time,
                           int(phase_bad.sum()), n_phase)
-                reset = np.flatnonzero(st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
+                reset = np.flatnonzero(st.p.diagonal()[NX0:NX0 + NSAT] > 0)
                 _reset_amb(st, reset)
                 st.slips += int(reset.size)
                 use_phase = phase_ok & code_ok
@@ -1047,7 +1054,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         if bad_phase.size > 1:
             # several misfits point at the set rather than at one satellite: it no longer vouches for a re-fix
             st.validated_int[:] = np.nan
-        amb = NX0 + np.flatnonzero(st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
+        amb = NX0 + np.flatnonzero(st.p.diagonal()[NX0:NX0 + NSAT] > 0)
         st.p[amb, amb] += 0.5**2
         rows = dd_post.kind == 0
         if bad_phase.size >= 3 and bad_phase.size == int(rows.sum()) and dd_post.ref_phase >= 0:
@@ -1062,7 +1069,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     # ambiguity resolution
     fix = None
     if o.ar_mode != "off":
-        amb_var = st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)]
+        amb_var = st.p.diagonal()[NX0:NX0 + NSAT]
         # ambiguities seeded from a surveyed take-off point are known, not guessed from the code: no lock wait
         locked = (st.lock > o.min_lock_epochs) | st.known_amb
         cand = use_phase & (el >= np.radians(o.ar_elmask_deg)) & ~half & locked & (amb_var > 0)

@@ -15,7 +15,7 @@ ends only enter: the noise does not grow with the window, and a slow creep adds 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -120,8 +120,8 @@ class StandstillMonitor:
             t_a, ep_a, sd_a, pos_a, lock_a = anchor
             continuous = valid & (lock - lock_a == self.epochs - ep_a)
             disp = tdcp_displacement(sd_a, pos_a, sd_m, pos_m, los, var_sd_m2, continuous)
-            if disp is not None:
-                disp = replace(disp, span_s=abs(t_ns - t_a) / 1e9)
+            if disp is not None:  # with its span (built directly: dataclasses.replace introspects the fields)
+                disp = Displacement(disp.d_m, disp.cov_m2, disp.info_m2, abs(t_ns - t_a) / 1e9, disp.n_sats)
         hist.append((t_ns, self.epochs, np.where(valid, sd_m, np.nan), np.array(pos_m, float), lock.copy()))
         # keep the newest entry older than the window (the next anchor) and everything inside it
         while len(hist) > 2 and abs(t_ns - hist[1][0]) / 1e9 > self.window_s:
