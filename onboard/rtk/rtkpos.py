@@ -611,8 +611,10 @@ def _var_sd_m2(o: RtkOptions, rov: _Receiver, el: Arr) -> Arr:
 
 
 def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, phase_ok: npt.NDArray[np.bool_],
-           code_ok: npt.NDArray[np.bool_], el: Arr, with_doppler: bool, trop_r: Arr) -> tuple[_DD, Arr]:
-    """Double-difference residuals at state `x` (RTKLIB ddres): phase, code, rover Doppler between satellites."""
+           code_ok: npt.NDArray[np.bool_], el: Arr, with_doppler: bool, trop_r: Arr,
+           jacobian: bool = True) -> tuple[_DD, Arr]:
+    """Double-difference residuals at state `x` (RTKLIB ddres): phase, code, rover Doppler between satellites.
+    `jacobian=False` for a residual test alone (_valid_residuals): the design matrix H is left empty (nrow, 0)."""
     o = st.options
     rng_r, e = _range_with_trop_m(rov, x[:3], trop_r)
     var_sd = _var_sd_m2(o, rov, el)
@@ -649,7 +651,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         return _DD(np.zeros(0), np.zeros((0, NX)), np.zeros((0, 0)), np.zeros(0, np.int8), np.zeros(0, np.int64), -1), e
     nrow = sum(g[2].size for g in groups)
     v = np.empty(nrow)
-    h = np.zeros((nrow, NX))
+    h = np.zeros((nrow, NX if jacobian else 0))
     r = np.zeros((nrow, nrow))
     kinds = np.empty(nrow, np.int8)
     slots = np.empty(nrow, np.int64)
@@ -659,12 +661,13 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         m = others.size
         rows = slice(k, k + m)
         v[rows] = z[others] - z[ref]
-        # position (phase, code) or velocity (Doppler) columns: LOS difference ref − other
-        cols = slice(3, 6) if kind == 2 else slice(0, 3)
-        h[rows, cols] = e[ref] - e[others]
-        if kind == 0:
-            h[_ROWS[k : k + m], NX0 + others] = LAMBDA_L1_M
-            h[rows, NX0 + ref] = -LAMBDA_L1_M
+        if jacobian:
+            # position (phase, code) or velocity (Doppler) columns: LOS difference ref − other
+            cols = slice(3, 6) if kind == 2 else slice(0, 3)
+            h[rows, cols] = e[ref] - e[others]
+            if kind == 0:
+                h[_ROWS[k : k + m], NX0 + others] = LAMBDA_L1_M
+                h[rows, NX0 + ref] = -LAMBDA_L1_M
         # covariance of rows sharing the reference: var_ref everywhere, var_other + var_ref on the diagonal
         r[rows, rows] = var[ref]
         var_other.append(var[others])
@@ -726,7 +729,7 @@ def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver,
         if dd.v.size == 0:
             continue
         x_c, p_c = _kf_update(x_prior, p_prior, dd.v, dd.h, dd.r)
-        post, _ = _ddres(st, x_c, rov, bas, rng_b, keep, code_ok, el, False, trop_r)
+        post, _ = _ddres(st, x_c, rov, bas, rng_b, keep, code_ok, el, False, trop_r, jacobian=False)
         if np.all(_valid_residuals(post, o.validation_sigma_factor)):
             found.append((int(c), (x_c, p_c)))
             if lone.size and int(c) == int(lone[0]):
@@ -1031,7 +1034,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
                          st.p[3:6, 3:6], age, 0.0)
 
     # post-fit residual check of the float solution
-    dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False, trop_r)
+    dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False, trop_r, jacobian=False)
     ok_post = _valid_residuals(dd_post, o.validation_sigma_factor)
     bad_phase = dd_post.slot[(dd_post.kind == 0) & ~ok_post]
     if bad_phase.size and st.held_prns.any():
@@ -1087,7 +1090,8 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             use_fix = np.zeros(NSAT, bool)
             use_fix[fix.slots] = True
             use_fix[fix.ref] = True
-            dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False, trop_r)
+            dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False, trop_r,
+                                 jacobian=False)
             valid = _valid_residuals(dd_fix, o.validation_sigma_factor)
             if (maha <= _CHI2_3DOF_999 or fix.settled) and valid.all():
                 break
