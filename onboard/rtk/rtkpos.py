@@ -16,6 +16,7 @@ State vector: x[0:3] rover position (ECEF m), x[3:6] velocity (m/s), x[6+prn-1] 
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -29,7 +30,7 @@ from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.mlambda import LambdaError, mlambda
 from onboard.rtk.models import CodeScatter, median_of_few, phase_variance_m2, saastamoinen_m
 from onboard.rtk.options import RtkOptions
-from onboard.rtk.pntpos import SppSolution, pntpos, pntpos_batch, sat_az_el
+from onboard.rtk.pntpos import SppSolution, _norm, pntpos, pntpos_batch, sat_az_el
 from onboard.rtk.standstill import StandstillMonitor
 from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP, Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, ObsEpoch, Solution
 
@@ -304,7 +305,7 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
     if not st.static:
         st.p[:NX0, :NX0] += _process_noise(st, dt, st.x[:3])
     # a filter that drifted far from the SPP solution is restarted on it (RTKLIB udpos's reset)
-    if np.linalg.norm(st.x[:3] - spp_pos) > 100.0 or st.p[0, 0] > 1e4:
+    if _norm(st.x[:3] - spp_pos) > 100.0 or st.p[0, 0] > 1e4:
         log.info("position state reset to SPP (%.1f m off)", np.linalg.norm(st.x[:3] - spp_pos))
         st.x[:3] = spp_pos
         st.p[:3, :] = 0.0
@@ -356,7 +357,7 @@ def bias_process_noise_cyc2_s(o: RtkOptions, rover_pos: Arr, base_pos: Arr | Non
     q = o.bias_process_noise_cyc**2
     if base_pos is None or o.bias_process_noise_cyc_per_km <= 0.0:
         return q
-    bl_km = float(np.linalg.norm(np.asarray(rover_pos, float) - np.asarray(base_pos, float))) / 1000.0
+    bl_km = _norm(np.asarray(rover_pos, float) - np.asarray(base_pos, float)) / 1000.0
     return q + (o.bias_process_noise_cyc_per_km * bl_km) ** 2
 
 
@@ -741,7 +742,7 @@ def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver,
 
 def _valid_residuals(dd: _DD, factor: float) -> npt.NDArray[np.bool_]:
     """Rows whose |residual| ≤ factor·σ (RTKLIB valpos), σ from the measurement covariance."""
-    return np.abs(dd.v) <= factor * np.sqrt(np.diag(dd.r))
+    return np.abs(dd.v) <= factor * np.sqrt(dd.r.diagonal())
 
 
 @dataclass
@@ -918,7 +919,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         cov = np.eye(3) * (spp.gdop * 1.5) ** 2
         return _solution(t_sol, spp.pos_ecef_m, spp.vel_ecef_m_s, Q_SINGLE, ns_spp, cov, np.eye(3) * 0.01, age, 0.0)
 
-    if st.static and np.all(np.isfinite(spp.vel_ecef_m_s)) and np.linalg.norm(spp.vel_ecef_m_s) > o.takeoff_speed_m_s:
+    if st.static and np.isfinite(spp.vel_ecef_m_s).all() and _norm(spp.vel_ecef_m_s) > o.takeoff_speed_m_s:
         log.info("%s: take-off detected (%.2f m/s), leaving static mode", rover.time, np.linalg.norm(spp.vel_ecef_m_s))
         st.static = False
         st.p[3:6, 3:6] = np.eye(3) * o.initial_vel_sigma_m_s**2
@@ -938,7 +939,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         bas = _slots(base, nav.store, sats[1])
         st.base_cache = (base.time, bas)
     base_pos = np.asarray(base_pos_ecef_m, float)
-    st.baseline_m = float(np.linalg.norm(st.x[:3] - base_pos)) if st.initialized else 0.0
+    st.baseline_m = _norm(st.x[:3] - base_pos) if st.initialized else 0.0
 
     dt = rover.time.diff_s(st.time) if st.time is not None else 0.0
     _udstate(st, dt, spp.pos_ecef_m, spp.vel_ecef_m_s, base_pos)
@@ -991,7 +992,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             break
         # innovation gating with the innovation covariance (the one the update then uses)
         innov = _innovation(st.p, dd.h, dd.r)
-        norm = np.abs(dd.v) / np.sqrt(np.diag(innov[-1]))
+        norm = np.abs(dd.v) / np.sqrt(innov[-1].diagonal())
         bad = norm > 6.0
         bad &= ~((dd.kind == 0) & (np.abs(dd.v) < o.max_innovation_phase_m * 0.1))
         if not bad.any():
@@ -1028,7 +1029,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             rov.dop_hz[slot] = np.nan
     st.x, st.p = x_post, p_post
     ns = int(use_phase.sum())
-    if dd is None or ns < 2 or not np.any(dd.kind == 0):
+    if dd is None or ns < 2 or not (dd.kind == 0).any():
         # no phase double differences at all: report the filter position as float only if it is constrained
         return _solution(t_sol, st.x[:3], st.x[3:6], Q_FLOAT if ns >= 2 else Q_SINGLE, ns, st.p[:3, :3],
                          st.p[3:6, 3:6], age, 0.0)
@@ -1075,7 +1076,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         amb_var = st.p.diagonal()[NX0:NX0 + NSAT]
         # ambiguities seeded from a surveyed take-off point are known, not guessed from the code: no lock wait
         locked = (st.lock > o.min_lock_epochs) | st.known_amb
-        cand = use_phase & (el >= np.radians(o.ar_elmask_deg)) & ~half & locked & (amb_var > 0)
+        cand = use_phase & (el >= math.radians(o.ar_elmask_deg)) & ~half & locked & (amb_var > 0)
         fix = _resamb_lambda(st, st.x, st.p, cand, el, o.min_amb_dd, rover.time)
         for _retry in range(2):
             if fix is None:
