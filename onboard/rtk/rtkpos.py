@@ -15,6 +15,7 @@ State vector: x[0:3] rover position (ECEF m), x[3:6] velocity (m/s), x[6+prn-1] 
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass, field
@@ -267,14 +268,24 @@ def _process_noise(st: RtkState, dt: float, pos: Arr) -> Arr:
     o = st.options
     lat, lon, _ = ecef_to_llh(pos)
     rot = enu_rotation(lat, lon)
-    qa = rot.T @ np.diag([o.accel_h_sigma_m_s2**2, o.accel_h_sigma_m_s2**2, o.accel_v_sigma_m_s2**2]) @ rot
+    # Rᵀ·diag(σ²)·R with the diagonal product as a column scaling (the same numbers: one term per entry)
+    sig2 = np.array([o.accel_h_sigma_m_s2**2, o.accel_h_sigma_m_s2**2, o.accel_v_sigma_m_s2**2])
+    qa = (rot.T * sig2) @ rot
     adt = abs(dt)
-    q = np.zeros((NX0, NX0))
+    q = np.empty((NX0, NX0))
     q[:3, :3] = qa * adt**3 / 3.0
-    q[:3, 3:] = qa * dt * adt / 2.0  # negative when propagating backward in time
-    q[3:, :3] = qa * dt * adt / 2.0
+    q[:3, 3:] = q[3:, :3] = qa * dt * adt / 2.0  # negative when propagating backward in time
     q[3:, 3:] = qa * adt
     return q
+
+
+@functools.lru_cache(maxsize=8)
+def _transition(dt: float) -> Arr:
+    """Constant-velocity transition matrix of pos/vel over dt (s), read-only (the epoch interval repeats)."""
+    f = np.eye(NX0)
+    f[:3, 3:] = np.eye(3) * dt
+    f.flags.writeable = False
+    return f
 
 
 def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr | None = None) -> None:
@@ -297,8 +308,7 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
         st.p[3:6, 3:6] = np.eye(3) * (1e-8 if st.static else o.initial_vel_sigma_m_s**2)
         st.initialized = True
         return
-    f = np.eye(NX0)
-    f[:3, 3:] = np.eye(3) * dt
+    f = _transition(dt)
     st.x[:NX0] = f @ st.x[:NX0]
     st.p[:NX0, :] = f @ st.p[:NX0, :]
     st.p[:, :NX0] = st.p[:, :NX0] @ f.T
@@ -311,9 +321,8 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
         st.p[:3, :] = 0.0
         st.p[:, :3] = 0.0
         st.p[:3, :3] = np.eye(3) * o.initial_pos_sigma_m**2
-    amb = np.arange(NX0, NX)
-    active = st.p[amb, amb] > 0
-    st.p[amb[active], amb[active]] += bias_process_noise_cyc2_s(o, st.x[:3], base_pos) * abs(dt)
+    active = NX0 + (st.p.diagonal()[NX0:NX0 + NSAT] > 0).nonzero()[0]
+    st.p[active, active] += bias_process_noise_cyc2_s(o, st.x[:3], base_pos) * abs(dt)
 
 
 def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, rng_b: Arr, los_r: Arr, el: Arr,
