@@ -24,8 +24,7 @@ def saastamoinen_m(lat_rad: float, h_m: float, el_rad: Arr, humidity: float = 0.
     and `h_m` may be (k, 1) for k receivers, `el_rad` (k, n) (a row each)."""
     el = np.asarray(el_rad, dtype=float)
     if np.ndim(h_m):
-        return np.array([saastamoinen_m(float(a), float(h), row, humidity)
-                         for a, h, row in zip(np.ravel(lat_rad), np.ravel(h_m), el)]).reshape(el.shape)
+        return _saastamoinen_rows(np.ravel(lat_rad).astype(float), np.ravel(h_m).astype(float), el, humidity)
     out = np.zeros_like(el)
     if h_m < -100.0 or h_m > 1e4:
         return out
@@ -38,6 +37,26 @@ def saastamoinen_m(lat_rad: float, h_m: float, el_rad: Arr, humidity: float = 0.
     cz = np.cos(z[ok])
     trph = 0.0022768 * pres / (1.0 - 0.00266 * np.cos(2.0 * lat_rad) - 0.00028 * hgt / 1e3) / cz
     trpw = 0.002277 * (1255.0 / temp + 0.05) * e / cz
+    out[ok] = trph + trpw
+    return out
+
+
+def _saastamoinen_rows(lat: Arr, h: Arr, el: Arr, humidity: float) -> Arr:
+    """saastamoinen_m of k receivers at once (latitudes, heights (k,), elevations (k, n)): the scalar formula's
+    operations in the same order per element (the pressure's power per receiver in Python floats, as there), in
+    a few array operations instead of k calls (the SPP batch evaluates every epoch's troposphere)."""
+    out = np.zeros_like(el)
+    hgt = np.maximum(h, 0.0)
+    pres = np.array([1013.25 * (1.0 - 2.2557e-5 * x) ** 5.2568 for x in hgt.tolist()])
+    temp = 15.0 - 6.5e-3 * hgt + 273.16
+    e = 6.108 * humidity * np.exp((17.15 * temp - 4684.0) / (temp - 38.45))
+    ok = (el > 0) & ((h >= -100.0) & (h <= 1e4))[:, None]
+    if not ok.any():
+        return out
+    cz = np.cos(np.pi / 2.0 - el[ok])
+    row = np.nonzero(ok)[0]
+    trph = (0.0022768 * pres / (1.0 - 0.00266 * np.cos(2.0 * lat) - 0.00028 * hgt / 1e3))[row] / cz
+    trpw = (0.002277 * (1255.0 / temp + 0.05) * e)[row] / cz
     out[ok] = trph + trpw
     return out
 
