@@ -119,8 +119,9 @@ class CodeScatter:
                restart: npt.NDArray[np.bool_], dt_s: float) -> None:
         """Add one epoch: `cmc_m` SD code − λ·phase per slot (m), `model_var_m2` the SD code variance the
         filter uses, `ok` slots with both, `restart` slots whose phase arc starts afresh (slip, gap)."""
-        self.mean_m[restart | ~ok] = np.nan
-        self.count[restart | ~ok] = 0.0
+        gone = restart | ~ok
+        self.mean_m[gone] = np.nan
+        self.count[gone] = 0.0
         fresh = ok & ~np.isfinite(self.mean_m)
         self.mean_m[fresh] = cmc_m[fresh]
         self.count[fresh] = 1.0
@@ -129,7 +130,7 @@ class CodeScatter:
         upd = ok & ~fresh
         w = np.maximum(1.0 / (self.count[upd] + 1.0), w_time)
         dev = cmc_m - self.mean_m
-        if old.sum() >= 3:
+        if np.count_nonzero(old) >= 3:
             # deviation from a mean of n samples has variance σ²(1 + w) for weight w
             wo = np.maximum(1.0 / (self.count[old] + 1.0), w_time)
             r = median_of_few(dev[old] ** 2 / (model_var_m2[old] * (1.0 + wo))) / CHI2_1DOF_MEDIAN

@@ -15,6 +15,7 @@ ends only enter: the noise does not grow with the window, and a slow creep adds 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,7 +46,7 @@ class Displacement:
     @property
     def sigma_m(self) -> float:
         """3D standard deviation (m): √trace of the covariance."""
-        return float(np.sqrt(max(np.trace(self.cov_m2), 0.0)))
+        return math.sqrt(max(float(self.cov_m2.trace()), 0.0))
 
 
 def tdcp_displacement(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m: Arr, los_now: Arr,
@@ -64,7 +65,7 @@ def tdcp_displacement(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m:
     y = sd_now_m[k] - sd_then_m[k]
     e = los_now[k]
     var = 2.0 * var_sd_m2[k]
-    ref = int(np.argmin(var))  # the best-determined satellite (highest) as reference
+    ref = int(var.argmin())  # the best-determined satellite (highest) as reference
     others = np.arange(k.size) != ref
     dd_y = y[others] - y[ref]
     a = -(e[others] - e[ref])
@@ -73,7 +74,7 @@ def tdcp_displacement(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m:
     g = var[ref] / (1.0 + var[ref] * float(inv_d.sum()))
     aw = a.T * inv_d
     aw1 = aw.sum(axis=1)
-    normal = aw @ a - g * np.outer(aw1, aw1)
+    normal = aw @ a - g * (aw1[:, None] * aw1[None, :])  # np.outer's product without its wrapper
     rhs = aw @ dd_y - g * aw1 * float(inv_d @ dd_y)
     try:
         cov_u = np.linalg.inv(normal)
