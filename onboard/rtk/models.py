@@ -46,13 +46,14 @@ def _saastamoinen_rows(lat: Arr, h: Arr, el: Arr, humidity: float) -> Arr:
     operations in the same order per element (the pressure's power per receiver in Python floats, as there), in
     a few array operations instead of k calls (the SPP batch evaluates every epoch's troposphere)."""
     out = np.zeros_like(el)
-    hgt = np.maximum(h, 0.0)
+    inside = ~((h < -100.0) | (h > 1e4))  # the scalar formula's range (a NaN height goes on, as there)
+    ok = (el > 0) & inside[:, None]
+    if not ok.any():
+        return out
+    hgt = np.maximum(np.where(inside, h, 0.0), 0.0)  # rows outside stay 0 (no overflow computing them)
     pres = np.array([1013.25 * (1.0 - 2.2557e-5 * x) ** 5.2568 for x in hgt.tolist()])
     temp = 15.0 - 6.5e-3 * hgt + 273.16
     e = 6.108 * humidity * np.exp((17.15 * temp - 4684.0) / (temp - 38.45))
-    ok = (el > 0) & ((h >= -100.0) & (h <= 1e4))[:, None]
-    if not ok.any():
-        return out
     cz = np.cos(np.pi / 2.0 - el[ok])
     row = np.nonzero(ok)[0]
     trph = (0.0022768 * pres / (1.0 - 0.00266 * np.cos(2.0 * lat) - 0.00028 * hgt / 1e3))[row] / cz
