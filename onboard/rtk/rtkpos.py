@@ -321,8 +321,9 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
         st.p[:3, :] = 0.0
         st.p[:, :3] = 0.0
         st.p[:3, :3] = np.eye(3) * o.initial_pos_sigma_m**2
-    active = NX0 + (st.p.diagonal()[NX0:NX0 + NSAT] > 0).nonzero()[0]
-    st.p[active, active] += bias_process_noise_cyc2_s(o, st.x[:3], base_pos) * abs(dt)
+    amb = np.arange(NX0, NX)
+    active = st.p[amb, amb] > 0
+    st.p[amb[active], amb[active]] += bias_process_noise_cyc2_s(o, st.x[:3], base_pos) * abs(dt)
 
 
 def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, rng_b: Arr, los_r: Arr, el: Arr,
