@@ -383,7 +383,7 @@ def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t
         if dtb <= 30.0:
             d = base_zb - st.prev_zb
             ok = np.isfinite(d) & common
-            if ok.sum() >= 3:
+            if np.count_nonzero(ok) >= 3:
                 d = d - median_of_few(d[ok])
                 # cycles: atmosphere/orbit changes grow with the gap. Half a cycle, not one: a 1-cycle base
                 # slip reads 1.0 ± millimetres and slipped under a 1.0 threshold (hil_sim seed 3, undetected
@@ -408,7 +408,7 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
             d = (rov.cp_cyc - st.prev_cp_r) + dop_avg * dt_all  # RINEX: phase follows range, Doppler = −rate
             d[~(np.abs(dt_all) <= 30.0)] = np.nan
             ok = np.isfinite(d) & common
-            if ok.sum() >= 2:
+            if np.count_nonzero(ok) >= 2:
                 # the receiver-clock part is common to all satellites: take it from those not flagged,
                 # a burst of flagged slips would otherwise corrupt it
                 # the clock part grows with the time since each satellite's last phase (a drift the
@@ -416,7 +416,7 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
                 # is compared over its own interval
                 clean = ok & ~slip
                 rate = d / np.where(ok, dt_all, 1.0)
-                d = d - median_of_few(rate[clean] if clean.sum() >= 2 else rate[ok]) * dt_all
+                d = d - median_of_few(rate[clean] if np.count_nonzero(clean) >= 2 else rate[ok]) * dt_all
                 # a held set absorbs a missed slip (wrong fixes): tighter then; before a fix a false alarm
                 # only restarts a float
                 thr_cyc = o.slip_threshold_held_cyc if st.held_prns.any() else o.slip_threshold_cyc
@@ -445,7 +445,7 @@ def _remember_base(st: RtkState, base: _Receiver, t_b: GpsTime, base_zb_cyc: Arr
         d = zb - z_l
         ok = np.isfinite(d)
         jump = ((base.lli & LLI_SLIP) != 0) & np.isfinite(zb)
-        if ok.sum() >= 3:
+        if np.count_nonzero(ok) >= 3:
             d = d - median_of_few(d[ok])  # the base clock is common to every satellite
             jump |= ok & (np.abs(d) > 1.0 + 0.05 * dtb)  # as _detect_slips' base test
         for _t, z in hist:
@@ -476,14 +476,14 @@ def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver
     z = np.array([zk for _, zk in hist]) - hist[-1][1]  # relative to the newest epoch
     fin = np.isfinite(z)
     keep = fin.sum(axis=1) >= 3
-    if keep.sum() < 3:
+    if np.count_nonzero(keep) < 3:
         return base
     z, tk = z[keep], tk[keep]
     if -tk[0] < 0.5 * o.base_rate_window_s:
         return base
     z = z - np.array([median_of_few(row[np.isfinite(row)]) for row in z])[:, None]  # the base clock, common
     ok = np.all(np.isfinite(z), axis=0) & np.isfinite(base.cp_cyc)
-    if ok.sum() < 2:
+    if np.count_nonzero(ok) < 2:
         return base
     # least-squares slope over the window (a quadratic over 30 s followed the curvature better on hil_sim but
     # amplified the real M8P base's noise: 94.2 → 91.4 % fixed)
@@ -800,7 +800,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         ja = NX0 + idx
         d = _dd_matrix(idx, ref)
         a = d @ x[ja]
-        qa = d @ p[np.ix_(ja, ja)] @ d.T
+        qa = d @ p[ja[:, None], ja[None, :]] @ d.T  # np.ix_ without its per-call overhead
         qba = p[:3, ja] @ d.T
         try:
             res = mlambda(a, qa, ratio_cap=RATIO_CAP)
@@ -923,7 +923,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         return _solution(rover.time, st.x[:3] if st.initialized else np.zeros(3), nan3, Q_NONE, 0,
                          np.zeros((3, 3)), np.zeros((3, 3)), 0.0, 0.0)
     t_sol = rover.time.add_s(-spp.clock_bias_m / CLIGHT_M_S)
-    ns_spp = int(spp.used.sum())
+    ns_spp = int(np.count_nonzero(spp.used))
 
     def single(age: float) -> Solution:
         cov = np.eye(3) * (spp.gdop * 1.5) ** 2
@@ -1038,7 +1038,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         else:
             rov.dop_hz[slot] = np.nan
     st.x, st.p = x_post, p_post
-    ns = int(use_phase.sum())
+    ns = int(np.count_nonzero(use_phase))
     if dd is None or ns < 2 or not (dd.kind == 0).any():
         # no phase double differences at all: report the filter position as float only if it is constrained
         return _solution(t_sol, st.x[:3], st.x[3:6], Q_FLOAT if ns >= 2 else Q_SINGLE, ns, st.p[:3, :3],
