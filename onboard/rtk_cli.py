@@ -44,8 +44,8 @@ def _is_rinex(path: Path) -> bool:
 
 
 def read_observations(path: str | Path) -> ObsInput:
-    """RINEX observation file (GPS satellites only) or UBX log (journal file) → ObsInput. Raises InputError when
-    unusable."""
+    """RINEX observation file (GPS satellites only) or UBX log (journal file) → ObsInput. Raises InputError
+    when unusable."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file")

@@ -210,7 +210,8 @@ def _field_value(text: str, offset: int, k: int) -> float:
 
 def _iter_v3(path: Path, lines: list[str], start: int, hdr: RinexObsHeader,
              systems: str | None = None) -> Iterator[ObsEpoch]:
-    cols = {s: _column_indices(t, hdr.version) for s, t in hdr.obs_types.items() if systems is None or s in systems}
+    cols = {s: _column_indices(t, hdr.version) for s, t in hdr.obs_types.items()
+            if systems is None or s in systems}
     i = start
     while i < len(lines):
         line = lines[i]

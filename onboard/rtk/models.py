@@ -42,9 +42,10 @@ def saastamoinen_m(lat_rad: float, h_m: float, el_rad: Arr, humidity: float = 0.
 
 
 def _saastamoinen_rows(lat: Arr, h: Arr, el: Arr, humidity: float) -> Arr:
-    """saastamoinen_m of k receivers at once (latitudes, heights (k,), elevations (k, n)): the scalar formula's
-    operations in the same order per element (the pressure's power per receiver in Python floats, as there), in
-    a few array operations instead of k calls (the SPP batch evaluates every epoch's troposphere)."""
+    """saastamoinen_m of k receivers at once (latitudes, heights (k,), elevations (k, n)): the scalar
+    formula's operations in the same order per element (the pressure's power per receiver in Python floats,
+    as there), in a few array operations instead of k calls (the SPP batch evaluates every epoch's
+    troposphere)."""
     out = np.zeros_like(el)
     inside = ~((h < -100.0) | (h > 1e4))  # the scalar formula's range (a NaN height goes on, as there)
     ok = (el > 0) & inside[:, None]

@@ -610,8 +610,9 @@ class _DD:
 
 
 def _var_sd_m2(o: RtkOptions, rov: _Receiver, el: Arr) -> Arr:
-    """Single-difference phase variance (m²) per slot, 2·phase_variance_m2(el), memoised on the rover epoch: the
-    same elevations serve the code scatter, the standstill test and every _ddres call of the epoch. Read-only."""
+    """Single-difference phase variance (m²) per slot, 2·phase_variance_m2(el), memoised on the rover epoch:
+    the same elevations serve the code scatter, the standstill test and every _ddres call of the epoch.
+    Read-only."""
     key = ("var_sd", el.tobytes())
     hit = rov.memo.get(key)
     if hit is None:
@@ -625,7 +626,8 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
            code_ok: npt.NDArray[np.bool_], el: Arr, with_doppler: bool, trop_r: Arr,
            jacobian: bool = True) -> tuple[_DD, Arr]:
     """Double-difference residuals at state `x` (RTKLIB ddres): phase, code, rover Doppler between satellites.
-    `jacobian=False` for a residual test alone (_valid_residuals): the design matrix H is left empty (nrow, 0)."""
+    `jacobian=False` for a residual test alone (_valid_residuals): the design matrix H is left empty,
+    shape (nrow, 0)."""
     o = st.options
     rng_r, e = _range_with_trop_m(rov, x[:3], trop_r)
     var_sd = _var_sd_m2(o, rov, el)
