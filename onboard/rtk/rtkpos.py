@@ -931,7 +931,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         cov = np.eye(3) * (spp.gdop * 1.5) ** 2
         return _solution(t_sol, spp.pos_ecef_m, spp.vel_ecef_m_s, Q_SINGLE, ns_spp, cov, np.eye(3) * 0.01, age, 0.0)
 
-    if st.static and np.isfinite(spp.vel_ecef_m_s).all() and _norm(spp.vel_ecef_m_s) > o.takeoff_speed_m_s:
+    if st.static and np.all(np.isfinite(spp.vel_ecef_m_s)) and np.linalg.norm(spp.vel_ecef_m_s) > o.takeoff_speed_m_s:
         log.info("%s: take-off detected (%.2f m/s), leaving static mode", rover.time, np.linalg.norm(spp.vel_ecef_m_s))
         st.static = False
         st.p[3:6, 3:6] = np.eye(3) * o.initial_vel_sigma_m_s**2
