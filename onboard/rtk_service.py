@@ -54,13 +54,13 @@ from onboard.rtk.options import RtkOptions
 from onboard.rtk.rtkpos import Nav, rtk_init, rtk_pos
 from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, Ephemeris, ObsEpoch, Solution
 from onboard.settings import Settings
+from onboard.status import RTK_STATUS_NAME
 
 log = logging.getLogger(__name__)
 
 Arr = npt.NDArray[np.float64]
 RADIO_DIR = "radio"
 SOLUTION_NAME = "solution.pos"
-RTK_STATUS_NAME = "rtk.json"
 GAP_NO_WAIT_S = 2.0
 """Base data this much (s) later than its own interval are in a radio gap: the engine stops waiting for them."""
 

@@ -15,6 +15,8 @@ from pathlib import Path
 from typing import Any
 
 STATUS_SCHEMA = "directgeo-status/1"
+RTK_STATUS_NAME = "rtk.json"
+"""The real-time RTK snapshot (`onboard.rtk_service.RtkStatus`), written beside the recorder's status snapshot."""
 STATES = ("starting", "recording", "port_lost", "disk_full", "stopped", "error")
 CONFIG_STATES = ("disabled", "pending", "detecting", "configuring", "verified", "failed")
 
@@ -96,4 +98,16 @@ def read_status(path: Path) -> dict[str, Any]:
     obj = json.loads(Path(path).read_bytes())
     if not isinstance(obj, dict) or obj.get("schema") != STATUS_SCHEMA:
         raise ValueError(f"{path} is not a {STATUS_SCHEMA} snapshot")
+    return obj
+
+
+def read_rtk_status(status_path: Path) -> dict[str, Any] | None:
+    """The real-time RTK snapshot beside the status snapshot at `status_path`, None when the daemon runs no RTK
+    (no file). Raises ValueError when the file is there but is not a JSON object (half-written by a foreign tool)."""
+    try:
+        obj = json.loads(Path(status_path).with_name(RTK_STATUS_NAME).read_bytes())
+    except FileNotFoundError:
+        return None
+    if not isinstance(obj, dict):
+        raise ValueError(f"{RTK_STATUS_NAME} is not a JSON object")
     return obj

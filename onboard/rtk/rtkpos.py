@@ -126,9 +126,11 @@ class RtkState:
     first: the per-satellite correction rate that bridges a radio gap (see _extrapolated_base)."""
     last_ratio: float = 0.0
     clock_bias_m: float = 0.0
-    pending_fix: tuple[tuple, GpsTime, int] | None = None
+    pending_fix: tuple[tuple, GpsTime, int, GpsTime, float] | None = None
     """Integer set (ref, slots, DD integers) winning the ratio test without a held set to lean on, since when,
-    and at how many consecutive epochs."""
+    at how many consecutive epochs, its last win, and how far it has settled (1 = settled_fix_span_s static)."""
+    moving: bool = False
+    """The rover's Doppler speed exceeds takeoff_speed_m_s at this epoch (its code multipath decorrelates)."""
     pending_slip: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
     """Rover slips detected while no base data was usable, applied at the next relative epoch."""
     code_scatter: CodeScatter = field(default_factory=CodeScatter)
@@ -833,10 +835,14 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             full = _drop == 0
             key = (ref, tuple(others.tolist()), tuple(np.rint(res.fixed[:, 0]).astype(int).tolist()))
             if st.pending_fix is None or st.pending_fix[0] != key:
-                st.pending_fix = (key, t, 0)
-            st.pending_fix = (key, st.pending_fix[1], st.pending_fix[2] + 1)
-            span = abs(t.diff_s(st.pending_fix[1]))
-            settled = o.settled_fix_span_s > 0 and span >= o.settled_fix_span_s
+                st.pending_fix = (key, t, 0, t, 0.0)
+            _, since, wins, last, progress = st.pending_fix
+            if o.settled_fix_span_s > 0:
+                # the code multipath the float leans on decorrelates within seconds once the rover moves
+                progress += abs(t.diff_s(last)) / (o.settled_fix_span_moving_s if st.moving else o.settled_fix_span_s)
+            st.pending_fix = (key, since, wins + 1, t, progress)
+            span = abs(t.diff_s(since))
+            settled = o.settled_fix_span_s > 0 and progress >= 1.0 - 1e-9
             # correlated code multipath biases the float for about its correlation time: clean code waits less
             need_span = max(o.confirm_fix_span_min_s, o.confirm_fix_span_s * st.code_var_scale)
             cs = st.code_scatter
@@ -931,7 +937,8 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         cov = np.eye(3) * (spp.gdop * 1.5) ** 2
         return _solution(t_sol, spp.pos_ecef_m, spp.vel_ecef_m_s, Q_SINGLE, ns_spp, cov, np.eye(3) * 0.01, age, 0.0)
 
-    if st.static and np.all(np.isfinite(spp.vel_ecef_m_s)) and np.linalg.norm(spp.vel_ecef_m_s) > o.takeoff_speed_m_s:
+    st.moving = bool(np.all(np.isfinite(spp.vel_ecef_m_s)) and np.linalg.norm(spp.vel_ecef_m_s) > o.takeoff_speed_m_s)
+    if st.static and st.moving:
         log.info("%s: take-off detected (%.2f m/s), leaving static mode", rover.time, np.linalg.norm(spp.vel_ecef_m_s))
         st.static = False
         st.p[3:6, 3:6] = np.eye(3) * o.initial_vel_sigma_m_s**2

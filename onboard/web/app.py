@@ -12,7 +12,7 @@ from typing import Any
 from fastapi import FastAPI
 from fastapi.responses import HTMLResponse
 
-from onboard.status import read_status
+from onboard.status import read_rtk_status, read_status
 from onboard.web.checks import PreflightOptions, checks_json, overall, preflight_checks
 
 log = logging.getLogger(__name__)
@@ -48,8 +48,15 @@ def create_app(status_path: Path | None = None, options: PreflightOptions | None
     def preflight() -> dict[str, Any]:
         """Checks derived from the current snapshot, their overall level, and the snapshot itself."""
         status, error = _load(status_path)
-        checks = preflight_checks(status, time.time_ns(), options)
-        return {"overall": overall(checks), "checks": checks_json(checks), "status": status, "error": error}
+        rtk = None
+        if status is not None:
+            try:
+                rtk = read_rtk_status(status_path)
+            except (ValueError, OSError) as exc:  # a torn or foreign rtk.json: say so, keep the other checks
+                rtk = {"unreadable": str(exc)}
+        checks = preflight_checks(status, time.time_ns(), options, rtk)
+        return {"overall": overall(checks), "checks": checks_json(checks), "status": status, "rtk": rtk,
+                "error": error}
 
     @app.get("/api/status")
     def status() -> dict[str, Any]:

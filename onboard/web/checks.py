@@ -17,6 +17,10 @@ class PreflightOptions:
     min_cn0_dbhz: float = 35.0
     epoch_stale_after_s: float = 5.0
     disk_margin_bytes: int = 500 * 1024 * 1024
+    rtk_max_age_s: float = 30.0
+    """Base corrections older than this (s) cannot be fixed (the RTK engine's max_age_s): the radio link is down."""
+    rtk_lag_s: float = 5.0
+    """Real-time RTK solutions this far (s) behind the receiver's newest epoch: the engine is stalled or overloaded."""
 
 
 @dataclass(frozen=True)
@@ -29,9 +33,13 @@ class Check:
 
 
 def preflight_checks(
-    status: dict[str, Any] | None, now_wall_ns: int, options: PreflightOptions | None = None
+    status: dict[str, Any] | None, now_wall_ns: int, options: PreflightOptions | None = None,
+    rtk: dict[str, Any] | None = None,
 ) -> list[Check]:
-    """Evaluate a status snapshot (as read from JSON) at wall time `now_wall_ns`; None = no snapshot at all."""
+    """Evaluate a status snapshot (as read from JSON) at wall time `now_wall_ns`; None = no snapshot at all.
+
+    `rtk` is the real-time RTK snapshot (`rtk.json`, `onboard.rtk_service.RtkStatus.to_json`) when the daemon
+    runs RTK against a base stream, None otherwise (no RTK line: the trajectory is computed on the ground)."""
     options = options or PreflightOptions()
     if status is None:
         return [Check("recorder", FAIL, "no status snapshot: is the recorder running?")]
@@ -80,7 +88,55 @@ def preflight_checks(
     marks = int(status.get("time_marks") or 0)
     checks.append(Check("camera time marks", OK if marks > 0 else WARN,
                         f"{marks} flash marks" + ("" if marks else ": fire one test shot before take-off")))
+    if rtk is not None:
+        try:
+            checks.append(rtk_check(rtk, status, options))
+        except (TypeError, ValueError, AttributeError) as exc:  # a foreign or damaged rtk.json
+            checks.append(Check("RTK", WARN, f"RTK status malformed: {exc}"))
     return checks
+
+
+def _gpst_s(text: Any) -> float | None:
+    """Seconds since the GPS epoch of a "week:tow" string (GpsTime.__str__), None if absent or malformed."""
+    try:
+        week, tow = str(text).split(":")
+        return int(week) * 604800.0 + float(tow)
+    except (TypeError, ValueError):
+        return None
+
+
+def rtk_check(rtk: dict[str, Any], status: dict[str, Any], options: PreflightOptions) -> Check:
+    """The "RTK" line: fixed is ok; float, stale corrections or a stalled engine are warnings, since the flight
+    can still be processed on the ground from the journals, but the pilot should know before take-off."""
+    if rtk.get("unreadable"):
+        return Check("RTK", WARN, f"RTK status unreadable: {rtk['unreadable']}")
+    if not rtk.get("running"):
+        return Check("RTK", WARN, f"real-time RTK not running ({int(rtk.get('errors') or 0)} errors, "
+                                  f"{int(rtk.get('restarts') or 0)} restarts): the ground will post-process")
+    if not rtk.get("radio_open"):
+        return Check("RTK", WARN, f"base radio closed: {rtk.get('radio_error') or 'unknown'}")
+    if not int(rtk.get("base_epochs") or 0):
+        return Check("RTK", WARN, f"no base corrections yet ({int(rtk.get('radio_bytes') or 0)} radio bytes): "
+                                  "is the base station on?")
+    rover_s, rtk_s = _gpst_s(status.get("last_epoch_gpst")), _gpst_s(rtk.get("last_gpst"))
+    if rover_s is not None and (rtk_s is None or rover_s - rtk_s > options.rtk_lag_s):
+        behind = "no solution yet" if rtk_s is None else f"{rover_s - rtk_s:.0f} s behind the receiver"
+        return Check("RTK", WARN, f"RTK engine {behind} ({int(rtk.get('dropped_epochs') or 0)} epochs dropped)")
+    age = rtk.get("age_s")
+    if age is None or float(age) > options.rtk_max_age_s:
+        old = "of unknown age" if age is None else f"{float(age):.0f} s old"
+        return Check("RTK", WARN, f"base corrections {old}: radio link down?")
+    ns, ratio = int(rtk.get("ns") or 0), float(rtk.get("ratio") or 0.0)
+    baseline = rtk.get("baseline_m")
+    where = f", baseline {float(baseline) / 1000:.2f} km" if baseline is not None else ""
+    if int(rtk.get("q") or 0) == 1:  # RTKLIB's Q: 1 fix, 2 float, 5 single
+        ttff = rtk.get("ttff_s")
+        first = f", first fix after {float(ttff):.0f} s" if ttff is not None else ""
+        return Check("RTK", OK, f"fixed: ratio {ratio:.1f}, {ns} satellites{where}{first}")
+    # a cold start waits out the u-blox code multipath (correlated over ~30 s while static): hil_sim's
+    # calibrated flights first fix after 9-125 s on the ground; airborne epochs before it are float
+    return Check("RTK", WARN, f"not fixed yet (ratio {ratio:.1f}, {ns} satellites{where}): wait for the fix "
+                              "before take-off")
 
 
 def overall(checks: list[Check]) -> str:

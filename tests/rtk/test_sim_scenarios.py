@@ -129,6 +129,23 @@ def test_a_cold_start_fixes_when_the_right_set_keeps_winning_against_an_overconf
     assert r["first fix s"] <= 90.0 and r["air fix %"] >= 95.0 and r["3D RMS cm"] <= 2.0
 
 
+def test_a_cold_start_settles_faster_once_the_rover_flies() -> None:
+    # seed 2: the float is 2.2-2.9 m off through the 60 s on the ground (static code multipath, σ of a few
+    # decimetres); the right full set wins the ratio test from 65 s on, after take-off, and the float rejects
+    # it. Counted at the static rate (settled_fix_span_s, 60 s) it fixes at 125 s; in flight, where the code
+    # multipath decorrelates within seconds, it settles in settled_fix_span_moving_s (30 s): 96 s
+    from dataclasses import replace
+
+    from hil_sim.rtk_scenarios import SimCase, evaluate
+    from onboard.rtk.options import RtkOptions
+
+    case = SimCase("test", "", duration_s=200.0, seed=2)
+    r = evaluate(case, "m8t")
+    assert r["wrong"] == 0 and 90.0 <= r["first fix s"] <= 100.0
+    static_rate = evaluate(case, "m8t", replace(RtkOptions(), settled_fix_span_moving_s=60.0))
+    assert static_rate["first fix s"] >= 120.0 and static_rate["wrong"] == 0
+
+
 def test_a_partial_set_at_5_km_waits_longer_for_its_confirmation() -> None:
     # seed 7: a partial set 1.5 m off won the ratio test (3.1-3.5) for 30 s and was fixed for 3 epochs; the
     # differential ionosphere keeps a u-blox float off for minutes: 6 s per km more (confirm_fix_span_per_km_s)

@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 import uvicorn
 
-from onboard.status import SatelliteStatus, StatusSnapshot, write_status
+from onboard.rtk_service import RtkStatus, write_rtk_status
+from onboard.status import RTK_STATUS_NAME, SatelliteStatus, StatusSnapshot, write_status
 from onboard.web.app import create_app
 from onboard.web.checks import FAIL, OK, WARN, overall, preflight_checks
 
@@ -64,6 +65,51 @@ def test_each_problem_is_named() -> None:
     assert lv["receiver link"] == FAIL and lv["recorder"] == FAIL
 
 
+def _rtk_fixed() -> RtkStatus:
+    """The real-time RTK snapshot of a rover fixed on the epoch the recorder saw last (`_healthy`)."""
+    return RtkStatus(running=True, radio_open=True, radio_bytes=52000, base_frames=400, base_epochs=120,
+                     epochs=120, fixed=80, float_=40, q=1, ratio=12.5, ns=9, age_s=0.8, baseline_m=420.0,
+                     last_gpst="1590:345600.992000000", ttff_s=38.0)
+
+
+def _rtk_level(rtk: RtkStatus | dict, now_ns: int) -> tuple[str, str]:
+    snap = rtk.to_json() if isinstance(rtk, RtkStatus) else rtk
+    (check,) = [c for c in preflight_checks(_healthy(now_ns).to_json(), now_ns, rtk=snap) if c.name == "RTK"]
+    return check.level, check.detail
+
+
+def test_rtk_line_only_when_the_daemon_runs_rtk() -> None:
+    now = time.time_ns()
+    assert "RTK" not in _levels(_healthy(now).to_json(), now)  # no rtk.json: the ground post-processes
+    checks = preflight_checks(_healthy(now).to_json(), now, rtk=_rtk_fixed().to_json())
+    assert overall(checks) == OK
+    level, detail = _rtk_level(_rtk_fixed(), now)
+    assert level == OK and "ratio 12.5" in detail and "9 satellites" in detail and "0.42 km" in detail
+
+
+def test_rtk_problems_are_warnings_with_their_cause() -> None:
+    """Float, a silent base, a dead radio, old corrections, a lagging or stopped engine: each says what it is
+    (a warning, not a no-go: the journals still let the ground compute the trajectory)."""
+    now = time.time_ns()
+    cases = {
+        "not fixed yet": dict(q=2, ratio=1.8),
+        "no base corrections yet": dict(base_epochs=0, q=5),
+        "base radio closed: device disappeared": dict(radio_open=False, radio_error="device disappeared"),
+        "base corrections 45 s old": dict(age_s=45.0, q=2),
+        "6 s behind the receiver": dict(last_gpst="1590:345594.992000000"),
+        "no solution yet": dict(last_gpst=None),
+        "not running (2 errors": dict(running=False, errors=2),
+    }
+    for expect, change in cases.items():
+        rtk = _rtk_fixed()
+        for k, v in change.items():
+            setattr(rtk, k, v)
+        level, detail = _rtk_level(rtk, now)
+        assert level == WARN and expect in detail, (change, detail)
+    level, detail = _rtk_level({**_rtk_fixed().to_json(), "ratio": "abc"}, now)
+    assert level == WARN and "malformed" in detail
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -106,6 +152,16 @@ def test_page_in_a_real_browser_follows_the_snapshot(live_page: tuple[str, Path]
         write_status(status_path, snap)
         page.wait_for_function("document.getElementById('overall').textContent === 'DO NOT FLY'", timeout=10000)
         assert "CFG-TP5.flags" in page.inner_text("#checks")
+        # the daemon runs RTK: its snapshot beside the status adds the RTK line, float → warnings
+        write_status(status_path, _healthy(time.time_ns()))
+        rtk = _rtk_fixed()
+        rtk.q, rtk.ratio = 2, 1.4
+        write_rtk_status(status_path.with_name(RTK_STATUS_NAME), rtk.to_json())
+        page.wait_for_function("document.getElementById('overall').textContent === 'CHECK WARNINGS'", timeout=10000)
+        assert "wait for the fix before take-off" in page.inner_text("#checks")
+        write_rtk_status(status_path.with_name(RTK_STATUS_NAME), _rtk_fixed().to_json())
+        page.wait_for_function("document.getElementById('overall').textContent === 'READY TO FLY'", timeout=10000)
+        assert "fixed: ratio 12.5" in page.inner_text("#checks")
         browser.close()
 
 
@@ -116,3 +172,19 @@ def test_api_survives_a_garbage_snapshot(live_page: tuple[str, Path]) -> None:
     status_path.write_text("{ not json")
     body = httpx.get(url + "/api/preflight", timeout=5).json()
     assert body["overall"] == FAIL and body["error"]
+
+
+def test_api_survives_a_garbage_rtk_snapshot(live_page: tuple[str, Path]) -> None:
+    """A torn rtk.json costs the RTK line its content, not the page: the other checks still come through."""
+    import httpx
+
+    url, status_path = live_page
+    write_status(status_path, _healthy(time.time_ns()))
+    status_path.with_name(RTK_STATUS_NAME).write_text('{"running": tr')
+    body = httpx.get(url + "/api/preflight", timeout=5).json()
+    levels = {c["name"]: c["level"] for c in body["checks"]}
+    assert levels["RTK"] == WARN and levels["recorder"] == OK
+    assert any("RTK status unreadable" in c["detail"] for c in body["checks"])
+    write_rtk_status(status_path.with_name(RTK_STATUS_NAME), _rtk_fixed().to_json())
+    body = httpx.get(url + "/api/preflight", timeout=5).json()
+    assert body["overall"] == OK and body["rtk"]["q"] == 1
