@@ -44,14 +44,17 @@ def _is_rinex(path: Path) -> bool:
 
 
 def read_observations(path: str | Path) -> ObsInput:
-    """RINEX observation file or UBX log (journal file) → ObsInput. Raises InputError when unusable."""
+    """RINEX observation file (GPS satellites only) or UBX log (journal file) → ObsInput. Raises InputError
+    when unusable."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
     if _is_rinex(path):
         from onboard.formats.rinex_obs import read_rinex_obs
 
-        rnx = read_rinex_obs(path)
+        # GPS alone: the engine is GPS L1, and parsing the other systems' fields was a quarter of the reading
+        # (M8P rover + RAWX base 0.065 -> 0.049 s CPU, with the GLW1 CORS base 0.091 -> 0.070 s)
+        rnx = read_rinex_obs(path, systems="G")
         return ObsInput(rnx.epochs, [], rnx.header.antenna_position_ecef_m(), "rinex")
     from onboard.convert import collect
     from onboard.receiver.decode import iter_file_bytes

@@ -208,8 +208,10 @@ def _field_value(text: str, offset: int, k: int) -> float:
         return math.nan
 
 
-def _iter_v3(path: Path, lines: list[str], start: int, hdr: RinexObsHeader) -> Iterator[ObsEpoch]:
-    cols = {s: _column_indices(t, hdr.version) for s, t in hdr.obs_types.items()}
+def _iter_v3(path: Path, lines: list[str], start: int, hdr: RinexObsHeader,
+             systems: str | None = None) -> Iterator[ObsEpoch]:
+    cols = {s: _column_indices(t, hdr.version) for s, t in hdr.obs_types.items()
+            if systems is None or s in systems}
     i = start
     while i < len(lines):
         line = lines[i]
@@ -246,7 +248,8 @@ def _iter_v3(path: Path, lines: list[str], start: int, hdr: RinexObsHeader) -> I
         yield b.build(gpst_from_calendar(year, mo, dd, hh, mi, round(sec * 1e9)))
 
 
-def _iter_v2(path: Path, lines: list[str], start: int, hdr: RinexObsHeader) -> Iterator[ObsEpoch]:
+def _iter_v2(path: Path, lines: list[str], start: int, hdr: RinexObsHeader,
+             systems: str | None = None) -> Iterator[ObsEpoch]:
     types = hdr.obs_types.get("G", [])
     ntypes = len(types)
     cols = _column_indices(types, hdr.version)
@@ -285,6 +288,8 @@ def _iter_v2(path: Path, lines: list[str], start: int, hdr: RinexObsHeader) -> I
         b = _EpochBuilder()
         for k, sat in enumerate(sats):
             sys_letter = sat[0] if sat[0] != " " else "G"
+            if systems is not None and sys_letter not in systems:
+                continue
             try:
                 prn = int(sat[1:3])
             except ValueError as exc:
@@ -297,18 +302,20 @@ def _iter_v2(path: Path, lines: list[str], start: int, hdr: RinexObsHeader) -> I
         yield b.build(gpst_from_calendar(year, mo, dd, hh, mi, round(sec * 1e9)))
 
 
-def read_rinex_obs(path: str | Path) -> RinexObsFile:
+def read_rinex_obs(path: str | Path, systems: str | None = None) -> RinexObsFile:
     """Read a RINEX 2.1x or 3.0x observation file (gzip accepted) into a header and a list of epochs.
 
-    Raises `InputError` naming the file and line for anything unreadable.
+    `systems`: the RINEX system letters whose satellites are kept (e.g. "G"), None for all; the others' fields
+    are not parsed (an epoch of theirs alone stays, empty). Raises `InputError` naming the file and line for
+    anything unreadable.
     """
     path = Path(path)
     lines = read_text_lines(path, "observation file")
     hdr, start = _parse_header(path, lines)
     if hdr.version >= 3.0:
-        epochs = list(_iter_v3(path, lines, start, hdr))
+        epochs = list(_iter_v3(path, lines, start, hdr, systems))
     else:
         if not hdr.obs_types.get("G"):
             raise InputError(f"{path}: no '# / TYPES OF OBSERV' in the header")
-        epochs = list(_iter_v2(path, lines, start, hdr))
+        epochs = list(_iter_v2(path, lines, start, hdr, systems))
     return RinexObsFile(header=hdr, epochs=epochs)

@@ -223,7 +223,9 @@ class LambdaResult:
     def success_rate(self) -> float:
         """Bootstrapped success rate Π(2Φ(1/(2√Dᵢ))−1), a sharp lower bound of the ILS success rate
         (Teunissen 1998); computed in the decorrelated space."""
-        return float(np.prod([math.erf(1.0 / (2.0 * math.sqrt(2.0 * d))) for d in self.cond_var]))
+        # math.prod: the sequential product np.prod gives for these few factors (checked to the bit), without
+        # building an array
+        return math.prod([math.erf(1.0 / (2.0 * math.sqrt(2.0 * d))) for d in self.cond_var.tolist()])
 
     @property
     def ratio(self) -> float:

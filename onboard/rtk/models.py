@@ -24,8 +24,7 @@ def saastamoinen_m(lat_rad: float, h_m: float, el_rad: Arr, humidity: float = 0.
     and `h_m` may be (k, 1) for k receivers, `el_rad` (k, n) (a row each)."""
     el = np.asarray(el_rad, dtype=float)
     if np.ndim(h_m):
-        return np.array([saastamoinen_m(float(a), float(h), row, humidity)
-                         for a, h, row in zip(np.ravel(lat_rad), np.ravel(h_m), el)]).reshape(el.shape)
+        return _saastamoinen_rows(np.ravel(lat_rad).astype(float), np.ravel(h_m).astype(float), el, humidity)
     out = np.zeros_like(el)
     if h_m < -100.0 or h_m > 1e4:
         return out
@@ -38,6 +37,28 @@ def saastamoinen_m(lat_rad: float, h_m: float, el_rad: Arr, humidity: float = 0.
     cz = np.cos(z[ok])
     trph = 0.0022768 * pres / (1.0 - 0.00266 * np.cos(2.0 * lat_rad) - 0.00028 * hgt / 1e3) / cz
     trpw = 0.002277 * (1255.0 / temp + 0.05) * e / cz
+    out[ok] = trph + trpw
+    return out
+
+
+def _saastamoinen_rows(lat: Arr, h: Arr, el: Arr, humidity: float) -> Arr:
+    """saastamoinen_m of k receivers at once (latitudes, heights (k,), elevations (k, n)): the scalar
+    formula's operations in the same order per element (the pressure's power per receiver in Python floats,
+    as there), in a few array operations instead of k calls (the SPP batch evaluates every epoch's
+    troposphere)."""
+    out = np.zeros_like(el)
+    inside = ~((h < -100.0) | (h > 1e4))  # the scalar formula's range (a NaN height goes on, as there)
+    ok = (el > 0) & inside[:, None]
+    if not ok.any():
+        return out
+    hgt = np.maximum(np.where(inside, h, 0.0), 0.0)  # rows outside stay 0 (no overflow computing them)
+    pres = np.array([1013.25 * (1.0 - 2.2557e-5 * x) ** 5.2568 for x in hgt.tolist()])
+    temp = 15.0 - 6.5e-3 * hgt + 273.16
+    e = 6.108 * humidity * np.exp((17.15 * temp - 4684.0) / (temp - 38.45))
+    cz = np.cos(np.pi / 2.0 - el[ok])
+    row = np.nonzero(ok)[0]
+    trph = (0.0022768 * pres / (1.0 - 0.00266 * np.cos(2.0 * lat) - 0.00028 * hgt / 1e3))[row] / cz
+    trpw = (0.002277 * (1255.0 / temp + 0.05) * e)[row] / cz
     out[ok] = trph + trpw
     return out
 
@@ -100,8 +121,9 @@ class CodeScatter:
                restart: npt.NDArray[np.bool_], dt_s: float) -> None:
         """Add one epoch: `cmc_m` SD code − λ·phase per slot (m), `model_var_m2` the SD code variance the
         filter uses, `ok` slots with both, `restart` slots whose phase arc starts afresh (slip, gap)."""
-        self.mean_m[restart | ~ok] = np.nan
-        self.count[restart | ~ok] = 0.0
+        gone = restart | ~ok
+        self.mean_m[gone] = np.nan
+        self.count[gone] = 0.0
         fresh = ok & ~np.isfinite(self.mean_m)
         self.mean_m[fresh] = cmc_m[fresh]
         self.count[fresh] = 1.0
@@ -110,7 +132,7 @@ class CodeScatter:
         upd = ok & ~fresh
         w = np.maximum(1.0 / (self.count[upd] + 1.0), w_time)
         dev = cmc_m - self.mean_m
-        if old.sum() >= 3:
+        if np.count_nonzero(old) >= 3:
             # deviation from a mean of n samples has variance σ²(1 + w) for weight w
             wo = np.maximum(1.0 / (self.count[old] + 1.0), w_time)
             r = median_of_few(dev[old] ** 2 / (model_var_m2[old] * (1.0 + wo))) / CHI2_1DOF_MEDIAN

@@ -50,12 +50,23 @@ def sat_az_el(rcv_ecef_m: Arr, e_ecef: Arr, llh: Arr | None = None) -> tuple[Arr
     `llh` = ecef_to_llh(rcv_ecef_m) when the caller already has it (saves the conversion), (k,3) for k."""
     if e_ecef.ndim == 3:
         lat_lon = np.array([ecef_to_llh(p) for p in rcv_ecef_m]) if llh is None else llh
-        enu = e_ecef @ np.stack([enu_rotation(a, b).T for a, b, _ in lat_lon.tolist()])
+        enu = e_ecef @ _enu_rotations_t(lat_lon[:, 0], lat_lon[:, 1])
     else:
         lat, lon, _ = ecef_to_llh(rcv_ecef_m) if llh is None else llh
         enu = e_ecef @ enu_rotation(lat, lon).T
     up = np.minimum(np.maximum(enu[..., 2], -1.0), 1.0)  # np.clip to the bit, without its dispatch overhead
     return np.arctan2(enu[..., 0], enu[..., 1]) % (2 * np.pi), np.arcsin(up)
+
+
+def _enu_rotations_t(lat_rad: Arr, lon_rad: Arr) -> Arr:
+    """enu_rotation(lat, lon).T of k receivers (k, 3, 3) from four array sines/cosines instead of k calls."""
+    sl, cl = np.sin(lat_rad), np.cos(lat_rad)
+    so, co = np.sin(lon_rad), np.cos(lon_rad)
+    rot = np.empty((lat_rad.shape[0], 3, 3))
+    rot[:, 0, 0], rot[:, 1, 0], rot[:, 2, 0] = -so, co, 0.0
+    rot[:, 0, 1], rot[:, 1, 1], rot[:, 2, 1] = -sl * co, -sl * so, cl
+    rot[:, 0, 2], rot[:, 1, 2], rot[:, 2, 2] = cl * co, cl * so, sl
+    return rot
 
 
 _MIN_WEIGHT_EL_RAD = float(np.radians(5.0))

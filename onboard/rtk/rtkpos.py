@@ -15,7 +15,9 @@ State vector: x[0:3] rover position (ECEF m), x[3:6] velocity (m/s), x[6+prn-1] 
 
 from __future__ import annotations
 
+import functools
 import logging
+import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -29,7 +31,7 @@ from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.mlambda import LambdaError, mlambda
 from onboard.rtk.models import CodeScatter, median_of_few, phase_variance_m2, saastamoinen_m
 from onboard.rtk.options import RtkOptions
-from onboard.rtk.pntpos import SppSolution, pntpos, pntpos_batch, sat_az_el
+from onboard.rtk.pntpos import SppSolution, _norm, pntpos, pntpos_batch, sat_az_el
 from onboard.rtk.standstill import StandstillMonitor
 from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP, Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, ObsEpoch, Solution
 
@@ -268,14 +270,24 @@ def _process_noise(st: RtkState, dt: float, pos: Arr) -> Arr:
     o = st.options
     lat, lon, _ = ecef_to_llh(pos)
     rot = enu_rotation(lat, lon)
-    qa = rot.T @ np.diag([o.accel_h_sigma_m_s2**2, o.accel_h_sigma_m_s2**2, o.accel_v_sigma_m_s2**2]) @ rot
+    # Rᵀ·diag(σ²)·R with the diagonal product as a column scaling (the same numbers: one term per entry)
+    sig2 = np.array([o.accel_h_sigma_m_s2**2, o.accel_h_sigma_m_s2**2, o.accel_v_sigma_m_s2**2])
+    qa = (rot.T * sig2) @ rot
     adt = abs(dt)
-    q = np.zeros((NX0, NX0))
+    q = np.empty((NX0, NX0))
     q[:3, :3] = qa * adt**3 / 3.0
-    q[:3, 3:] = qa * dt * adt / 2.0  # negative when propagating backward in time
-    q[3:, :3] = qa * dt * adt / 2.0
+    q[:3, 3:] = q[3:, :3] = qa * dt * adt / 2.0  # negative when propagating backward in time
     q[3:, 3:] = qa * adt
     return q
+
+
+@functools.lru_cache(maxsize=8)
+def _transition(dt: float) -> Arr:
+    """Constant-velocity transition matrix of pos/vel over dt (s), read-only (the epoch interval repeats)."""
+    f = np.eye(NX0)
+    f[:3, 3:] = np.eye(3) * dt
+    f.flags.writeable = False
+    return f
 
 
 def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr | None = None) -> None:
@@ -298,15 +310,14 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
         st.p[3:6, 3:6] = np.eye(3) * (1e-8 if st.static else o.initial_vel_sigma_m_s**2)
         st.initialized = True
         return
-    f = np.eye(NX0)
-    f[:3, 3:] = np.eye(3) * dt
+    f = _transition(dt)
     st.x[:NX0] = f @ st.x[:NX0]
     st.p[:NX0, :] = f @ st.p[:NX0, :]
     st.p[:, :NX0] = st.p[:, :NX0] @ f.T
     if not st.static:
         st.p[:NX0, :NX0] += _process_noise(st, dt, st.x[:3])
     # a filter that drifted far from the SPP solution is restarted on it (RTKLIB udpos's reset)
-    if np.linalg.norm(st.x[:3] - spp_pos) > 100.0 or st.p[0, 0] > 1e4:
+    if _norm(st.x[:3] - spp_pos) > 100.0 or st.p[0, 0] > 1e4:
         log.info("position state reset to SPP (%.1f m off)", np.linalg.norm(st.x[:3] - spp_pos))
         st.x[:3] = spp_pos
         st.p[:3, :] = 0.0
@@ -323,7 +334,7 @@ def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, 
     after this epoch's time update: motion re-opens the position at once, before the measurement update."""
     o = st.options
     sd = LAMBDA_L1_M * (rov.cp_cyc - bas.cp_cyc) - (rng_r - rng_b)
-    var = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m)
+    var = _var_sd_m2(o, rov, el)
     t_ns = t.total_ns
     disp = st.standstill.update(t_ns, sd, st.x[:3], los_r, var, st.lock, valid)
     if st.static:
@@ -358,7 +369,7 @@ def bias_process_noise_cyc2_s(o: RtkOptions, rover_pos: Arr, base_pos: Arr | Non
     q = o.bias_process_noise_cyc**2
     if base_pos is None or o.bias_process_noise_cyc_per_km <= 0.0:
         return q
-    bl_km = float(np.linalg.norm(np.asarray(rover_pos, float) - np.asarray(base_pos, float))) / 1000.0
+    bl_km = _norm(np.asarray(rover_pos, float) - np.asarray(base_pos, float)) / 1000.0
     return q + (o.bias_process_noise_cyc_per_km * bl_km) ** 2
 
 
@@ -374,7 +385,7 @@ def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t
         if dtb <= 30.0:
             d = base_zb - st.prev_zb
             ok = np.isfinite(d) & common
-            if ok.sum() >= 3:
+            if np.count_nonzero(ok) >= 3:
                 d = d - median_of_few(d[ok])
                 # cycles: atmosphere/orbit changes grow with the gap. Half a cycle, not one: a 1-cycle base
                 # slip reads 1.0 ± millimetres and slipped under a 1.0 threshold (hil_sim seed 3, undetected
@@ -394,12 +405,12 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
     if st.prev_time_r is not None:
         seen = st.last_t_r_ns != _NO_TIME_NS
         dt_all = np.where(seen, (t_r.total_ns - np.where(seen, st.last_t_r_ns, 0)) / 1e9, np.nan)
-        if np.any(np.isfinite(dt_all)):
+        if np.isfinite(dt_all).any():
             dop_avg = np.where(np.isfinite(st.prev_dop_r), 0.5 * (rov.dop_hz + st.prev_dop_r), rov.dop_hz)
             d = (rov.cp_cyc - st.prev_cp_r) + dop_avg * dt_all  # RINEX: phase follows range, Doppler = −rate
             d[~(np.abs(dt_all) <= 30.0)] = np.nan
             ok = np.isfinite(d) & common
-            if ok.sum() >= 2:
+            if np.count_nonzero(ok) >= 2:
                 # the receiver-clock part is common to all satellites: take it from those not flagged,
                 # a burst of flagged slips would otherwise corrupt it
                 # the clock part grows with the time since each satellite's last phase (a drift the
@@ -407,17 +418,17 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
                 # is compared over its own interval
                 clean = ok & ~slip
                 rate = d / np.where(ok, dt_all, 1.0)
-                d = d - median_of_few(rate[clean] if clean.sum() >= 2 else rate[ok]) * dt_all
+                d = d - median_of_few(rate[clean] if np.count_nonzero(clean) >= 2 else rate[ok]) * dt_all
                 # a held set absorbs a missed slip (wrong fixes): tighter then; before a fix a false alarm
                 # only restarts a float
                 thr_cyc = o.slip_threshold_held_cyc if st.held_prns.any() else o.slip_threshold_cyc
-                thr = thr_cyc * np.maximum(1.0, np.abs(np.nan_to_num(dt_all, nan=1.0)))
+                thr = thr_cyc * np.maximum(1.0, np.abs(dt_all))  # NaN (never seen) only where not ok
                 slip |= ok & (np.abs(d) > thr)
                 bridged = ok
         # a phase gap the Doppler could not bridge: receivers do not always flag a loss of lock inside the
         # gap (the Septentrio rover of GEONET 3034 comes back a whole cycle off with LLI 0), so the continuity
         # of such phase is unknown and its ambiguity starts afresh
-        amb_on = st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0
+        amb_on = st.p.diagonal()[NX0:NX0 + NSAT] > 0
         slip |= common & ~st.prev_phase_r & amb_on & ~bridged
     return slip
 
@@ -436,7 +447,7 @@ def _remember_base(st: RtkState, base: _Receiver, t_b: GpsTime, base_zb_cyc: Arr
         d = zb - z_l
         ok = np.isfinite(d)
         jump = ((base.lli & LLI_SLIP) != 0) & np.isfinite(zb)
-        if ok.sum() >= 3:
+        if np.count_nonzero(ok) >= 3:
             d = d - median_of_few(d[ok])  # the base clock is common to every satellite
             jump |= ok & (np.abs(d) > 1.0 + 0.05 * dtb)  # as _detect_slips' base test
         for _t, z in hist:
@@ -467,14 +478,14 @@ def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver
     z = np.array([zk for _, zk in hist]) - hist[-1][1]  # relative to the newest epoch
     fin = np.isfinite(z)
     keep = fin.sum(axis=1) >= 3
-    if keep.sum() < 3:
+    if np.count_nonzero(keep) < 3:
         return base
     z, tk = z[keep], tk[keep]
     if -tk[0] < 0.5 * o.base_rate_window_s:
         return base
     z = z - np.array([median_of_few(row[np.isfinite(row)]) for row in z])[:, None]  # the base clock, common
     ok = np.all(np.isfinite(z), axis=0) & np.isfinite(base.cp_cyc)
-    if ok.sum() < 2:
+    if np.count_nonzero(ok) < 2:
         return base
     # least-squares slope over the window (a quadratic over 30 s followed the curvature better on hil_sim but
     # amplified the real M8P base's noise: 94.2 → 91.4 % fixed)
@@ -526,7 +537,7 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
             if ok.sum() >= 3 and 0.0 < dt_r <= 2.0:
                 step = step - median_of_few(step[ok & ~cleared] if (ok & ~cleared).sum() >= 2 else step[ok])
                 slip = slip | (cleared & ok & (np.abs(step) > 0.25))
-    lost = (st.outage > o.max_outage_epochs) & (st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
+    lost = (st.outage > o.max_outage_epochs) & (st.p.diagonal()[NX0:NX0 + NSAT] > 0)
     reset = np.flatnonzero(lost | (slip & valid_phase))
     if reset.size:
         st.slips += int(np.count_nonzero(slip & valid_phase))
@@ -534,7 +545,7 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
     st.outage[valid_phase] = 0
     amb = NX0 + np.arange(NSAT)
     new = valid_phase & (st.p[amb, amb] <= 0)
-    if np.any(new):
+    if new.any():
         if st.init_pos_ecef_m is not None and st.fix_count == 0 and st.p[0, 0] <= (2 * o.init_pos_sigma_m) ** 2:
             sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b)) / LAMBDA_L1_M
             # phase − modelled range keeps the receivers' clock difference (0.5 ms = 150 km on hil_sim), which
@@ -570,13 +581,13 @@ def code_variance_scale(st: RtkState, rov: _Receiver, base: _Receiver, phase_ok:
     o = st.options
     cmc = (rov.pr_m - base.pr_m) - LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc)
     ok = phase_ok & np.isfinite(cmc)
-    var_code = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m) * o.code_phase_ratio**2
+    var_code = _var_sd_m2(o, rov, el) * o.code_phase_ratio**2
     with np.errstate(invalid="ignore"):
         st.code_scatter.update(np.where(ok, cmc, 0.0), var_code, ok, slip, dt)
     cs = st.code_scatter
     if o.code_scatter_reference <= 0.0 or cs.epochs < o.code_scatter_min_epochs or not np.isfinite(cs.ratio):
         return 1.0
-    return float(np.clip(cs.ratio / o.code_scatter_reference, o.code_variance_min_scale, 1.0))
+    return float(min(max(cs.ratio / o.code_scatter_reference, o.code_variance_min_scale), 1.0))
 
 
 def _dd_matrix(idx: npt.NDArray[np.int64], ref: int) -> Arr:
@@ -600,17 +611,28 @@ class _DD:
     ref_phase: int
 
 
-def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, phase_ok: npt.NDArray[np.bool_],
-           code_ok: npt.NDArray[np.bool_], el: Arr, with_doppler: bool, trop_r: Arr) -> tuple[_DD, Arr]:
-    """Double-difference residuals at state `x` (RTKLIB ddres): phase, code, rover Doppler between satellites."""
-    o = st.options
-    rng_r, e = _range_with_trop_m(rov, x[:3], trop_r)
-    key = ("var_sd", el.tobytes())  # the same elevations serve every _ddres call of the epoch
-    var_sd = rov.memo.get(key, (None,))[0]
-    if var_sd is None:
+def _var_sd_m2(o: RtkOptions, rov: _Receiver, el: Arr) -> Arr:
+    """Single-difference phase variance (m²) per slot, 2·phase_variance_m2(el), memoised on the rover epoch:
+    the same elevations serve the code scatter, the standstill test and every _ddres call of the epoch.
+    Read-only."""
+    key = ("var_sd", el.tobytes())
+    hit = rov.memo.get(key)
+    if hit is None:
         var_sd = 2.0 * phase_variance_m2(el, o.phase_sigma_a_m, o.phase_sigma_b_m)
         var_sd.flags.writeable = False
-        rov.memo[key] = (var_sd,)
+        hit = rov.memo[key] = (var_sd,)
+    return hit[0]
+
+
+def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, phase_ok: npt.NDArray[np.bool_],
+           code_ok: npt.NDArray[np.bool_], el: Arr, with_doppler: bool, trop_r: Arr,
+           jacobian: bool = True) -> tuple[_DD, Arr]:
+    """Double-difference residuals at state `x` (RTKLIB ddres): phase, code, rover Doppler between satellites.
+    `jacobian=False` for a residual test alone (_valid_residuals): the design matrix H is left empty,
+    shape (nrow, 0)."""
+    o = st.options
+    rng_r, e = _range_with_trop_m(rov, x[:3], trop_r)
+    var_sd = _var_sd_m2(o, rov, el)
     if st.base_age_var_m2 > 0.0:
         var_sd = var_sd + st.base_age_var_m2
     # groups (kind, reference slot, other slots, zero-difference residual z, per-slot variance), rows i − ref
@@ -621,7 +643,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         idx = ok.nonzero()[0]
         if idx.size < 2:
             continue
-        ref = int(idx[np.argmax(el[idx])])
+        ref = int(idx[el[idx].argmax()])
         if kind == 0:
             ref_phase = ref
             z = LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - drng - LAMBDA_L1_M * x[NX0:]
@@ -633,7 +655,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     if with_doppler:
         idx = (code_ok & np.isfinite(rov.dop_hz)).nonzero()[0]
         if idx.size >= 2:
-            ref = int(idx[np.argmax(el[idx])])
+            ref = int(idx[el[idx].argmax()])
             vs = rov.sats.vel_m_s
             sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, 1] * x[0] - vs[:, 0] * x[1])
             rate_model = np.einsum("ij,ij->i", e, vs - x[3:6]) + sag - CLIGHT_M_S * rov.sats.drift_s_s
@@ -644,7 +666,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         return _DD(np.zeros(0), np.zeros((0, NX)), np.zeros((0, 0)), np.zeros(0, np.int8), np.zeros(0, np.int64), -1), e
     nrow = sum(g[2].size for g in groups)
     v = np.empty(nrow)
-    h = np.zeros((nrow, NX))
+    h = np.zeros((nrow, NX if jacobian else 0))
     r = np.zeros((nrow, nrow))
     kinds = np.empty(nrow, np.int8)
     slots = np.empty(nrow, np.int64)
@@ -654,12 +676,13 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         m = others.size
         rows = slice(k, k + m)
         v[rows] = z[others] - z[ref]
-        # position (phase, code) or velocity (Doppler) columns: LOS difference ref − other
-        cols = slice(3, 6) if kind == 2 else slice(0, 3)
-        h[rows, cols] = e[ref] - e[others]
-        if kind == 0:
-            h[_ROWS[k : k + m], NX0 + others] = LAMBDA_L1_M
-            h[rows, NX0 + ref] = -LAMBDA_L1_M
+        if jacobian:
+            # position (phase, code) or velocity (Doppler) columns: LOS difference ref − other
+            cols = slice(3, 6) if kind == 2 else slice(0, 3)
+            h[rows, cols] = e[ref] - e[others]
+            if kind == 0:
+                h[_ROWS[k : k + m], NX0 + others] = LAMBDA_L1_M
+                h[rows, NX0 + ref] = -LAMBDA_L1_M
         # covariance of rows sharing the reference: var_ref everywhere, var_other + var_ref on the diagonal
         r[rows, rows] = var[ref]
         var_other.append(var[others])
@@ -723,7 +746,7 @@ def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver,
         if dd.v.size == 0:
             continue
         x_c, p_c = _kf_update(x_prior, p_prior, dd.v, dd.h, dd.r)
-        post, _ = _ddres(st, x_c, rov, bas, rng_b, keep, code_ok, el, False, trop_r)
+        post, _ = _ddres(st, x_c, rov, bas, rng_b, keep, code_ok, el, False, trop_r, jacobian=False)
         if np.all(_valid_residuals(post, o.validation_sigma_factor)):
             if lone.size and int(c) == int(lone[0]) and not st.held_prns[c]:
                 return int(c), (x_c, p_c)
@@ -744,7 +767,7 @@ def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver,
 
 def _valid_residuals(dd: _DD, factor: float) -> npt.NDArray[np.bool_]:
     """Rows whose |residual| ≤ factor·σ (RTKLIB valpos), σ from the measurement covariance."""
-    return np.abs(dd.v) <= factor * np.sqrt(np.diag(dd.r))
+    return np.abs(dd.v) <= factor * np.sqrt(dd.r.diagonal())
 
 
 @dataclass
@@ -787,12 +810,12 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
     for _drop in range(o.max_partial_drop + 1 if o.partial_ar else 1):
         if idx.size < min_dd + 1:
             break
-        ref = int(idx[np.argmax(el[idx])])
+        ref = int(idx[el[idx].argmax()])
         others = idx[idx != ref]
         ja = NX0 + idx
         d = _dd_matrix(idx, ref)
         a = d @ x[ja]
-        qa = d @ p[np.ix_(ja, ja)] @ d.T
+        qa = d @ p[ja[:, None], ja[None, :]] @ d.T  # np.ix_ without its per-call overhead
         qba = p[:3, ja] @ d.T
         try:
             res = mlambda(a, qa, ratio_cap=RATIO_CAP)
@@ -919,7 +942,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         return _solution(rover.time, st.x[:3] if st.initialized else np.zeros(3), nan3, Q_NONE, 0,
                          np.zeros((3, 3)), np.zeros((3, 3)), 0.0, 0.0)
     t_sol = rover.time.add_s(-spp.clock_bias_m / CLIGHT_M_S)
-    ns_spp = int(spp.used.sum())
+    ns_spp = int(np.count_nonzero(spp.used))
 
     def single(age: float) -> Solution:
         cov = np.eye(3) * (spp.gdop * 1.5) ** 2
@@ -946,7 +969,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         bas = _slots(base, nav.store, sats[1])
         st.base_cache = (base.time, bas)
     base_pos = np.asarray(base_pos_ecef_m, float)
-    st.baseline_m = float(np.linalg.norm(st.x[:3] - base_pos)) if st.initialized else 0.0
+    st.baseline_m = _norm(st.x[:3] - base_pos) if st.initialized else 0.0
 
     dt = rover.time.diff_s(st.time) if st.time is not None else 0.0
     _udstate(st, dt, spp.pos_ecef_m, spp.vel_ecef_m_s, base_pos)
@@ -963,7 +986,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     base_zb_cyc = base_zb / LAMBDA_L1_M
     slip = _detect_slips(st, rov, bas, base_zb_cyc, rover.time, base.time, phase_ok)
     if st.pending_slip.any():  # rover slips seen while the base was missing
-        gone = np.flatnonzero(st.pending_slip & ~phase_ok & (st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0))
+        gone = np.flatnonzero(st.pending_slip & ~phase_ok & (st.p.diagonal()[NX0:NX0 + NSAT] > 0))
         if gone.size:
             _reset_amb(st, gone)
             st.slips += int(gone.size)
@@ -999,7 +1022,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             break
         # innovation gating with the innovation covariance (the one the update then uses)
         innov = _innovation(st.p, dd.h, dd.r)
-        norm = np.abs(dd.v) / np.sqrt(np.diag(innov[-1]))
+        norm = np.abs(dd.v) / np.sqrt(innov[-1].diagonal())
         bad = norm > 6.0
         bad &= ~((dd.kind == 0) & (np.abs(dd.v) < o.max_innovation_phase_m * 0.1))
         if not bad.any():
@@ -1017,7 +1040,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
                 # ambiguities afresh rather than keep a possibly slipped one (and a wrong hold) alive
                 log.debug("%s: phase outliers on %d of %d DDs -> all ambiguities reset", rover.time,
                           int(phase_bad.sum()), n_phase)
-                reset = np.flatnonzero(st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
+                reset = np.flatnonzero(st.p.diagonal()[NX0:NX0 + NSAT] > 0)
                 _reset_amb(st, reset)
                 st.slips += int(reset.size)
                 use_phase = phase_ok & code_ok
@@ -1035,14 +1058,14 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         else:
             rov.dop_hz[slot] = np.nan
     st.x, st.p = x_post, p_post
-    ns = int(use_phase.sum())
-    if dd is None or ns < 2 or not np.any(dd.kind == 0):
+    ns = int(np.count_nonzero(use_phase))
+    if dd is None or ns < 2 or not (dd.kind == 0).any():
         # no phase double differences at all: report the filter position as float only if it is constrained
         return _solution(t_sol, st.x[:3], st.x[3:6], Q_FLOAT if ns >= 2 else Q_SINGLE, ns, st.p[:3, :3],
                          st.p[3:6, 3:6], age, 0.0)
 
     # post-fit residual check of the float solution
-    dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False, trop_r)
+    dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False, trop_r, jacobian=False)
     ok_post = _valid_residuals(dd_post, o.validation_sigma_factor)
     bad_phase = dd_post.slot[(dd_post.kind == 0) & ~ok_post]
     if bad_phase.size and st.held_prns.any():
@@ -1065,7 +1088,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         if bad_phase.size > 1:
             # several misfits point at the set rather than at one satellite: it no longer vouches for a re-fix
             st.validated_int[:] = np.nan
-        amb = NX0 + np.flatnonzero(st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)] > 0)
+        amb = NX0 + np.flatnonzero(st.p.diagonal()[NX0:NX0 + NSAT] > 0)
         st.p[amb, amb] += 0.5**2
         rows = dd_post.kind == 0
         if bad_phase.size >= 3 and bad_phase.size == int(rows.sum()) and dd_post.ref_phase >= 0:
@@ -1080,10 +1103,10 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     # ambiguity resolution
     fix = None
     if o.ar_mode != "off":
-        amb_var = st.p[NX0 + np.arange(NSAT), NX0 + np.arange(NSAT)]
+        amb_var = st.p.diagonal()[NX0:NX0 + NSAT]
         # ambiguities seeded from a surveyed take-off point are known, not guessed from the code: no lock wait
         locked = (st.lock > o.min_lock_epochs) | st.known_amb
-        cand = use_phase & (el >= np.radians(o.ar_elmask_deg)) & ~half & locked & (amb_var > 0)
+        cand = use_phase & (el >= math.radians(o.ar_elmask_deg)) & ~half & locked & (amb_var > 0)
         fix = _resamb_lambda(st, st.x, st.p, cand, el, o.min_amb_dd, rover.time)
         for _retry in range(2):
             if fix is None:
@@ -1098,7 +1121,8 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             use_fix = np.zeros(NSAT, bool)
             use_fix[fix.slots] = True
             use_fix[fix.ref] = True
-            dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False, trop_r)
+            dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False, trop_r,
+                                 jacobian=False)
             valid = _valid_residuals(dd_fix, o.validation_sigma_factor)
             if (maha <= _CHI2_3DOF_999 or fix.settled) and valid.all():
                 break

@@ -15,7 +15,8 @@ ends only enter: the noise does not grow with the window, and a slow creep adds 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -45,7 +46,7 @@ class Displacement:
     @property
     def sigma_m(self) -> float:
         """3D standard deviation (m): √trace of the covariance."""
-        return float(np.sqrt(max(np.trace(self.cov_m2), 0.0)))
+        return math.sqrt(max(float(self.cov_m2.trace()), 0.0))
 
 
 def tdcp_displacement(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m: Arr, los_now: Arr,
@@ -64,7 +65,7 @@ def tdcp_displacement(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m:
     y = sd_now_m[k] - sd_then_m[k]
     e = los_now[k]
     var = 2.0 * var_sd_m2[k]
-    ref = int(np.argmin(var))  # the best-determined satellite (highest) as reference
+    ref = int(var.argmin())  # the best-determined satellite (highest) as reference
     others = np.arange(k.size) != ref
     dd_y = y[others] - y[ref]
     a = -(e[others] - e[ref])
@@ -73,7 +74,7 @@ def tdcp_displacement(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m:
     g = var[ref] / (1.0 + var[ref] * float(inv_d.sum()))
     aw = a.T * inv_d
     aw1 = aw.sum(axis=1)
-    normal = aw @ a - g * np.outer(aw1, aw1)
+    normal = aw @ a - g * (aw1[:, None] * aw1[None, :])  # np.outer's product without its wrapper
     rhs = aw @ dd_y - g * aw1 * float(inv_d @ dd_y)
     try:
         cov_u = np.linalg.inv(normal)
@@ -120,8 +121,8 @@ class StandstillMonitor:
             t_a, ep_a, sd_a, pos_a, lock_a = anchor
             continuous = valid & (lock - lock_a == self.epochs - ep_a)
             disp = tdcp_displacement(sd_a, pos_a, sd_m, pos_m, los, var_sd_m2, continuous)
-            if disp is not None:
-                disp = replace(disp, span_s=abs(t_ns - t_a) / 1e9)
+            if disp is not None:  # with its span (built directly: dataclasses.replace introspects the fields)
+                disp = Displacement(disp.d_m, disp.cov_m2, disp.info_m2, abs(t_ns - t_a) / 1e9, disp.n_sats)
         hist.append((t_ns, self.epochs, np.where(valid, sd_m, np.nan), np.array(pos_m, float), lock.copy()))
         # keep the newest entry older than the window (the next anchor) and everything inside it
         while len(hist) > 2 and abs(t_ns - hist[1][0]) / 1e9 > self.window_s:

@@ -117,3 +117,17 @@ def test_missing_end_of_header(tmp_path):
     p.write_text("     3.04           OBSERVATION DATA    M                   RINEX VERSION / TYPE\n")
     with pytest.raises(InputError, match="END OF HEADER"):
         read_rinex_obs(p)
+
+
+@pytest.mark.parametrize("name", ["gnss/ublox-m8p-galway-2018/rinex/rover-20181004-1237.obs.gz",  # RINEX 3.04
+                                  "gnss/ublox-m8p-galway-2018/cors-glw1/glw1277m.18o.gz"])  # RINEX 2.11
+def test_systems_filter_keeps_exactly_the_gps_satellites(name):
+    full = read_rinex_obs(shared_file(name))
+    gps = read_rinex_obs(shared_file(name), systems="G")
+    assert len(gps.epochs) == len(full.epochs)
+    assert any(np.any(e.gnss_id == GNSS_GLONASS) for e in full.epochs)
+    for a, b in zip(full.epochs, gps.epochs, strict=True):
+        ga = a.gps_only()
+        assert b.time == a.time and np.all(b.gnss_id == GNSS_GPS)
+        for f in ("sv_id", "pr_m", "cp_cyc", "dop_hz", "cn0_dbhz", "lli"):
+            np.testing.assert_array_equal(getattr(b, f), getattr(ga, f))
