@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_rtk import DATASETS, PROJECT, PY, engine_commands
+from bench_rtk import DATASETS, PROJECT, PY, compile_project, engine_commands
 
 # `onboard rtk --help` after importing the readers/writer a RINEX run loads: the command line's own start-up
 STARTUP_OURS = ("import sys, onboard.formats.rinex_obs, onboard.formats.rinex_nav, onboard.formats.pos\n"
@@ -73,6 +73,7 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
     chosen = [d for d in DATASETS if not args.only or any(s in d.name for s in args.only)]
+    compile_project()
     start_ours = min(child_cpu_s([PY, "-c", STARTUP_OURS]) for _ in range(args.repeat))
     start_drv = min(child_cpu_s([PY, "-c", STARTUP_DRIVER]) for _ in range(args.repeat))
     print(f"startup CPU: ours {start_ours:.3f} s, driver {start_drv:.3f} s (interpreter + imports)")
