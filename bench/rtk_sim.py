@@ -10,7 +10,8 @@ wrong fixes (Q=1 more than 10 cm from the true antenna in 3D, over all epochs, s
 slips the engine detected, engine CPU µs per epoch. Flights: the standard survey flight, 600 s (take-off at
 60 s, climb to 84 s, 6 lines, landing), 1 Hz rover and base. The whole matrix: about 3 min of CPU.
 
-Run: `.venv/bin/python bench/rtk_sim.py [--only SUBSTR ...] [--model lea6t|m8t] [--seed N]`
+Run: `.venv/bin/python bench/rtk_sim.py [--only SUBSTR ...] [--model lea6t|m8t] [--seed N | --seeds 1-16]`
+(`--seeds`: one summary line per scenario over the seeds: min/median/mean airborne fix %, wrong fixes)
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 from typing import Any
+
+import numpy as np
 
 from hil_sim.rtk_scenarios import SimCase, evaluate
 
@@ -61,13 +64,50 @@ def run_matrix(only: list[str] | None = None, models: tuple[str, ...] = ("lea6t"
             print(row(c, model, evaluate(c, model)), flush=True)
 
 
+def run_seeds(seeds: list[int], only: list[str] | None = None, models: tuple[str, ...] = ("lea6t", "m8t")) -> None:
+    """Print, per scenario and model, the airborne fix % over several World seeds (min, median, mean), the
+    wrong fixes summed over the seeds (naming the seeds that had any) and the median first fix: one line each,
+    so that a change is judged on more than one draw of the errors."""
+    print(f"hil_sim flights, seeds {seeds[0]}-{seeds[-1]} ({len(seeds)}), directgeo onboard.rtk forward, GPS L1, "
+          "15 deg mask, fix-and-hold, max age 30 s")
+    head = (f"{'scenario':30s} {'model':6s} {'air % min':>9s} {'median':>7s} {'mean':>6s} {'wrong':>6s}  "
+            "seeds with wrong fixes / first fix s (median)")
+    print(head)
+    print("-" * len(head))
+    for case in CASES:
+        if only and not any(s in case.name for s in only):
+            continue
+        for model in models:
+            runs = {seed: evaluate(replace(case, seed=seed), model) for seed in seeds}
+            air = np.array([r["air fix %"] for r in runs.values()], float)
+            wrong = {seed: r["wrong"] for seed, r in runs.items() if r["wrong"]}
+            first = np.nanmedian([r["first fix s"] for r in runs.values()])
+            bad = ", ".join(f"s{k}: {v}" for k, v in wrong.items()) or "none"
+            print(f"{case.name:30s} {model:6s} {np.nanmin(air):9.1f} {np.nanmedian(air):7.1f} {np.nanmean(air):6.1f} "
+                  f"{sum(wrong.values()):6d}  {bad} / {first:.0f}", flush=True)
+
+
+def _seed_range(text: str) -> list[int]:
+    """"1-16" or "3" or "1,4,9" → the seeds."""
+    out: list[int] = []
+    for part in text.split(","):
+        a, _, b = part.partition("-")
+        out += list(range(int(a), int(b or a) + 1))
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", nargs="*", help="substrings of scenario names to run")
     ap.add_argument("--model", choices=("lea6t", "m8t"), action="append", help="default: both")
     ap.add_argument("--seed", type=int, default=1, help="World seed (errors, slips; default 1)")
+    ap.add_argument("--seeds", type=_seed_range, help="several seeds, e.g. 1-16: one summary line per scenario")
     args = ap.parse_args()
-    run_matrix(args.only, tuple(args.model or ("lea6t", "m8t")), args.seed)
+    models = tuple(args.model or ("lea6t", "m8t"))
+    if args.seeds:
+        run_seeds(args.seeds, args.only, models)
+    else:
+        run_matrix(args.only, models, args.seed)
 
 
 if __name__ == "__main__":
