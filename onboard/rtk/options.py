@@ -122,7 +122,31 @@ class RtkOptions:
     through the slow satellite motion put the Septentrio float 0.3-0.5 m off with a 4-10 cm σ: no fix in 360
     epochs. More is not free: it hands the float to the code, whose u-blox multipath is correlated (hil_sim at
     5 km, main 79 % fixed: 81 % with 0.3-0.6e-3, 0 % with ≥ 1e-3/km, float 2 m off). Septentrio fixed with
-    0.3/0.4/0.5/0.6/1.0/1.5/2.0e-3: 28/21/31/30/21/57/58 % (0 wrong each; the AR gates make it lumpy)."""
+    0.3/0.4/0.5/0.6/1.0/1.5/2.0e-3: 28/21/31/30/21/57/58 % (0 wrong each; the AR gates make it lumpy).
+    Applied only where the ionosphere is not estimated (iono_sigma_m_per_km, iono_min_baseline_km)."""
+    iono_sigma_m_per_km: float = 0.0005
+    """Prior σ of each satellite's single-differenced (rover − base) vertical L1 ionospheric delay per km of
+    baseline (m/km), estimated as a filter state (x[38 + prn − 1]) mapped to the slant by the single-layer
+    obliquity, entering code with + and phase with − (the ionosphere-weighted model of Odijk; RTKLIB
+    ionoopt=EST's udion). With L1 alone phase cannot tell the ionosphere from the ambiguity: the prior is what
+    bounds it, and the ratio test, the fixed solution and its residuals stop carrying the differential
+    ionosphere as if it were zero. While these states exist the per-km ambiguity random walk
+    (bias_process_noise_cyc_per_km) is off. 0 disables.
+    hil_sim 5 km (1 mm/km slant gradient per satellite, i.e. a ~0.7 mm/km vertical σ), M8T, air fix % seeds
+    1-8 / 9-16, 0 wrong everywhere unless noted:
+    without (per-km walk 0.5e-3): 93.8 83.2 0 99.8 99.2 67.3 71.6 85.6 / 80.2 82.8 100 100 100 57.7 (314 wrong,
+    40 cm) 54.8 67.5; 0.0004: 97.5 81.1 56.3 100 99.6 90.0 72.2 85.1 / 96.4 100 100 100 100 86.2 97.5 80.3;
+    0.0005: 98.5 81.1 29.1 100 98.9 94.5 71.6 84.3 / 94.9 100 100 100 89.4 86.4 94.7 79.8; 0.0006: seed 3
+    0 %; more weakens the ambiguities further (0.001: seed 3 0 %, seed 1 84 %) and lets biased floats fix:
+    0.001 with confirm_fix_span_per_km_s ≤ 3 a partial set 40 cm off (seed 2), 0.002 with 6 wrong sets 6-19
+    cm off (seeds 1, 8). GEONET 3034/Septentrio (5.3 km) 71.7 → 82.2 % (0.0004: 78.9 %,
+    0.001-0.002: 81.4 %); GEONET 0759/3040 (3.3 km) 98.3 % with or without."""
+    iono_process_noise_m_per_km: float = 0.0
+    """Random walk of those vertical ionosphere states per km of baseline (m/√s/km). 0.2e-3 (the Septentrio
+    drift measured at bias_process_noise_cyc_per_km) broke the 30 s GEONET 0759/3040 hold: 98.3 → 20.8 %."""
+    iono_min_baseline_km: float = 1.0
+    """The ionosphere states exist only from this baseline (km) on (re-evaluated each epoch; dropped below):
+    shorter baselines are processed exactly as without them."""
     accel_h_sigma_m_s2: float = 3.0
     accel_v_sigma_m_s2: float = 1.0
     initial_pos_sigma_m: float = 30.0
