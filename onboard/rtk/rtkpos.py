@@ -595,11 +595,15 @@ def _slant_iono_m(st: RtkState, x: Arr, el: Arr) -> tuple[Arr, Arr]:
 def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float) -> None:
     """Time update of the SD ionosphere states (RTKLIB udion): on long baselines only, started at 0 with a
     prior σ growing with the baseline for every satellite `seen` (its code used), a random walk likewise,
-    dropped after max_outage_epochs without phase. Below iono_min_baseline_km every state is dropped."""
+    dropped after max_outage_epochs without phase. They start from iono_min_baseline_km and are all dropped
+    below 3/4 of it."""
     o = st.options
     j = NXI + np.arange(NSAT)
     bl_km = float(np.linalg.norm(st.x[:3] - base_pos)) / 1000.0
-    on = o.iono_sigma_m_per_km > 0.0 and bl_km >= o.iono_min_baseline_km
+    # a little hysteresis: a rover flying about the threshold does not drop and restart them every few seconds
+    on = o.iono_sigma_m_per_km > 0.0 and bl_km >= o.iono_min_baseline_km * (0.75 if st.iono_on else 1.0)
+    if o.iono_ublox_code_only and st.code_scatter.epochs >= o.code_scatter_min_epochs and st.code_var_scale < 0.5:
+        on = False  # geodetic code measured: see the option
     if not on:
         if st.iono_on:
             st.x[j] = 0.0
