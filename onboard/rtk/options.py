@@ -123,15 +123,16 @@ class RtkOptions:
     epochs. More is not free: it hands the float to the code, whose u-blox multipath is correlated (hil_sim at
     5 km, main 79 % fixed: 81 % with 0.3-0.6e-3, 0 % with ≥ 1e-3/km, float 2 m off). Septentrio fixed with
     0.3/0.4/0.5/0.6/1.0/1.5/2.0e-3: 28/21/31/30/21/57/58 % (0 wrong each; the AR gates make it lumpy).
-    Applied only where the ionosphere is not estimated (iono_sigma_m_per_km, iono_min_baseline_km)."""
-    iono_sigma_m_per_km: float = 0.0
+    Where the ionosphere is estimated (iono_sigma_m_per_km, iono_min_baseline_km) only for code measured
+    geodetic (code_variance_scale < 0.5), which can follow the drift the constant ionosphere states do not."""
+    iono_sigma_m_per_km: float = 0.0005
     """Prior σ of each satellite's single-differenced (rover − base) vertical L1 ionospheric delay per km of
     baseline (m/km), estimated as a filter state (x[38 + prn − 1]) mapped to the slant by the single-layer
     obliquity, entering code with + and phase with − (the ionosphere-weighted model of Odijk; RTKLIB
     ionoopt=EST's udion). With L1 alone phase cannot tell the ionosphere from the ambiguity: the prior is what
     bounds it, and the ratio test, the fixed solution and its residuals stop carrying the differential
-    ionosphere as if it were zero. While these states exist the per-km ambiguity random walk
-    (bias_process_noise_cyc_per_km) is off. 0 disables.
+    ionosphere as if it were zero. With these states u-blox-like code gets no per-km ambiguity random walk
+    (which hands its float to correlated code multipath); code measured geodetic keeps it. 0 disables.
     hil_sim 5 km (1 mm/km slant gradient per satellite, i.e. a ~0.7 mm/km vertical σ), M8T, air fix % seeds
     1-8 / 9-16, 0 wrong everywhere unless noted:
     without (per-km walk 0.5e-3): 93.8 83.2 0 99.8 99.2 67.3 71.6 85.6 / 80.2 82.8 100 100 100 57.7 (314 wrong,
@@ -139,18 +140,14 @@ class RtkOptions:
     0.0005: 98.5 81.1 29.1 100 98.9 94.5 71.6 84.3 / 94.9 100 100 100 89.4 86.4 94.7 79.8; 0.0006: seed 3
     0 %; more weakens the ambiguities further (0.001: seed 3 0 %, seed 1 84 %) and lets biased floats fix:
     0.001 with confirm_fix_span_per_km_s ≤ 3 a partial set 40 cm off (seed 2), 0.002 with 6 wrong sets 6-19
-    cm off (seeds 1, 8). GEONET 3034/Septentrio (5.3 km) 71.7 → 82.2 % (0.0004: 78.9 %,
-    0.001-0.002: 81.4 %); GEONET 0759/3040 (3.3 km) 98.3 % with or without. Off by default (0) for now: on
-    measured geodetic code the states are dropped after code_scatter_min_epochs (iono_ublox_code_only;
-    without it Septentrio backward 40.3 → 0 %, combined 100 → 82.2 %), and even so Septentrio's AR-off float
-    leaves its covariance too often (tests/rtk/test_septentrio_real_data.py fails with 0.0005); 0.0005 is the
-    value measured above for u-blox rovers."""
+    cm off (seeds 1, 8). GEONET 3034/Septentrio (5.3 km) forward / backward / combined 71.7 / 40.3 / 100 →
+    80.3 / 57.5 / 100 % (without the walk for geodetic code: 82.2 / 0 / 82.2 %, its float 0.5-0.75 m off with
+    a 0.1 m σ backward); GEONET 0759/3040 (3.3 km) 98.3 / 93.3 / 100 % with or without."""
     iono_process_noise_m_per_km: float = 0.0
     """Random walk of those vertical ionosphere states per km of baseline (m/√s/km). 0.2e-3 (the Septentrio
-    drift measured at bias_process_noise_cyc_per_km) broke the 30 s GEONET 0759/3040 hold: 98.3 → 20.8 %."""
-    iono_ublox_code_only: bool = True
-    """No ionosphere states once the code has been measured geodetic-like (code_variance_scale < 0.5, as for
-    confirm_fix_span_per_km_s)."""
+    drift measured at bias_process_noise_cyc_per_km) broke the 30 s GEONET 0759/3040 hold: 98.3 → 20.8 %;
+    hil_sim 5 km seeds 1-8 with 0.03e-3: seed 3 29 → 0 %, with 0.1e-3 seed 1 98.5 → 0 % (its ionosphere is
+    constant)."""
     iono_min_baseline_km: float = 2.0
     """The ionosphere states start from this baseline (km) and are dropped below 3/4 of it (re-evaluated each
     epoch): shorter baselines are processed exactly as without them. hil_sim's nominal base is 1.0 km away

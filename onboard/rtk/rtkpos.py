@@ -317,9 +317,9 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
         st.p[:3, :3] = np.eye(3) * o.initial_pos_sigma_m**2
     amb = np.arange(NX0, NXI)
     active = st.p[amb, amb] > 0
-    # with the ionosphere estimated (st.iono_on, last epoch's verdict) the per-km random walk stands for
-    # nothing left: the floor alone
-    per_km = None if st.iono_on else base_pos
+    # with the ionosphere estimated (st.iono_on, last epoch's verdict) the per-km random walk is left to
+    # geodetic code, which can follow the drift it stands for (see RtkOptions.iono_sigma_m_per_km)
+    per_km = None if st.iono_on and not _geodetic_code(st) else base_pos
     st.p[amb[active], amb[active]] += bias_process_noise_cyc2_s(o, st.x[:3], per_km) * abs(dt)
 
 
@@ -592,33 +592,52 @@ def _slant_iono_m(st: RtkState, x: Arr, el: Arr) -> tuple[Arr, Arr]:
     return mf * x[NXI:NX], mf
 
 
-def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float) -> None:
+def _geodetic_code(st: RtkState) -> bool:
+    """The code has been measured far cleaner than u-blox code (code_variance_scale < 0.5, the threshold of
+    confirm_fix_span_per_km_s)."""
+    return st.code_scatter.epochs >= st.options.code_scatter_min_epochs and st.code_var_scale < 0.5
+
+
+def _drop_iono(st: RtkState, drop: npt.NDArray[np.bool_], el: Arr) -> None:
+    """Remove the ionosphere states of the `drop` slots, folding each into its ambiguity where both exist
+    (N' = N − m(el)·I/λ, the phase then carries the delay as without the states), so that the ambiguities keep
+    the ionosphere's estimate and uncertainty instead of losing them."""
+    k = np.flatnonzero(drop & (st.p[NXI + np.arange(NSAT), NXI + np.arange(NSAT)] > 0))
+    if k.size == 0:
+        return
+    fold = k[(st.p[NX0 + k, NX0 + k] > 0) & np.isfinite(el[k])]
+    if fold.size:
+        a = np.eye(NX)
+        a[NX0 + fold, NXI + fold] = -iono_mapping(el[fold]) / LAMBDA_L1_M
+        st.x = a @ st.x
+        st.p = a @ st.p @ a.T
+    j = NXI + k
+    st.x[j] = 0.0
+    st.p[j, :] = 0.0
+    st.p[:, j] = 0.0
+
+
+def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float, el: Arr) -> None:
     """Time update of the SD ionosphere states (RTKLIB udion): on long baselines only, started at 0 with a
     prior σ growing with the baseline for every satellite `seen` (its code used), a random walk likewise,
     dropped after max_outage_epochs without phase. They start from iono_min_baseline_km and are all dropped
-    below 3/4 of it."""
+    below 3/4 of it; see _drop_iono. `el` the
+    satellites' elevations (rad) this epoch."""
     o = st.options
     j = NXI + np.arange(NSAT)
     bl_km = float(np.linalg.norm(st.x[:3] - base_pos)) / 1000.0
     # a little hysteresis: a rover flying about the threshold does not drop and restart them every few seconds
     on = o.iono_sigma_m_per_km > 0.0 and bl_km >= o.iono_min_baseline_km * (0.75 if st.iono_on else 1.0)
-    if o.iono_ublox_code_only and st.code_scatter.epochs >= o.code_scatter_min_epochs and st.code_var_scale < 0.5:
-        on = False  # geodetic code measured: see the option
     if not on:
         if st.iono_on:
-            st.x[j] = 0.0
-            st.p[j, :] = 0.0
-            st.p[:, j] = 0.0
+            _drop_iono(st, np.ones(NSAT, bool), el)
         st.iono_on = False
         return
     st.iono_on = True
     active = st.p[j, j] > 0
     lost = active & (st.outage > o.max_outage_epochs)
     if lost.any():
-        k = j[lost]
-        st.x[k] = 0.0
-        st.p[k, :] = 0.0
-        st.p[:, k] = 0.0
+        _drop_iono(st, lost, el)
         active &= ~lost
     if active.any() and o.iono_process_noise_m_per_km > 0.0:
         st.p[j[active], j[active]] += (o.iono_process_noise_m_per_km * bl_km) ** 2 * abs(dt)
@@ -1027,7 +1046,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     st.base_age_var_m2 = (o.base_age_sigma_m_s * age) ** 2 if carried is not bas else 0.0
     bas = carried
     _udbias(st, rov, bas, rng_r, rng_b, phase_ok, slip, t_r=rover.time)
-    _udion(st, common, base_pos, dt)
+    _udion(st, common, base_pos, dt, el)
     st.code_var_scale = code_variance_scale(st, rov, bas, phase_ok, slip, el, dt)
     if o.standstill or st.static:
         _watch_standstill(st, rov, bas, rng_r, rng_b, los_r, el, phase_ok & ~slip & ~half, rover.time, dt)

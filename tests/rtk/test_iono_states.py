@@ -58,8 +58,7 @@ def _run(nav: Nav, options: RtkOptions, n: int = 240):
     return sols, st, slant, pos
 
 
-ON = RtkOptions(iono_sigma_m_per_km=0.0005, iono_ublox_code_only=False)
-"""Noise-free code measures as geodetic (scale < 0.5), which would switch the states off."""
+ON = RtkOptions()
 
 
 def test_iono_states_recover_a_known_ionosphere_and_unbias_the_fix(nav):
