@@ -844,6 +844,25 @@ def _agrees_with_validated(st: RtkState, ref: int, others: npt.NDArray[np.int64]
     return bool(np.all(d == d[0]))
 
 
+def _same_candidate(old: tuple, new: tuple, max_change: int) -> bool:
+    """Is `new` (ref, other slots, DD integers) the pending candidate `old`, or the same integers on a set that
+    gained or lost at most `max_change` satellites (the SD integer differences equal on every common one)?"""
+    if old == new:
+        return True
+    if max_change <= 0:
+        return False
+    c = np.full((2, NSAT), np.nan)
+    for row, (ref, others, ints) in zip(c, (old, new)):
+        row[ref] = 0.0
+        row[list(others)] = ints
+    fin = np.isfinite(c)
+    common = fin[0] & fin[1]
+    if int(np.count_nonzero(fin[0] ^ fin[1])) > max_change or common.sum() < 2:
+        return False
+    d = c[1, common] - c[0, common]
+    return bool(np.all(d == d[0]))
+
+
 def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el: Arr,
                    min_dd: int, t: GpsTime) -> _Fix | None:
     """Integer ambiguity resolution on the DD ambiguities of `cand` slots (RTKLIB resamb_LAMBDA) with
@@ -891,7 +910,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             seen_candidate = True
             full = _drop == 0
             key = (ref, tuple(others.tolist()), tuple(np.rint(res.fixed[:, 0]).astype(int).tolist()))
-            if st.pending_fix is None or st.pending_fix[0] != key:
+            if st.pending_fix is None or not _same_candidate(st.pending_fix[0], key, o.pending_set_change_sats):
                 st.pending_fix = (key, t, 0)
             st.pending_fix = (key, st.pending_fix[1], st.pending_fix[2] + 1)
             span = abs(t.diff_s(st.pending_fix[1]))

@@ -15,7 +15,8 @@ from onboard.rtk.ephemeris import EphemerisStore, satellite_states
 from onboard.rtk.geodesy import azimuth_elevation, enu_to_ecef
 from onboard.rtk.models import iono_mapping
 from onboard.rtk.options import RtkOptions
-from onboard.rtk.rtkpos import NSAT, NXI, Nav, rtk_init, rtk_pos
+from onboard.rtk import rtkpos
+from onboard.rtk.rtkpos import NSAT, NX0, NXI, Nav, rtk_init, rtk_pos
 from onboard.rtk.types import Q_FIX, ObsEpoch
 from tests.conftest import shared_file
 from tests.rtk._sim import BASE_ECEF_M, T0, SimReceiver, observe
@@ -91,3 +92,28 @@ def test_no_iono_states_on_short_baselines(nav):
         sa, sb = rtk_pos(a, rov, bas, nav, BASE_ECEF_M), rtk_pos(b, rov, bas, nav, BASE_ECEF_M)
         assert np.array_equal(sa.pos_ecef_m, sb.pos_ecef_m) and sa.q == sb.q
     assert not a.iono_on and not np.any(a.p[NXI:, NXI:])
+
+
+def test_dropping_the_states_folds_them_into_the_ambiguities(nav):
+    """_drop_iono keeps what the phase sees: λ·N − m(el)·I per satellite (value and variance) becomes λ·N'."""
+    _, st, _, _ = _run(nav, ON, n=60)
+    j = NXI + np.arange(NSAT)
+    a = NX0 + np.arange(NSAT)
+    both = (st.p[j, j] > 0) & (st.p[a, a] > 0)
+    assert both.sum() >= 6
+    el = np.where(both, np.radians(20.0 + 60.0 * np.arange(NSAT) / NSAT), np.nan)
+    m = iono_mapping(el)
+    t = np.zeros((NSAT, rtkpos.NX))  # phase delay rows: λ·N − m·I
+    t[np.arange(NSAT), a] = LAMBDA_L1_M
+    t[np.arange(NSAT), j] = -np.nan_to_num(m)
+    seen_x, seen_p = t @ st.x, t @ st.p @ t.T
+    x_pos, p_pos = st.x[:3].copy(), st.p[:3, :3].copy()
+    rtkpos._drop_iono(st, np.ones(NSAT, bool), el)
+    assert not np.any(st.p[j, :]) and not np.any(st.x[j])
+    k = np.flatnonzero(both)
+    after_x = LAMBDA_L1_M * st.x[a]
+    after_p = LAMBDA_L1_M**2 * st.p[np.ix_(a, a)]
+    np.testing.assert_allclose(after_x[k], seen_x[k], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(after_p[np.ix_(k, k)], seen_p[np.ix_(k, k)], rtol=1e-9, atol=1e-12)
+    np.testing.assert_array_equal(st.x[:3], x_pos)  # the position is untouched
+    np.testing.assert_allclose(st.p[:3, :3], p_pos, rtol=1e-12, atol=0)
