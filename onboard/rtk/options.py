@@ -65,16 +65,6 @@ class RtkOptions:
     at least two of the three are wrong and ours, rejected by its own float, is the likeliest; 60 fixes none
     of them. The other real sets are unchanged either way (every candidate there is near its float). 0
     disables."""
-    pending_set_change_sats: int = 1
-    """A first-fix candidate keeps its confirmation (the time and count of its wins) when the winning set
-    gains or loses up to this many satellites with the same integers on the others (0: any change restarts
-    it). hil_sim 5 km seed 3 (M8T, ionosphere states): the right set won from 186 s, its float (0.5 m off, σ
-    0.2 m) rejected it (Mahalanobis 21-27) until settled_fix_span_s, and one satellite leaving the set at
-    234 s restarted the count: first fix 436 s, 29.1 % airborne; with 1: 243 s, 65.6 % (2: the same). Seeds
-    4, 14, 15 +0.2 %, the other seeds 1-16 unchanged, 0 wrong; hil_sim nominal seeds 1-6 unchanged (seed 6
-    first fix 20 → 19 s). M8P walk (no truth): 176 → 208 fixed epochs, none at 1040-1095, horizontal RMS
-    from the M8P's own RTK 32.3 → 29.3 cm; M8P static, GLW1, GEONET fix rates unchanged, Septentrio backward
-    57.5 → 57.8 %."""
     full_set_confirm_epochs: int = 2
     """A first fix on the full candidate set (no satellite dropped by partial AR) needs the same integer set
     winning the ratio test at this many consecutive epochs instead of over confirm_fix_span_s (and, below
@@ -143,6 +133,7 @@ class RtkOptions:
     bounds it, and the ratio test, the fixed solution and its residuals stop carrying the differential
     ionosphere as if it were zero. With these states u-blox-like code gets no per-km ambiguity random walk
     (which hands its float to correlated code multipath); code measured geodetic keeps it. 0 disables.
+    Only from iono_min_baseline_km to iono_max_baseline_km.
     hil_sim 5 km (1 mm/km slant gradient per satellite, i.e. a ~0.7 mm/km vertical σ), M8T, air fix % seeds
     1-8 / 9-16, 0 wrong everywhere unless noted:
     without (per-km walk 0.5e-3): 93.8 83.2 0 99.8 99.2 67.3 71.6 85.6 / 80.2 82.8 100 100 100 57.7 (314 wrong,
@@ -158,10 +149,18 @@ class RtkOptions:
     drift measured at bias_process_noise_cyc_per_km) broke the 30 s GEONET 0759/3040 hold: 98.3 → 20.8 %;
     hil_sim 5 km seeds 1-8 with 0.03e-3: seed 3 29 → 0 %, with 0.1e-3 seed 1 98.5 → 0 % (its ionosphere is
     constant)."""
-    iono_min_baseline_km: float = 2.0
-    """The ionosphere states start from this baseline (km) and are dropped below 3/4 of it (re-evaluated each
-    epoch): shorter baselines are processed exactly as without them. hil_sim's nominal base is 1.0 km away
-    (the flight takes the rover 0.8-1.3 km from it): with 1.0 there its fixed RMS moved 0.64 → 0.65 cm."""
+    iono_min_baseline_km: float = 4.5
+    """The ionosphere states start from this baseline (km) and are dropped (folded into the ambiguities) below
+    3/4 of it, re-evaluated each epoch: shorter baselines are processed exactly as without them (hil_sim
+    nominal, 1.0 km; GEONET 0759/3040, 3.3 km). hil_sim M8T seeds 1-8 air fix % without / with the states
+    from 3.5 km: 3.5 km 100 84.7 87.3 100 100 100 76.6 94.0 / 100 81.1 69.9 100 99.6 96.0 73.5 88.3; 4 km 99.8
+    84.1 0 100 100 100 73.7 93.0 / 100 81.1 68.4 100 99.6 97.7 72.6 90.5 (3 km: worse as well): below ~4.5 km
+    the per-km ambiguity walk does better but on an outlier seed; 0 wrong everywhere."""
+    iono_max_baseline_km: float = 7.5
+    """Nor beyond this baseline (km; dropped above 1.1 times it). hil_sim M8T seeds 1-8 without / with: 7 km
+    0.2 16.6 0 93.2 98.9 0 47.1 80.3 / 92.6 80.9 0 94.5 97.5 67.3 62.9 80.5 %, 0 wrong; 8.5 km seed 1: a
+    5-satellite set 20-24 cm off won for 88 s (ratio 3 → 8) on a float 0.35-0.45 m off and was held (165 wrong
+    epochs; 10 km: seed 8 9 wrong, 9-10 cm), where without them 8.5-10 km fix little but nothing wrong."""
     accel_h_sigma_m_s2: float = 3.0
     accel_v_sigma_m_s2: float = 1.0
     initial_pos_sigma_m: float = 30.0

@@ -620,14 +620,16 @@ def _drop_iono(st: RtkState, drop: npt.NDArray[np.bool_], el: Arr) -> None:
 def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float, el: Arr) -> None:
     """Time update of the SD ionosphere states (RTKLIB udion): on long baselines only, started at 0 with a
     prior σ growing with the baseline for every satellite `seen` (its code used), a random walk likewise,
-    dropped after max_outage_epochs without phase. They start from iono_min_baseline_km and are all dropped
-    below 3/4 of it; see _drop_iono. `el` the
+    dropped after max_outage_epochs without phase. They exist between iono_min_baseline_km and
+    iono_max_baseline_km (dropped below 3/4 of the first, above 1.1 times the second); see _drop_iono. `el` the
     satellites' elevations (rad) this epoch."""
     o = st.options
     j = NXI + np.arange(NSAT)
     bl_km = float(np.linalg.norm(st.x[:3] - base_pos)) / 1000.0
-    # a little hysteresis: a rover flying about the threshold does not drop and restart them every few seconds
-    on = o.iono_sigma_m_per_km > 0.0 and bl_km >= o.iono_min_baseline_km * (0.75 if st.iono_on else 1.0)
+    # a little hysteresis: a rover flying about a threshold does not drop and restart them every few seconds
+    lo, hi = (0.75 * o.iono_min_baseline_km, 1.1 * o.iono_max_baseline_km) if st.iono_on else \
+        (o.iono_min_baseline_km, o.iono_max_baseline_km)
+    on = o.iono_sigma_m_per_km > 0.0 and lo <= bl_km <= hi
     if not on:
         if st.iono_on:
             _drop_iono(st, np.ones(NSAT, bool), el)
@@ -844,25 +846,6 @@ def _agrees_with_validated(st: RtkState, ref: int, others: npt.NDArray[np.int64]
     return bool(np.all(d == d[0]))
 
 
-def _same_candidate(old: tuple, new: tuple, max_change: int) -> bool:
-    """Is `new` (ref, other slots, DD integers) the pending candidate `old`, or the same integers on a set that
-    gained or lost at most `max_change` satellites (the SD integer differences equal on every common one)?"""
-    if old == new:
-        return True
-    if max_change <= 0:
-        return False
-    c = np.full((2, NSAT), np.nan)
-    for row, (ref, others, ints) in zip(c, (old, new)):
-        row[ref] = 0.0
-        row[list(others)] = ints
-    fin = np.isfinite(c)
-    common = fin[0] & fin[1]
-    if int(np.count_nonzero(fin[0] ^ fin[1])) > max_change or common.sum() < 2:
-        return False
-    d = c[1, common] - c[0, common]
-    return bool(np.all(d == d[0]))
-
-
 def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el: Arr,
                    min_dd: int, t: GpsTime) -> _Fix | None:
     """Integer ambiguity resolution on the DD ambiguities of `cand` slots (RTKLIB resamb_LAMBDA) with
@@ -910,7 +893,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             seen_candidate = True
             full = _drop == 0
             key = (ref, tuple(others.tolist()), tuple(np.rint(res.fixed[:, 0]).astype(int).tolist()))
-            if st.pending_fix is None or not _same_candidate(st.pending_fix[0], key, o.pending_set_change_sats):
+            if st.pending_fix is None or st.pending_fix[0] != key:
                 st.pending_fix = (key, t, 0)
             st.pending_fix = (key, st.pending_fix[1], st.pending_fix[2] + 1)
             span = abs(t.diff_s(st.pending_fix[1]))
