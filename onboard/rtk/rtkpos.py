@@ -10,8 +10,8 @@ must rest on at least `min_amb_dd` + 1 double differences when not held; known-p
 (Daakir et al. 2015 eq. 2) and a static mode until take-off.
 
 State vector: x[0:3] rover position (ECEF m), x[3:6] velocity (m/s), x[6+prn-1] SD ambiguity of GPS `prn`
-(rover − base, cycles), x[38+prn-1] SD vertical L1 ionospheric delay of `prn` (rover − base, m; inactive,
-zero variance, unless RtkOptions.iono_sigma_m_per_km is set and the baseline is long). Pure: no I/O, no clock.
+(rover − base, cycles), and, while the baseline is in the band of RtkOptions.iono_min/max_baseline_km,
+x[38+prn-1] the SD vertical L1 ionospheric delay of `prn` (rover − base, m; see _udion). Pure: no I/O, no clock.
 """
 
 from __future__ import annotations
@@ -40,8 +40,9 @@ Arr = npt.NDArray[np.float64]
 NSAT = 32
 NX0 = 6
 NXI = NX0 + NSAT
-"""First ionosphere state (see _udion)."""
+"""Size of the state without ionosphere states, and index of the first one (see _udion)."""
 NX = NXI + NSAT
+"""Size of the state with them: the arrays grow to it only while they are in use (smaller arrays otherwise)."""
 _CHI2_3DOF_999 = 16.27
 RATIO_CAP = 999.9
 """Largest AR ratio reported (RTKLIB's .pos column): LAMBDA stops searching once the ratio provably exceeds it."""
@@ -88,8 +89,8 @@ class RtkState:
     """Filter state (RTKLIB rtk_t): estimates, covariance, per-satellite counters. Mutated by rtk_pos()."""
 
     options: RtkOptions
-    x: Arr = field(default_factory=lambda: np.zeros(NX))
-    p: Arr = field(default_factory=lambda: np.zeros((NX, NX)))
+    x: Arr = field(default_factory=lambda: np.zeros(NXI))
+    p: Arr = field(default_factory=lambda: np.zeros((NXI, NXI)))
     initialized: bool = False
     time: GpsTime | None = None
     lock: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(NSAT, np.int64))
@@ -342,7 +343,7 @@ def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, 
         log.info("%s: standstill for %.0f s, static hold", t, st.standstill.still_for_s(t_ns))
         st.static = True
         # zero-velocity update: the velocity is known now, and stays so without process noise
-        h = np.zeros((3, NX))
+        h = np.zeros((3, st.x.size))
         h[:, 3:6] = np.eye(3)
         st.x, st.p = _kf_update(st.x, st.p, -st.x[3:6], h, np.eye(3) * 1e-8)
 
@@ -607,7 +608,7 @@ def _drop_iono(st: RtkState, drop: npt.NDArray[np.bool_], el: Arr) -> None:
         return
     fold = k[(st.p[NX0 + k, NX0 + k] > 0) & np.isfinite(el[k])]
     if fold.size:
-        a = np.eye(NX)
+        a = np.eye(st.x.size)
         a[NX0 + fold, NXI + fold] = -iono_mapping(el[fold]) / LAMBDA_L1_M
         st.x = a @ st.x
         st.p = a @ st.p @ a.T
@@ -621,10 +622,10 @@ def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float, 
     """Time update of the SD ionosphere states (RTKLIB udion): on long baselines only, started at 0 with a
     prior σ growing with the baseline for every satellite `seen` (its code used), a random walk likewise,
     dropped after max_outage_epochs without phase. They exist between iono_min_baseline_km and
-    iono_max_baseline_km (dropped below 3/4 of the first, above 1.1 times the second); see _drop_iono. `el` the
+    iono_max_baseline_km (dropped below 3/4 of the first, above 1.1 times the second; the state arrays grow
+    from NXI to NX for them and shrink back); see _drop_iono. `el` the
     satellites' elevations (rad) this epoch."""
     o = st.options
-    j = NXI + np.arange(NSAT)
     bl_km = float(np.linalg.norm(st.x[:3] - base_pos)) / 1000.0
     # a little hysteresis: a rover flying about a threshold does not drop and restart them every few seconds
     lo, hi = (0.75 * o.iono_min_baseline_km, 1.1 * o.iono_max_baseline_km) if st.iono_on else \
@@ -633,9 +634,15 @@ def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float, 
     if not on:
         if st.iono_on:
             _drop_iono(st, np.ones(NSAT, bool), el)
+            st.x, st.p = st.x[:NXI].copy(), st.p[:NXI, :NXI].copy()
         st.iono_on = False
         return
+    if not st.iono_on:
+        x, p = np.zeros(NX), np.zeros((NX, NX))
+        x[:NXI], p[:NXI, :NXI] = st.x, st.p
+        st.x, st.p = x, p
     st.iono_on = True
+    j = NXI + np.arange(NSAT)
     active = st.p[j, j] > 0
     lost = active & (st.outage > o.max_outage_epochs)
     if lost.any():
@@ -717,10 +724,10 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
             s2 = (o.doppler_sigma_m_s / np.sin(np.maximum(el, 0.1))) ** 2
             groups.append((2, ref, idx[idx != ref], z, s2))
     if not groups:
-        return _DD(np.zeros(0), np.zeros((0, NX)), np.zeros((0, 0)), np.zeros(0, np.int8), np.zeros(0, np.int64), -1), e
+        return _DD(np.zeros(0), np.zeros((0, x.size)), np.zeros((0, 0)), np.zeros(0, np.int8), np.zeros(0, np.int64), -1), e
     nrow = sum(g[2].size for g in groups)
     v = np.empty(nrow)
-    h = np.zeros((nrow, NX))
+    h = np.zeros((nrow, x.size))
     r = np.zeros((nrow, nrow))
     kinds = np.empty(nrow, np.int8)
     slots = np.empty(nrow, np.int64)
@@ -953,7 +960,7 @@ def _holdamb(st: RtkState, fix: _Fix) -> None:
     """Constrain the float DD ambiguities to the fixed integers (RTKLIB holdamb)."""
     o = st.options
     n = fix.slots.size
-    h = np.zeros((n, NX))
+    h = np.zeros((n, st.x.size))
     h[np.arange(n), NX0 + fix.slots] = 1.0
     h[:, NX0 + fix.ref] = -1.0
     v = fix.ints - h @ st.x
