@@ -157,8 +157,10 @@ class RtkOptions:
     84.1 0 100 100 100 73.7 93.0 / 100 81.1 68.4 100 99.6 97.7 72.6 90.5 (3 km: worse as well): below ~4.5 km
     the per-km ambiguity walk does better but on an outlier seed; 0 wrong everywhere."""
     iono_max_baseline_km: float = 7.5
-    """Nor beyond this baseline (km; dropped above 1.1 times it). hil_sim M8T seeds 1-8 without / with: 7 km
-    0.2 16.6 0 93.2 98.9 0 47.1 80.3 / 92.6 80.9 0 94.5 97.5 67.3 62.9 80.5 %, 0 wrong; 8.5 km seed 1: a
+    """Nor beyond this baseline (km; dropped above 1.1 times it). hil_sim M8T seeds 1-8 without / with: 6 km
+    80.7 48.0 0 95.1 99.1 62.8 52.4 83.0 / 97.9 80.9 0 96.0 98.1 87.3 64.1 83.6 %; 7 km 0.2 16.6 0 93.2 98.9 0
+    47.1 80.3 / 92.6 80.9 0 94.5 97.5 67.3 62.9 80.5 %, seeds 9-16 67.3 0 100 100 88.8 53.9 (294 wrong, 40 cm)
+    0 21.6 / 50.1 68.1 100 100 87.3 33.6 60.5 74.3 %, 0 wrong with them; 8.5 km seed 1: a
     5-satellite set 20-24 cm off won for 88 s (ratio 3 → 8) on a float 0.35-0.45 m off and was held (165 wrong
     epochs; 10 km: seed 8 9 wrong, 9-10 cm), where without them 8.5-10 km fix little but nothing wrong."""
     accel_h_sigma_m_s2: float = 3.0
