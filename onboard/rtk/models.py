@@ -88,6 +88,18 @@ def klobuchar_m(t_tow_s: float, lat_rad: float, lon_rad: float, az_rad: Arr, el_
     return CLIGHT_M_S * f * delay
 
 
+IONO_SHELL_HEIGHT_M = 350e3
+"""Height of the single-layer ionosphere (m), as RTKLIB ionmapf."""
+_EARTH_RADIUS_IONO_M = 6380e3
+
+
+def iono_mapping(el_rad: Arr) -> Arr:
+    """Single-layer ionospheric mapping function (slant / vertical delay, RTKLIB ionmapf): 1 at the zenith,
+    about 2.7 at 15° elevation."""
+    c = _EARTH_RADIUS_IONO_M / (_EARTH_RADIUS_IONO_M + IONO_SHELL_HEIGHT_M) * np.cos(np.asarray(el_rad, float))
+    return 1.0 / np.sqrt(1.0 - c * c)
+
+
 def phase_variance_m2(el_rad: Arr, a_m: float, b_m: float) -> Arr:
     """Zero-difference carrier-phase variance (m²): (a² + b²/sin²el), RTKLIB varerr() without the factor 2."""
     s = np.sin(np.maximum(np.asarray(el_rad, float), np.radians(1.0)))

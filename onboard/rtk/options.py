@@ -131,7 +131,47 @@ class RtkOptions:
     through the slow satellite motion put the Septentrio float 0.3-0.5 m off with a 4-10 cm σ: no fix in 360
     epochs. More is not free: it hands the float to the code, whose u-blox multipath is correlated (hil_sim at
     5 km, main 79 % fixed: 81 % with 0.3-0.6e-3, 0 % with ≥ 1e-3/km, float 2 m off). Septentrio fixed with
-    0.3/0.4/0.5/0.6/1.0/1.5/2.0e-3: 28/21/31/30/21/57/58 % (0 wrong each; the AR gates make it lumpy)."""
+    0.3/0.4/0.5/0.6/1.0/1.5/2.0e-3: 28/21/31/30/21/57/58 % (0 wrong each; the AR gates make it lumpy).
+    Where the ionosphere is estimated (iono_sigma_m_per_km, iono_min_baseline_km) only for code measured
+    geodetic (code_variance_scale < 0.5), which can follow the drift the constant ionosphere states do not."""
+    iono_sigma_m_per_km: float = 0.0005
+    """Prior σ of each satellite's single-differenced (rover − base) vertical L1 ionospheric delay per km of
+    baseline (m/km), estimated as a filter state (x[38 + prn − 1]) mapped to the slant by the single-layer
+    obliquity, entering code with + and phase with − (the ionosphere-weighted model of Odijk; RTKLIB
+    ionoopt=EST's udion). With L1 alone phase cannot tell the ionosphere from the ambiguity: the prior is what
+    bounds it, and the ratio test, the fixed solution and its residuals stop carrying the differential
+    ionosphere as if it were zero. With these states u-blox-like code gets no per-km ambiguity random walk
+    (which hands its float to correlated code multipath); code measured geodetic keeps it. 0 disables.
+    Only from iono_min_baseline_km to iono_max_baseline_km.
+    hil_sim 5 km (1 mm/km slant gradient per satellite, i.e. a ~0.7 mm/km vertical σ), M8T, air fix % seeds
+    1-8 / 9-16, 0 wrong everywhere unless noted:
+    without (per-km walk 0.5e-3): 93.8 83.2 0 99.8 99.2 67.3 71.6 85.6 / 80.2 82.8 100 100 100 57.7 (314 wrong,
+    40 cm) 54.8 67.5; 0.0004: 97.5 81.1 56.3 100 99.6 90.0 72.2 85.1 / 96.4 100 100 100 100 86.2 97.5 80.3;
+    0.0005: 98.5 81.1 29.1 100 98.9 94.5 71.6 84.3 / 94.9 100 100 100 89.4 86.4 94.7 79.8; 0.0006: seed 3
+    0 %; more weakens the ambiguities further (0.001: seed 3 0 %, seed 1 84 %) and lets biased floats fix:
+    0.001 with confirm_fix_span_per_km_s ≤ 3 a partial set 40 cm off (seed 2), 0.002 with 6 wrong sets 6-19
+    cm off (seeds 1, 8). GEONET 3034/Septentrio (5.3 km) forward / backward / combined 71.7 / 40.3 / 100 →
+    80.3 / 57.5 / 100 % (without the walk for geodetic code: 82.2 / 0 / 82.2 %, its float 0.5-0.75 m off with
+    a 0.1 m σ backward); GEONET 0759/3040 (3.3 km) 98.3 / 93.3 / 100 % with or without."""
+    iono_process_noise_m_per_km: float = 0.0
+    """Random walk of those vertical ionosphere states per km of baseline (m/√s/km). 0.2e-3 (the Septentrio
+    drift measured at bias_process_noise_cyc_per_km) broke the 30 s GEONET 0759/3040 hold: 98.3 → 20.8 %;
+    hil_sim 5 km seeds 1-8 with 0.03e-3: seed 3 29 → 0 %, with 0.1e-3 seed 1 98.5 → 0 % (its ionosphere is
+    constant)."""
+    iono_min_baseline_km: float = 4.5
+    """The ionosphere states start from this baseline (km) and are dropped (folded into the ambiguities) below
+    3/4 of it, re-evaluated each epoch: shorter baselines are processed exactly as without them (hil_sim
+    nominal, 1.0 km; GEONET 0759/3040, 3.3 km). hil_sim M8T seeds 1-8 air fix % without / with the states
+    from 3.5 km: 3.5 km 100 84.7 87.3 100 100 100 76.6 94.0 / 100 81.1 69.9 100 99.6 96.0 73.5 88.3; 4 km 99.8
+    84.1 0 100 100 100 73.7 93.0 / 100 81.1 68.4 100 99.6 97.7 72.6 90.5 (3 km: worse as well): below ~4.5 km
+    the per-km ambiguity walk does better but on an outlier seed; 0 wrong everywhere."""
+    iono_max_baseline_km: float = 7.5
+    """Nor beyond this baseline (km; dropped above 1.1 times it). hil_sim M8T seeds 1-8 without / with: 6 km
+    80.7 48.0 0 95.1 99.1 62.8 52.4 83.0 / 97.9 80.9 0 96.0 98.1 87.3 64.1 83.6 %; 7 km 0.2 16.6 0 93.2 98.9 0
+    47.1 80.3 / 92.6 80.9 0 94.5 97.5 67.3 62.9 80.5 %, seeds 9-16 67.3 0 100 100 88.8 53.9 (294 wrong, 40 cm)
+    0 21.6 / 50.1 68.1 100 100 87.3 33.6 60.5 74.3 %, 0 wrong with them; 8.5 km seed 1: a
+    5-satellite set 20-24 cm off won for 88 s (ratio 3 → 8) on a float 0.35-0.45 m off and was held (165 wrong
+    epochs; 10 km: seed 8 9 wrong, 9-10 cm), where without them 8.5-10 km fix little but nothing wrong."""
     accel_h_sigma_m_s2: float = 3.0
     accel_v_sigma_m_s2: float = 1.0
     initial_pos_sigma_m: float = 30.0

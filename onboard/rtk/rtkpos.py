@@ -10,7 +10,8 @@ must rest on at least `min_amb_dd` + 1 double differences when not held; known-p
 (Daakir et al. 2015 eq. 2) and a static mode until take-off.
 
 State vector: x[0:3] rover position (ECEF m), x[3:6] velocity (m/s), x[6+prn-1] SD ambiguity of GPS `prn`
-(rover − base, cycles). Pure: no I/O, no clock.
+(rover − base, cycles), and, while the baseline is in the band of RtkOptions.iono_min/max_baseline_km,
+x[38+prn-1] the SD vertical L1 ionospheric delay of `prn` (rover − base, m; see _udion). Pure: no I/O, no clock.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
 from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states_batch
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.mlambda import LambdaError, mlambda
-from onboard.rtk.models import CodeScatter, median_of_few, phase_variance_m2, saastamoinen_m
+from onboard.rtk.models import CodeScatter, iono_mapping, median_of_few, phase_variance_m2, saastamoinen_m
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.pntpos import SppSolution, _norm, pntpos, pntpos_batch, sat_az_el
 from onboard.rtk.standstill import StandstillMonitor
@@ -40,7 +41,10 @@ log = logging.getLogger(__name__)
 Arr = npt.NDArray[np.float64]
 NSAT = 32
 NX0 = 6
-NX = NX0 + NSAT
+NXI = NX0 + NSAT
+"""Size of the state without ionosphere states, and index of the first one (see _udion)."""
+NX = NXI + NSAT
+"""Size of the state with them: the arrays grow to it only while they are in use (smaller arrays otherwise)."""
 _CHI2_3DOF_999 = 16.27
 RATIO_CAP = 999.9
 """Largest AR ratio reported (RTKLIB's .pos column): LAMBDA stops searching once the ratio provably exceeds it."""
@@ -87,8 +91,8 @@ class RtkState:
     """Filter state (RTKLIB rtk_t): estimates, covariance, per-satellite counters. Mutated by rtk_pos()."""
 
     options: RtkOptions
-    x: Arr = field(default_factory=lambda: np.zeros(NX))
-    p: Arr = field(default_factory=lambda: np.zeros((NX, NX)))
+    x: Arr = field(default_factory=lambda: np.zeros(NXI))
+    p: Arr = field(default_factory=lambda: np.zeros((NXI, NXI)))
     initialized: bool = False
     time: GpsTime | None = None
     lock: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(NSAT, np.int64))
@@ -137,6 +141,8 @@ class RtkState:
     code_var_scale: float = 1.0
     """Factor on the modelled code variance from the measured code scatter (see code_variance_scale)."""
     standstill: StandstillMonitor = field(default_factory=StandstillMonitor)
+    iono_on: bool = False
+    """The per-satellite ionosphere states are in use (see _udion)."""
 
 
 def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkState:
@@ -323,9 +329,12 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
         st.p[:3, :] = 0.0
         st.p[:, :3] = 0.0
         st.p[:3, :3] = np.eye(3) * o.initial_pos_sigma_m**2
-    amb = np.arange(NX0, NX)
+    amb = np.arange(NX0, NXI)
     active = st.p[amb, amb] > 0
-    st.p[amb[active], amb[active]] += bias_process_noise_cyc2_s(o, st.x[:3], base_pos) * abs(dt)
+    # with the ionosphere estimated (st.iono_on, last epoch's verdict) the per-km random walk is left to
+    # geodetic code, which can follow the drift it stands for (see RtkOptions.iono_sigma_m_per_km)
+    per_km = None if st.iono_on and not _geodetic_code(st) else base_pos
+    st.p[amb[active], amb[active]] += bias_process_noise_cyc2_s(o, st.x[:3], per_km) * abs(dt)
 
 
 def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, rng_b: Arr, los_r: Arr, el: Arr,
@@ -347,7 +356,7 @@ def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, 
         log.info("%s: standstill for %.0f s, static hold", t, st.standstill.still_for_s(t_ns))
         st.static = True
         # zero-velocity update: the velocity is known now, and stays so without process noise
-        h = np.zeros((3, NX))
+        h = np.zeros((3, st.x.size))
         h[:, 3:6] = np.eye(3)
         st.x, st.p = _kf_update(st.x, st.p, -st.x[3:6], h, np.eye(3) * 1e-8)
 
@@ -365,7 +374,8 @@ def _leave_static(st: RtkState, dt: float) -> None:
 def bias_process_noise_cyc2_s(o: RtkOptions, rover_pos: Arr, base_pos: Arr | None) -> float:
     """Spectral density (cycles²/s) of the SD ambiguity random walk: a floor plus a part proportional to the
     baseline (km), which stands for the differential ionosphere/troposphere drifting the L1 phase over minutes
-    (RTKLIB udion scales its ionosphere process noise with the baseline the same way)."""
+    (RTKLIB udion scales its ionosphere process noise with the baseline the same way); the floor alone
+    without `base_pos` (and while the ionosphere states are estimated)."""
     q = o.bias_process_noise_cyc**2
     if base_pos is None or o.bias_process_noise_cyc_per_km <= 0.0:
         return q
@@ -590,6 +600,76 @@ def code_variance_scale(st: RtkState, rov: _Receiver, base: _Receiver, phase_ok:
     return float(min(max(cs.ratio / o.code_scatter_reference, o.code_variance_min_scale), 1.0))
 
 
+def _slant_iono_m(st: RtkState, x: Arr, el: Arr) -> tuple[Arr, Arr]:
+    """(slant SD ionospheric delay (m) per slot at state `x`, the mapping function): 0 where no state."""
+    mf = iono_mapping(el)
+    return mf * x[NXI:NX], mf
+
+
+def _geodetic_code(st: RtkState) -> bool:
+    """The code has been measured far cleaner than u-blox code (code_variance_scale < 0.5, the threshold of
+    confirm_fix_span_per_km_s)."""
+    return st.code_scatter.epochs >= st.options.code_scatter_min_epochs and st.code_var_scale < 0.5
+
+
+def _drop_iono(st: RtkState, drop: npt.NDArray[np.bool_], el: Arr) -> None:
+    """Remove the ionosphere states of the `drop` slots, folding each into its ambiguity where both exist
+    (N' = N − m(el)·I/λ, the phase then carries the delay as without the states), so that the ambiguities keep
+    the ionosphere's estimate and uncertainty instead of losing them."""
+    k = np.flatnonzero(drop & (st.p[NXI + np.arange(NSAT), NXI + np.arange(NSAT)] > 0))
+    if k.size == 0:
+        return
+    fold = k[(st.p[NX0 + k, NX0 + k] > 0) & np.isfinite(el[k])]
+    if fold.size:
+        a = np.eye(st.x.size)
+        a[NX0 + fold, NXI + fold] = -iono_mapping(el[fold]) / LAMBDA_L1_M
+        st.x = a @ st.x
+        st.p = a @ st.p @ a.T
+    j = NXI + k
+    st.x[j] = 0.0
+    st.p[j, :] = 0.0
+    st.p[:, j] = 0.0
+
+
+def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float, el: Arr) -> None:
+    """Time update of the SD ionosphere states (RTKLIB udion): on long baselines only, started at 0 with a
+    prior σ growing with the baseline for every satellite `seen` (its code used), a random walk likewise,
+    dropped after max_outage_epochs without phase. They exist between iono_min_baseline_km and
+    iono_max_baseline_km (dropped below 3/4 of the first, above 1.1 times the second; the state arrays grow
+    from NXI to NX for them and shrink back); see _drop_iono. `el` the
+    satellites' elevations (rad) this epoch."""
+    o = st.options
+    bl_km = float(np.linalg.norm(st.x[:3] - base_pos)) / 1000.0
+    # a little hysteresis: a rover flying about a threshold does not drop and restart them every few seconds
+    lo, hi = (0.75 * o.iono_min_baseline_km, 1.1 * o.iono_max_baseline_km) if st.iono_on else \
+        (o.iono_min_baseline_km, o.iono_max_baseline_km)
+    on = o.iono_sigma_m_per_km > 0.0 and lo <= bl_km <= hi
+    if not on:
+        if st.iono_on:
+            _drop_iono(st, np.ones(NSAT, bool), el)
+            st.x, st.p = st.x[:NXI].copy(), st.p[:NXI, :NXI].copy()
+        st.iono_on = False
+        return
+    if not st.iono_on:
+        x, p = np.zeros(NX), np.zeros((NX, NX))
+        x[:NXI], p[:NXI, :NXI] = st.x, st.p
+        st.x, st.p = x, p
+    st.iono_on = True
+    j = NXI + np.arange(NSAT)
+    active = st.p[j, j] > 0
+    lost = active & (st.outage > o.max_outage_epochs)
+    if lost.any():
+        _drop_iono(st, lost, el)
+        active &= ~lost
+    if active.any() and o.iono_process_noise_m_per_km > 0.0:
+        st.p[j[active], j[active]] += (o.iono_process_noise_m_per_km * bl_km) ** 2 * abs(dt)
+    new = seen & ~active
+    if new.any():
+        k = j[new]
+        st.x[k] = 0.0
+        st.p[k, k] = (o.iono_sigma_m_per_km * bl_km) ** 2
+
+
 def _dd_matrix(idx: npt.NDArray[np.int64], ref: int) -> Arr:
     """Rows i − ref over the slots `idx` (ref excluded): shape (len(idx)−1, len(idx))."""
     others = (idx != ref).nonzero()[0]
@@ -639,6 +719,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     groups: list[tuple[int, int, npt.NDArray[np.int64], Arr, Arr]] = []
     ref_phase = -1
     drng = rng_r - rng_b
+    ion = _slant_iono_m(st, x, el) if st.iono_on else None
     for kind, ok in ((0, phase_ok), (1, code_ok)):
         idx = ok.nonzero()[0]
         if idx.size < 2:
@@ -646,10 +727,14 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         ref = int(idx[el[idx].argmax()])
         if kind == 0:
             ref_phase = ref
-            z = LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - drng - LAMBDA_L1_M * x[NX0:]
+            z = LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - drng - LAMBDA_L1_M * x[NX0:NXI]
             var = var_sd
+            if ion is not None:
+                z = z + ion[0]  # the ionosphere advances the phase
         else:
             z = (rov.pr_m - base.pr_m) - drng
+            if ion is not None:
+                z = z - ion[0]  # and delays the code
             var = var_sd * o.code_phase_ratio**2 * st.code_var_scale
         groups.append((kind, ref, idx[idx != ref], z, var))
     if with_doppler:
@@ -663,10 +748,10 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
             s2 = (o.doppler_sigma_m_s / np.sin(np.maximum(el, 0.1))) ** 2
             groups.append((2, ref, idx[idx != ref], z, s2))
     if not groups:
-        return _DD(np.zeros(0), np.zeros((0, NX)), np.zeros((0, 0)), np.zeros(0, np.int8), np.zeros(0, np.int64), -1), e
+        return _DD(np.zeros(0), np.zeros((0, x.size)), np.zeros((0, 0)), np.zeros(0, np.int8), np.zeros(0, np.int64), -1), e
     nrow = sum(g[2].size for g in groups)
     v = np.empty(nrow)
-    h = np.zeros((nrow, NX if jacobian else 0))
+    h = np.zeros((nrow, x.size if jacobian else 0))
     r = np.zeros((nrow, nrow))
     kinds = np.empty(nrow, np.int8)
     slots = np.empty(nrow, np.int64)
@@ -683,6 +768,10 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
             if kind == 0:
                 h[_ROWS[k : k + m], NX0 + others] = LAMBDA_L1_M
                 h[rows, NX0 + ref] = -LAMBDA_L1_M
+            if ion is not None and kind < 2:
+                sign = -1.0 if kind == 0 else 1.0
+                h[_ROWS[k : k + m], NXI + others] = sign * ion[1][others]
+                h[rows, NXI + ref] = -sign * ion[1][ref]
         # covariance of rows sharing the reference: var_ref everywhere, var_other + var_ref on the diagonal
         r[rows, rows] = var[ref]
         var_other.append(var[others])
@@ -781,6 +870,8 @@ class _Fix:
     nb: int
     settled: bool = False
     """The same integer set has won the ratio test at every epoch for settled_fix_span_s (see the option)."""
+    iono: Arr | None = None
+    """The ionosphere states (m) conditioned on the integers, when they are in use."""
 
 
 def _agrees_with_validated(st: RtkState, ref: int, others: npt.NDArray[np.int64], ints: Arr, min_common: int) -> bool:
@@ -880,7 +971,11 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             pos = x[:3] - gain @ (a - ints)
             cov = p[:3, :3] - gain @ qba.T
             st.last_ratio = ratio
-            return _Fix(pos, cov, ratio, others, ref, ints, others.size, settled)
+            iono = None
+            if st.iono_on:
+                qia = p[NXI:NX, ja] @ d.T
+                iono = x[NXI:NX] - qia @ np.linalg.solve(qa, a - ints)
+            return _Fix(pos, cov, ratio, others, ref, ints, others.size, settled, iono)
         # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
         # whose ambiguity is still code-level, else mostly the lowest one), not blindly the lowest satellite:
         # one fresh ambiguity would otherwise sink the ratio of a set determined long ago
@@ -896,6 +991,8 @@ def _fixed_ambiguity_state(x: Arr, fix: _Fix) -> Arr:
     xf = x.copy()
     xf[:3] = fix.pos
     xf[NX0 + fix.slots] = xf[NX0 + fix.ref] + fix.ints
+    if fix.iono is not None:
+        xf[NXI:NX] = fix.iono
     return xf
 
 
@@ -903,7 +1000,7 @@ def _holdamb(st: RtkState, fix: _Fix) -> None:
     """Constrain the float DD ambiguities to the fixed integers (RTKLIB holdamb)."""
     o = st.options
     n = fix.slots.size
-    h = np.zeros((n, NX))
+    h = np.zeros((n, st.x.size))
     h[np.arange(n), NX0 + fix.slots] = 1.0
     h[:, NX0 + fix.ref] = -1.0
     v = fix.ints - h @ st.x
@@ -999,6 +1096,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     st.base_age_var_m2 = (o.base_age_sigma_m_s * age) ** 2 if carried is not bas else 0.0
     bas = carried
     _udbias(st, rov, bas, rng_r, rng_b, phase_ok, slip, t_r=rover.time)
+    _udion(st, common, base_pos, dt, el)
     st.code_var_scale = code_variance_scale(st, rov, bas, phase_ok, slip, el, dt)
     if o.standstill or st.static:
         _watch_standstill(st, rov, bas, rng_r, rng_b, los_r, el, phase_ok & ~slip & ~half, rover.time, dt)
