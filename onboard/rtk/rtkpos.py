@@ -432,6 +432,11 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
                 # a held set absorbs a missed slip (wrong fixes): tighter then; before a fix a false alarm
                 # only restarts a float
                 thr_cyc = o.slip_threshold_held_cyc if st.held_prns.any() else o.slip_threshold_cyc
+                if st.held_prns.any() and clean.sum() >= 5 and o.slip_outlier_factor > 0:
+                    # a quiet epoch (the Doppler follows every other satellite's phase closely) shows a slip
+                    # well under the fixed threshold: a robust spread of the others sets a lower one
+                    spread = 1.4826 * median_of_few(np.abs(d[clean]))
+                    thr_cyc = min(thr_cyc, max(o.slip_threshold_min_cyc, o.slip_outlier_factor * spread))
                 thr = thr_cyc * np.maximum(1.0, np.abs(dt_all))  # NaN (never seen) only where not ok
                 slip |= ok & (np.abs(d) > thr)
                 bridged = ok
