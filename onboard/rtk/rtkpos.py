@@ -76,10 +76,10 @@ class _Receiver:
     lli: npt.NDArray[np.uint8]
     sats: SatState  # aligned with the 32 slots
     has: npt.NDArray[np.bool_]
-    memo: dict[tuple[str, bytes], tuple[Arr, ...]] = field(default_factory=dict)
-    """Geometry already computed for this epoch, by (what, receiver position bytes): the base epoch serves
-    several rover epochs from the same known position, and the rover's is asked for again at the same
-    predicted position. The arrays are read-only."""
+    memo: dict[tuple[object, ...], tuple[Arr, ...]] = field(default_factory=dict)
+    """What was already computed for this epoch, by (what, its inputs): geometry by receiver position bytes (the
+    base epoch serves several rover epochs from the same known position, and the rover's is asked for again at
+    the same predicted position), the base's correction rate by history (_extrapolated_base). Read-only."""
 
 
 @dataclass
@@ -519,31 +519,49 @@ def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver
     hist = st.base_hist
     if age_s < o.base_extrapolate_min_age_s or len(hist) < 3:
         return base
-    t_n = hist[-1][0]
-    tk = np.array([t.diff_s(t_n) for t, _ in hist])  # ≤ 0, newest last
-    if -tk[0] < 0.5 * o.base_rate_window_s:
+    # the rate depends on the history alone, which changes only with a new base epoch: the rover epochs of one
+    # base epoch (a radio gap) share it, memoised on that base epoch's receiver
+    key = ("rate", len(hist), hist[0][0].total_ns, hist[-1][0].total_ns)
+    rate = base.memo.get(key)
+    if rate is None:
+        rate = base.memo[key] = _correction_rate(o, hist, base.cp_cyc)
+    if not rate:
         return base
-    z = np.array([zk for _, zk in hist]) - hist[-1][1]  # relative to the newest epoch
-    fin = np.isfinite(z)
-    keep = fin.sum(axis=1) >= 3
-    if np.count_nonzero(keep) < 3:
-        return base
-    z, tk = z[keep], tk[keep]
-    if -tk[0] < 0.5 * o.base_rate_window_s:
-        return base
-    z = z - np.array([median_of_few(row[np.isfinite(row)]) for row in z])[:, None]  # the base clock, common
-    ok = np.all(np.isfinite(z), axis=0) & np.isfinite(base.cp_cyc)
-    if np.count_nonzero(ok) < 2:
-        return base
-    # least-squares slope over the window (a quadratic over 30 s followed the curvature better on hil_sim but
-    # amplified the real M8P base's noise: 94.2 → 91.4 % fixed)
-    tc = tk - tk.mean()
-    slope = tc @ (z[:, ok] - z[:, ok].mean(axis=0)) / (tc @ tc)
+    ok, slope = rate
     cp = base.cp_cyc.copy()
     # from the age where carrying starts, so the correction does not jump when it starts (a jump of rate ×
     # min age released a good hold on the M8P RAWX base); the drift before that stays, as for raw data
     cp[ok] += slope * (age_s - o.base_extrapolate_min_age_s)
     return _Receiver(base.pr_m, cp, base.dop_hz, base.lli, base.sats, base.has)
+
+
+def _correction_rate(o: RtkOptions, hist: list[tuple[GpsTime, Arr]], base_cp_cyc: Arr) -> tuple[Arr, ...]:
+    """(slots, their rate in cycles/s) of the base's phase − modelled range over the history `hist` (see
+    _extrapolated_base), the common base-clock drift removed; () when the history cannot tell (too short, too
+    few clean slots)."""
+    t_n = hist[-1][0]
+    tk = np.array([t.diff_s(t_n) for t, _ in hist])  # ≤ 0, newest last
+    if -tk[0] < 0.5 * o.base_rate_window_s:
+        return ()
+    z = np.array([zk for _, zk in hist]) - hist[-1][1]  # relative to the newest epoch
+    fin = np.isfinite(z)
+    keep = fin.sum(axis=1) >= 3
+    if np.count_nonzero(keep) < 3:
+        return ()
+    z, tk = z[keep], tk[keep]
+    if -tk[0] < 0.5 * o.base_rate_window_s:
+        return ()
+    z = z - np.array([median_of_few(row[np.isfinite(row)]) for row in z])[:, None]  # the base clock, common
+    ok = np.all(np.isfinite(z), axis=0) & np.isfinite(base_cp_cyc)
+    if np.count_nonzero(ok) < 2:
+        return ()
+    # least-squares slope over the window (a quadratic over 30 s followed the curvature better on hil_sim but
+    # amplified the real M8P base's noise: 94.2 → 91.4 % fixed)
+    tc = tk - tk.mean()
+    slope = tc @ (z[:, ok] - z[:, ok].mean(axis=0)) / (tc @ tc)
+    ok.flags.writeable = False
+    slope.flags.writeable = False
+    return ok, slope
 
 
 def _remember_rover(st: RtkState, rov: _Receiver, t_r: GpsTime) -> None:
