@@ -329,10 +329,11 @@ def geometric_range(
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Range (m) with the Sagnac correction and unit line-of-sight vectors (receiver → satellite).
 
-    `sat_pos_m` (n,3), `rcv_pos_m` (3,), both ECEF; follows RTKLIB geodist().
+    `sat_pos_m` (n,3) (or (k,n,3): k epochs seen from the same receiver position), `rcv_pos_m` (3,), both
+    ECEF; follows RTKLIB geodist().
     """
     d = sat_pos_m - rcv_pos_m
-    r = np.sqrt(np.add.reduce(d * d, axis=1))  # np.linalg.norm(d, axis=1) without its dispatch overhead
-    e = d / r[:, None]
-    sagnac = OMEGA_E_RAD_S * (sat_pos_m[:, 0] * rcv_pos_m[1] - sat_pos_m[:, 1] * rcv_pos_m[0]) / CLIGHT_M_S
+    r = np.sqrt(np.add.reduce(d * d, axis=-1))  # np.linalg.norm(d, axis=-1) without its dispatch overhead
+    e = d / r[..., None]
+    sagnac = OMEGA_E_RAD_S * (sat_pos_m[..., 0] * rcv_pos_m[1] - sat_pos_m[..., 1] * rcv_pos_m[0]) / CLIGHT_M_S
     return r + sagnac, e

@@ -57,7 +57,8 @@ def _ld_lists(q: Arr) -> tuple[list[list[float]], list[float]]:
     return lmat, d
 
 
-def _perm(lmat: list[list[float]], d: list[float], j: int, delta: float, z: list[list[float]]) -> None:
+def _perm(lmat: list[list[float]], d: list[float], j: int, delta: float, zt: list[list[float]]) -> None:
+    """Permute ambiguities j and j+1 (RTKLIB perm()); `zt` holds Z by columns (swapped as two list items)."""
     n = len(lmat)
     eta = d[j] / delta
     lam = d[j + 1] * lmat[j + 1][j] / delta
@@ -73,22 +74,21 @@ def _perm(lmat: list[list[float]], d: list[float], j: int, delta: float, z: list
     for k in range(j + 2, n):
         row = lmat[k]
         row[j], row[j + 1] = row[j + 1], row[j]
-    for k in range(n):
-        row = z[k]
-        row[j], row[j + 1] = row[j + 1], row[j]
+    zt[j], zt[j + 1] = zt[j + 1], zt[j]
 
 
 def reduction(lmat_in: Arr, d_in: Arr) -> tuple[Arr, Arr, Arr]:
     """Decorrelate (integer Gauss transforms + permutations, RTKLIB reduction()): returns (L, D, Z)."""
-    lmat, d, z = _reduction_lists(lmat_in.tolist(), d_in.tolist())
-    return np.array(lmat), np.array(d), np.array(z)
+    lmat, d, zt = _reduction_lists(lmat_in.tolist(), d_in.tolist())
+    return np.array(lmat), np.array(d), np.array(zt).T.copy()
 
 
 def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list[float]], list[float],
                                                                           list[list[float]]]:
-    """reduction() on lists, in place on `lmat` and `d`; returns (L, D, Z)."""
+    """reduction() on lists, in place on `lmat` and `d`; returns (L, D, Zᵀ): Z by columns, which its transforms
+    change (a permutation then swaps two list items). Z stays integer, so exact whatever the order."""
     n = len(d)
-    z = [[1.0 if r == c else 0.0 for c in range(n)] for r in range(n)]
+    zt = [[1.0 if r == c else 0.0 for r in range(n)] for c in range(n)]
     j = n - 2
     k = n - 2
     while j >= 0:
@@ -100,16 +100,20 @@ def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list
                     for kk in range(i, n):
                         row = lmat[kk]
                         row[j] -= mu * row[i]
-                    for row in z:
-                        row[j] -= mu * row[i]
+                    zj, zi = zt[j], zt[i]
+                    for r in range(n):
+                        zj[r] -= mu * zi[r]
         delta = d[j] + lmat[j + 1][j] ** 2 * d[j + 1]
         if delta + 1e-6 < d[j + 1]:
-            _perm(lmat, d, j, delta, z)
+            _perm(lmat, d, j, delta, zt)
+            # RTKLIB restarts at j = n − 2; the tests above j + 1 would repeat exactly (their d and L entries are
+            # untouched by the permutation and by the transforms since, which only change columns ≤ j + 1):
+            # all passed, so they pass again, without a transform (j > k) or any other effect
             k = j
-            j = n - 2
+            j = min(j + 1, n - 2)
         else:
             j -= 1
-    return lmat, d, z
+    return lmat, d, zt
 
 
 def search(lmat_a: Arr, d_a: Arr, zs_a: Arr, m: int = 2) -> tuple[Arr, Arr]:
@@ -253,8 +257,8 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None) ->
     if n == 0 or q.shape != (n, n):
         raise LambdaError(f"bad shapes: a {a.shape}, Q {q.shape}")
     lmat0, d0 = _ld_lists(np.asarray(q, dtype=float))
-    lmat, d, z_list = _reduction_lists(lmat0, d0)
-    z: Arr = np.array(z_list, dtype=float)
+    lmat, d, zt = _reduction_lists(lmat0, d0)
+    z: Arr = np.array(zt, dtype=float).T.copy()  # Z row-major as RTKLIB's: the products below the same
     zs = z.T @ a
     zs_list = zs.tolist()
     if ratio_cap is not None:

@@ -17,7 +17,7 @@ import numpy.typing as npt
 
 from onboard.gnsstime import GpsTime
 from onboard.rtk.options import RtkOptions
-from onboard.rtk.rtkpos import NavData, epoch_satellites, epoch_spp, rtk_init, rtk_pos
+from onboard.rtk.rtkpos import NavData, epoch_receivers, epoch_spp, rtk_init, rtk_pos
 from onboard.rtk.types import LLI_SLIP, Q_FIX, Q_FLOAT, Q_NONE, ObsEpoch, Solution
 
 log = logging.getLogger(__name__)
@@ -102,16 +102,17 @@ def run_filter(rover: Sequence[ObsEpoch], paired_base: Sequence[ObsEpoch | None]
             reverse_slip_flags(sorted({id(b): b for b in paired_base if b is not None}.values(),
                                       key=lambda e: e.time)))}
         paired_base = [None if b is None else base_rev[id(b)] for b in paired_base]
-    # satellite positions/clocks of every epoch in one batch: they depend on the data alone, not on the filter
-    sats_r = epoch_satellites(list(rover), nav.store)
-    spps = epoch_spp(list(rover), sats_r, nav, st.options)
+    # slot arrays and satellite positions/clocks of every epoch in one batch (and the base's modelled ranges
+    # from its known position): they depend on the data alone, not on the filter
+    rcv_r = epoch_receivers(list(rover), nav.store)
+    spps = epoch_spp(list(rover), rcv_r, nav, st.options)
     bases = list({id(b): b for b in paired_base if b is not None}.values())
-    sats_b = dict(zip((id(b) for b in bases), epoch_satellites(bases, nav.store)))
+    rcv_b = dict(zip((id(b) for b in bases), epoch_receivers(bases, nav.store, base_pos_ecef_m)))
     sols: list[Solution | None] = [None] * len(rover)
     stats = RunStats(epochs=len(rover))
     for i in order:
         b = paired_base[i]
-        sol = rtk_pos(st, rover[i], b, nav, base_pos_ecef_m, (sats_r[i], None if b is None else sats_b[id(b)]),
+        sol = rtk_pos(st, rover[i], b, nav, base_pos_ecef_m, (rcv_r[i], None if b is None else rcv_b[id(b)]),
                       spps[i])
         sols[i] = sol
         stats.fixed += sol.q == Q_FIX

@@ -80,10 +80,10 @@ class _Receiver:
     lli: npt.NDArray[np.uint8]
     sats: SatState  # aligned with the 32 slots
     has: npt.NDArray[np.bool_]
-    memo: dict[tuple[str, bytes], tuple[Arr, ...]] = field(default_factory=dict)
-    """Geometry already computed for this epoch, by (what, receiver position bytes): the base epoch serves
-    several rover epochs from the same known position, and the rover's is asked for again at the same
-    predicted position. The arrays are read-only."""
+    memo: dict[tuple[object, ...], tuple[Arr, ...]] = field(default_factory=dict)
+    """What was already computed for this epoch, by (what, its inputs): geometry by receiver position bytes (the
+    base epoch serves several rover epochs from the same known position, and the rover's is asked for again at
+    the same predicted position), the base's correction rate by history (_extrapolated_base). Read-only."""
 
 
 @dataclass
@@ -153,38 +153,71 @@ def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkStat
     return st
 
 
+def _slot_arrays(epochs: list[ObsEpoch]) -> tuple[Arr, Arr, Arr, npt.NDArray[np.uint8]]:
+    """The epochs' GPS pseudoranges (m), phases (cycles), Dopplers (Hz) (NaN where absent) and LLI bits (0
+    where absent) on the 32 PRN slots, one row per epoch, scattered in one assignment each."""
+    gps = [e.gps_only() for e in epochs]
+    shape = (len(gps), NSAT)
+    pr, cp, dop = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
+    lli = np.zeros(shape, np.uint8)
+    if len(gps) == 1:  # one live epoch: no concatenation
+        g = gps[0]
+        at: tuple[npt.NDArray[np.int64] | int, npt.NDArray[np.int64]] = (0, g.sv_id.astype(int) - 1)
+        pr[at], cp[at], dop[at], lli[at] = g.pr_m, g.cp_cyc, g.dop_hz, g.lli
+    elif gps:
+        rows = np.repeat(np.arange(len(gps)), [len(g) for g in gps])
+        at = (rows, np.concatenate([g.sv_id for g in gps]).astype(int) - 1)
+        pr[at] = np.concatenate([g.pr_m for g in gps])
+        cp[at] = np.concatenate([g.cp_cyc for g in gps])
+        dop[at] = np.concatenate([g.dop_hz for g in gps])
+        lli[at] = np.concatenate([g.lli for g in gps])
+    return pr, cp, dop, lli
+
+
 def slot_pseudoranges(obs: ObsEpoch) -> Arr:
     """The epoch's GPS pseudoranges (m) on the 32 PRN slots, NaN where absent."""
-    g = obs.gps_only()
-    pr = np.full(NSAT, np.nan)
-    pr[g.sv_id.astype(int) - 1] = g.pr_m
-    return pr
+    return _slot_arrays([obs])[0][0]
 
 
 def epoch_satellites(epochs: list[ObsEpoch], store: EphemerisStore) -> list[SatState]:
     """Satellite states on the 32 slots of every epoch (satposs at each epoch's own time tag), in one batch:
-    what _slots computes per epoch, for rtk_pos's `sats` when the epochs are known ahead (post-processing)."""
+    what _slots computes per epoch, when the epochs are known ahead (post-processing)."""
     if not epochs:
         return []
-    prs = np.array([slot_pseudoranges(e) for e in epochs])
-    return satellite_states_batch(store, _PRNS, [e.time.total_ns for e in epochs], prs)
+    return satellite_states_batch(store, _PRNS, [e.time.total_ns for e in epochs], _slot_arrays(epochs)[0])
 
 
-def epoch_spp(epochs: list[ObsEpoch], sats: list[SatState], nav: NavData, o: RtkOptions) -> list[SppSolution]:
+def epoch_receivers(epochs: list[ObsEpoch], store: EphemerisStore, pos_ecef_m: Arr | None = None
+                    ) -> list[_Receiver]:
+    """What _slots gives for each epoch (slot arrays, satellite states), for rtk_pos's `receivers` when the
+    epochs are known ahead (post-processing): the scatter and satposs of every epoch in one batch.
+
+    `pos_ecef_m`: the receiver's fixed, known position (the base), where every epoch's modelled range is then
+    evaluated in one batch too (see _model_range_rows). Each receiver's arrays are rows of the batch's, its
+    own (rtk_pos may blank a Doppler of its rover epoch)."""
+    if not epochs:
+        return []
+    pr, cp, dop, lli = _slot_arrays(epochs)
+    sats = satellite_states_batch(store, _PRNS, [e.time.total_ns for e in epochs], pr)
+    has = np.isfinite(pr) & np.array([s.ok for s in sats])
+    out = [_Receiver(pr[k], cp[k], dop[k], lli[k], sats[k], has[k]) for k in range(len(epochs))]
+    if pos_ecef_m is not None:
+        _model_range_rows(out, np.asarray(pos_ecef_m, float))
+    return out
+
+
+def epoch_spp(epochs: list[ObsEpoch], rcvs: list[_Receiver], nav: NavData, o: RtkOptions) -> list[SppSolution]:
     """Single-point solutions of every epoch in one batch (pntpos_batch), for rtk_pos's `spp` when the epochs
-    are known ahead (post-processing). All start from the first solvable epoch's solution, as rtk_pos starts
-    each epoch's from the filter position: the same start for a receiver within kilometres (a survey site, a
-    drone flight); the solution does not depend on it (sub-mm), the point where the atmosphere is evaluated
-    moves by the rover's distance from it (re-evaluated past 50 m)."""
+    are known ahead (post-processing), from their receivers (epoch_receivers). All start from the first
+    solvable epoch's solution, as rtk_pos starts each epoch's from the filter position: the same start for a
+    receiver within kilometres (a survey site, a drone flight); the solution does not depend on it (sub-mm),
+    the point where the atmosphere is evaluated moves by the rover's distance from it (re-evaluated past
+    50 m)."""
     if not epochs:
         return []
-    prs = np.full((len(epochs), NSAT), np.nan)
-    dops = np.full(prs.shape, np.nan)
-    for k, e in enumerate(epochs):  # both columns from one pass over each epoch's GPS measurements
-        g = e.gps_only()
-        idx = g.sv_id.astype(int) - 1
-        prs[k, idx] = g.pr_m
-        dops[k, idx] = g.dop_hz
+    prs = np.array([r.pr_m for r in rcvs])
+    dops = np.array([r.dop_hz for r in rcvs])
+    sats = [r.sats for r in rcvs]
     tows = np.array([e.time.tow_s for e in epochs])
     args = (o.elmask_rad, dops, nav.iono)
     kw = {"outlier_m": o.spp_outlier_m, "max_gdop": o.spp_max_gdop}
@@ -200,18 +233,11 @@ def epoch_spp(epochs: list[ObsEpoch], sats: list[SatState], nav: NavData, o: Rtk
 def _slots(obs: ObsEpoch, store: EphemerisStore, sats: SatState | None = None) -> _Receiver:
     """Scatter a GPS epoch onto 32 PRN slots and compute satellite states at its own time tag (satposs),
     unless given (`sats`, from epoch_satellites)."""
-    g = obs.gps_only()
-    idx = g.sv_id.astype(int) - 1
-    pr = np.full(NSAT, np.nan)
-    cp = np.full(NSAT, np.nan)
-    dop = np.full(NSAT, np.nan)
-    lli = np.zeros(NSAT, np.uint8)
-    pr[idx], cp[idx], dop[idx], lli[idx] = g.pr_m, g.cp_cyc, g.dop_hz, g.lli
-    has = np.isfinite(pr)
+    pr, cp, dop, lli = (a[0] for a in _slot_arrays([obs]))
     if sats is None:
         # straight onto the 32 slots: a batch of one leaves slots without a pseudorange zero and not ok
-        sats = satellite_states_batch(store, _PRNS, [g.time.total_ns], pr.reshape(1, NSAT))[0]
-    return _Receiver(pr, cp, dop, lli, sats, has & sats.ok)
+        sats = satellite_states_batch(store, _PRNS, [obs.time.total_ns], pr.reshape(1, NSAT))[0]
+    return _Receiver(pr, cp, dop, lli, sats, np.isfinite(pr) & sats.ok)
 
 
 def _geometry(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr]:
@@ -233,16 +259,38 @@ def _model_range_m(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr, Arr, Arr]
     hit = rcv.memo.get(key)
     if hit is None:
         r, e = _geometry(rcv, pos_ecef_m)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            llh = ecef_to_llh(pos_ecef_m)
-            az, el = sat_az_el(pos_ecef_m, e, llh)
-        lat, _, h = llh
-        trop = saastamoinen_m(lat, h, el)
-        hit = (r - CLIGHT_M_S * rcv.sats.clock_s + trop, e, az, el)
+        rng, az, el = _model_from_geometry(r, e, rcv.sats.clock_s, pos_ecef_m)
+        hit = (rng, e, az, el)
         for a in hit:
             a.flags.writeable = False
         rcv.memo[key] = hit
     return hit[0], hit[1], hit[2], hit[3]
+
+
+def _model_from_geometry(r: Arr, e: Arr, clock_s: Arr, pos_ecef_m: Arr) -> tuple[Arr, Arr, Arr]:
+    """Modelled range (m), azimuth and elevation (rad) from geometric_range()'s range `r` and LOS `e` of the
+    satellites seen from one position: one slot row (32,) / (32, 3), or several epochs' (k, 32) / (k, 32, 3)."""
+    with np.errstate(invalid="ignore", divide="ignore"):  # empty slots (zero positions) give NaN, unused
+        llh = ecef_to_llh(pos_ecef_m)
+        az, el = sat_az_el(pos_ecef_m, e.reshape(-1, 3), llh)
+    az, el = az.reshape(r.shape), el.reshape(r.shape)
+    lat, _, h = llh
+    return r - CLIGHT_M_S * clock_s + saastamoinen_m(lat, h, el), az, el
+
+
+def _model_range_rows(rcvs: list[_Receiver], pos_ecef_m: Arr) -> None:
+    """Memoise _model_range_m (and _geometry) of every receiver at one fixed position (the base's) from a
+    batch over all of them: the same operations per element as the per-epoch call, in array operations."""
+    sat_pos = np.array([rc.sats.pos_m for rc in rcvs])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r, e = geometric_range(sat_pos, pos_ecef_m)
+    model, az, el = _model_from_geometry(r, e, np.array([rc.sats.clock_s for rc in rcvs]), pos_ecef_m)
+    for a in (r, e, model, az, el):
+        a.flags.writeable = False  # and so every row
+    pos_key = pos_ecef_m.tobytes()
+    for k, rc in enumerate(rcvs):
+        rc.memo[("geo", pos_key)] = (r[k], e[k])
+        rc.memo[("model", pos_key)] = (model[k], e[k], az[k], el[k])
 
 
 def _range_with_trop_m(rcv: _Receiver, pos_ecef_m: Arr, trop_m: Arr) -> tuple[Arr, Arr]:
@@ -486,31 +534,49 @@ def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver
     hist = st.base_hist
     if age_s < o.base_extrapolate_min_age_s or len(hist) < 3:
         return base
-    t_n = hist[-1][0]
-    tk = np.array([t.diff_s(t_n) for t, _ in hist])  # ≤ 0, newest last
-    if -tk[0] < 0.5 * o.base_rate_window_s:
+    # the rate depends on the history alone, which changes only with a new base epoch: the rover epochs of one
+    # base epoch (a radio gap) share it, memoised on that base epoch's receiver
+    key = ("rate", len(hist), hist[0][0].total_ns, hist[-1][0].total_ns)
+    rate = base.memo.get(key)
+    if rate is None:
+        rate = base.memo[key] = _correction_rate(o, hist, base.cp_cyc)
+    if not rate:
         return base
-    z = np.array([zk for _, zk in hist]) - hist[-1][1]  # relative to the newest epoch
-    fin = np.isfinite(z)
-    keep = fin.sum(axis=1) >= 3
-    if np.count_nonzero(keep) < 3:
-        return base
-    z, tk = z[keep], tk[keep]
-    if -tk[0] < 0.5 * o.base_rate_window_s:
-        return base
-    z = z - np.array([median_of_few(row[np.isfinite(row)]) for row in z])[:, None]  # the base clock, common
-    ok = np.all(np.isfinite(z), axis=0) & np.isfinite(base.cp_cyc)
-    if np.count_nonzero(ok) < 2:
-        return base
-    # least-squares slope over the window (a quadratic over 30 s followed the curvature better on hil_sim but
-    # amplified the real M8P base's noise: 94.2 → 91.4 % fixed)
-    tc = tk - tk.mean()
-    slope = tc @ (z[:, ok] - z[:, ok].mean(axis=0)) / (tc @ tc)
+    ok, slope = rate
     cp = base.cp_cyc.copy()
     # from the age where carrying starts, so the correction does not jump when it starts (a jump of rate ×
     # min age released a good hold on the M8P RAWX base); the drift before that stays, as for raw data
     cp[ok] += slope * (age_s - o.base_extrapolate_min_age_s)
     return _Receiver(base.pr_m, cp, base.dop_hz, base.lli, base.sats, base.has)
+
+
+def _correction_rate(o: RtkOptions, hist: list[tuple[GpsTime, Arr]], base_cp_cyc: Arr) -> tuple[Arr, ...]:
+    """(slots, their rate in cycles/s) of the base's phase − modelled range over the history `hist` (see
+    _extrapolated_base), the common base-clock drift removed; () when the history cannot tell (too short, too
+    few clean slots)."""
+    t_n = hist[-1][0]
+    tk = np.array([t.diff_s(t_n) for t, _ in hist])  # ≤ 0, newest last
+    if -tk[0] < 0.5 * o.base_rate_window_s:
+        return ()
+    z = np.array([zk for _, zk in hist]) - hist[-1][1]  # relative to the newest epoch
+    fin = np.isfinite(z)
+    keep = fin.sum(axis=1) >= 3
+    if np.count_nonzero(keep) < 3:
+        return ()
+    z, tk = z[keep], tk[keep]
+    if -tk[0] < 0.5 * o.base_rate_window_s:
+        return ()
+    z = z - np.array([median_of_few(row[np.isfinite(row)]) for row in z])[:, None]  # the base clock, common
+    ok = np.all(np.isfinite(z), axis=0) & np.isfinite(base_cp_cyc)
+    if np.count_nonzero(ok) < 2:
+        return ()
+    # least-squares slope over the window (a quadratic over 30 s followed the curvature better on hil_sim but
+    # amplified the real M8P base's noise: 94.2 → 91.4 % fixed)
+    tc = tk - tk.mean()
+    slope = tc @ (z[:, ok] - z[:, ok].mean(axis=0)) / (tc @ tc)
+    ok.flags.writeable = False
+    slope.flags.writeable = False
+    return ok, slope
 
 
 def _remember_rover(st: RtkState, rov: _Receiver, t_r: GpsTime) -> None:
@@ -1020,17 +1086,17 @@ def _holdamb(st: RtkState, fix: _Fix) -> None:
 
 
 def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
-            base_pos_ecef_m: Arr | None, sats: tuple[SatState | None, SatState | None] = (None, None),
+            base_pos_ecef_m: Arr | None, receivers: tuple[_Receiver | None, _Receiver | None] = (None, None),
             spp: SppSolution | None = None) -> Solution:
     """Process one rover epoch (RTKLIB rtkpos()/relpos()); returns the epoch's Solution.
 
     `base` is the base epoch paired with this rover epoch (latest at or before it, see postpro.pair_epochs);
     `base_pos_ecef_m` the base antenna L1 phase centre. Without base data a single-point solution (Q=5).
-    `sats`: the rover's and the base epoch's satellite states when already computed (epoch_satellites),
-    else None (computed here); `spp` the rover's single-point solution likewise (epoch_spp).
+    `receivers`: the rover's and the base epoch's slot data when already built (epoch_receivers), else None
+    (built here); `spp` the rover's single-point solution likewise (epoch_spp).
     """
     o = st.options
-    rov = _slots(rover, nav.store, sats[0])
+    rov = _slots(rover, nav.store) if receivers[0] is None else receivers[0]
     nan3 = np.full(3, np.nan)
     if spp is None or not st.initialized:
         # the filter starts on this epoch's own solution from a cold start (precomputed ones start elsewhere)
@@ -1068,7 +1134,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     if st.base_cache is not None and st.base_cache[0] == base.time:
         bas = st.base_cache[1]
     else:
-        bas = _slots(base, nav.store, sats[1])
+        bas = _slots(base, nav.store) if receivers[1] is None else receivers[1]
         st.base_cache = (base.time, bas)
     base_pos = np.asarray(base_pos_ecef_m, float)
     st.baseline_m = _norm(st.x[:3] - base_pos) if st.initialized else 0.0

@@ -115,3 +115,31 @@ def test_the_last_base_epoch_carried_forward_20_s_matches_the_base_then(flight):
     assert raw_m.max() > 0.03  # raw, the old epoch is centimetres off …
     # … carried forward, what is left is mostly the phase noise of the two epochs (3 mm/sin el each)
     assert miss_m.max() < 0.02 and np.sqrt(np.mean(miss_m**2)) < 0.5 * np.sqrt(np.mean(raw_m**2))
+
+
+def test_the_correction_rate_is_shared_by_the_rover_epochs_of_one_base_epoch(flight):
+    """The rover epochs of one base epoch (a radio gap) reuse the rate memoised on its receiver: each age gets
+    exactly what a receiver without the memo gets, and a new base epoch (another history) gets its own rate."""
+    from onboard.rtk.consts import LAMBDA_L1_M
+    from onboard.rtk.rtkpos import _extrapolated_base, _model_range_m, _remember_base, _slots
+
+    world, _, base = flight
+    store = EphemerisStore(world.ephemerides())
+
+    def remember(ep):  # phase − modelled range (cycles) per slot, as rtk_pos gives _remember_base
+        b = _slots(ep, store)
+        _remember_base(st, b, ep.time, (LAMBDA_L1_M * b.cp_cyc - _model_range_m(b, world.base_ecef_m)[0]) / LAMBDA_L1_M)
+
+    st = rtk_init(RtkOptions())
+    for ep in base[GAP.start - 22:GAP.start]:
+        remember(ep)
+    last = _slots(base[GAP.start - 1], store)
+    for age in (6.0, 7.5, 12.0, 19.0):  # carried from 5 s on
+        shared = _extrapolated_base(st, last, age)
+        alone = _extrapolated_base(st, _slots(base[GAP.start - 1], store), age)
+        assert not np.array_equal(shared.cp_cyc, last.cp_cyc, equal_nan=True)  # carried
+        assert np.array_equal(shared.cp_cyc, alone.cp_cyc, equal_nan=True)
+    assert len([k for k in last.memo if k[0] == "rate"]) == 1
+    remember(base[GAP.start])
+    _extrapolated_base(st, last, 6.0)
+    assert len([k for k in last.memo if k[0] == "rate"]) == 2

@@ -158,6 +158,29 @@ def test_satellite_states_of_all_epochs_in_one_batch_equal_the_per_epoch_calls()
     assert np.array_equal(epoch_satellites(epochs[:3], late)[0].pos_m, batch[0].pos_m)
 
 
+def test_receivers_of_all_epochs_in_one_batch_equal_the_per_epoch_slots() -> None:
+    """Post-processing builds every epoch's slot data before the filter (epoch_receivers), with a base's
+    modelled ranges from its known position in one batch: each epoch must get exactly what _slots and
+    _model_range_m give it alone (the real-time path)."""
+    from onboard.rtk.rtkpos import _geometry, _model_range_m, _slots, epoch_receivers
+
+    nav = read_rinex_nav(shared_file(M8P + "rover-20181004-1237.nav.gz"))
+    obs = read_rinex_obs(shared_file(M8P + "base-20181004-1236.rawx.obs.gz"))
+    store = EphemerisStore(nav.ephemerides)
+    epochs = obs.epochs[::5]  # mixed GNSS: the receivers keep GPS
+    pos = np.array([3774089.2120, -601661.6157, 5089321.2474])
+    batch = epoch_receivers(epochs, store, pos)
+    assert len(batch) == len(epochs) and len(epoch_receivers([], store, pos)) == 0
+    for ep, b in zip(epochs, batch):
+        one = _slots(ep, store)
+        assert b.memo and b.has.sum() >= 5
+        for x, y in ((b.pr_m, one.pr_m), (b.cp_cyc, one.cp_cyc), (b.dop_hz, one.dop_hz), (b.lli, one.lli),
+                     (b.has, one.has), (b.sats.pos_m, one.sats.pos_m), *zip(_geometry(b, pos), _geometry(one, pos)),
+                     *zip(_model_range_m(b, pos), _model_range_m(one, pos))):
+            assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f")
+        assert not b.memo[("model", pos.tobytes())][0].flags.writeable
+
+
 def test_spp_of_many_epochs_in_one_batch_equals_each_epoch_alone() -> None:
     """pntpos_batch over many epochs (post-processing) gives each epoch what pntpos (its batch of one, the
     real-time path) gives: same satellites used, same RAIM exclusion, positions/clock within micrometres."""
