@@ -81,7 +81,8 @@ def run_seeds(seeds: list[int], only: list[str] | None = None, models: tuple[str
             runs = {seed: evaluate(replace(case, seed=seed), model) for seed in seeds}
             air = np.array([r["air fix %"] for r in runs.values()], float)
             wrong = {seed: r["wrong"] for seed, r in runs.items() if r["wrong"]}
-            first = np.nanmedian([r["first fix s"] for r in runs.values()])
+            firsts = np.array([r["first fix s"] for r in runs.values()], float)
+            first = float(np.median(firsts[np.isfinite(firsts)])) if np.isfinite(firsts).any() else float("nan")
             bad = ", ".join(f"s{k}: {v}" for k, v in wrong.items()) or "none"
             print(f"{case.name:30s} {model:6s} {np.nanmin(air):9.1f} {np.nanmedian(air):7.1f} {np.nanmean(air):6.1f} "
                   f"{sum(wrong.values()):6d}  {bad} / {first:.0f}", flush=True)
