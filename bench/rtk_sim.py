@@ -17,6 +17,7 @@ Run: `.venv/bin/python bench/rtk_sim.py [--only SUBSTR ...] [--model lea6t|m8t] 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Iterator
 from dataclasses import replace
 from typing import Any
 
@@ -50,18 +51,22 @@ def row(case: SimCase, model: str, r: dict[str, Any]) -> str:
             f"{r['us/epoch']:6.0f}  {case.target}")
 
 
+def _runs(only: list[str] | None, models: tuple[str, ...]) -> Iterator[tuple[SimCase, str]]:
+    """(scenario, model) pairs to run: scenarios whose name contains one of `only`, or all."""
+    for case in CASES:
+        if not only or any(s in case.name for s in only):
+            yield from ((case, model) for model in models)
+
+
 def run_matrix(only: list[str] | None = None, models: tuple[str, ...] = ("lea6t", "m8t"), seed: int = 1) -> None:
     """Print the matrix (scenarios whose name contains one of `only`, or all)."""
     print(f"hil_sim flights (seed {seed}), directgeo onboard.rtk forward, GPS L1, 15 deg mask, fix-and-hold, "
           "max age 30 s")
     print(HEADER)
     print("-" * len(HEADER))
-    for case in CASES:
-        if only and not any(s in case.name for s in only):
-            continue
-        for model in models:
-            c = replace(case, seed=seed)
-            print(row(c, model, evaluate(c, model)), flush=True)
+    for case, model in _runs(only, models):
+        c = replace(case, seed=seed)
+        print(row(c, model, evaluate(c, model)), flush=True)
 
 
 def run_seeds(seeds: list[int], only: list[str] | None = None, models: tuple[str, ...] = ("lea6t", "m8t")) -> None:
@@ -74,18 +79,15 @@ def run_seeds(seeds: list[int], only: list[str] | None = None, models: tuple[str
             "seeds with wrong fixes / first fix s (median)")
     print(head)
     print("-" * len(head))
-    for case in CASES:
-        if only and not any(s in case.name for s in only):
-            continue
-        for model in models:
-            runs = {seed: evaluate(replace(case, seed=seed), model) for seed in seeds}
-            air = np.array([r["air fix %"] for r in runs.values()], float)
-            wrong = {seed: r["wrong"] for seed, r in runs.items() if r["wrong"]}
-            firsts = np.array([r["first fix s"] for r in runs.values()], float)
-            first = float(np.median(firsts[np.isfinite(firsts)])) if np.isfinite(firsts).any() else float("nan")
-            bad = ", ".join(f"s{k}: {v}" for k, v in wrong.items()) or "none"
-            print(f"{case.name:30s} {model:6s} {np.nanmin(air):9.1f} {np.nanmedian(air):7.1f} {np.nanmean(air):6.1f} "
-                  f"{sum(wrong.values()):6d}  {bad} / {first:.0f}", flush=True)
+    for case, model in _runs(only, models):
+        runs = {seed: evaluate(replace(case, seed=seed), model) for seed in seeds}
+        air = np.array([r["air fix %"] for r in runs.values()], float)
+        wrong = {seed: r["wrong"] for seed, r in runs.items() if r["wrong"]}
+        firsts = np.array([r["first fix s"] for r in runs.values()], float)
+        first = float(np.median(firsts[np.isfinite(firsts)])) if np.isfinite(firsts).any() else float("nan")
+        bad = ", ".join(f"s{k}: {v}" for k, v in wrong.items()) or "none"
+        print(f"{case.name:30s} {model:6s} {np.nanmin(air):9.1f} {np.nanmedian(air):7.1f} {np.nanmean(air):6.1f} "
+              f"{sum(wrong.values()):6d}  {bad} / {first:.0f}", flush=True)
 
 
 def _seed_range(text: str) -> list[int]:
