@@ -136,30 +136,38 @@ def test_cli_registers_base_and_refuses_a_missing_or_bad_position(capsys) -> Non
     assert "survey-in" in capsys.readouterr().err
 
 
-def test_a_slip_at_an_rxm_raw_base_reaches_the_rover_as_a_lock_time_reset() -> None:
+def _third_satellite_through_1004(lli_at, lock_ms_at):  # type: ignore[no-untyped-def]
+    """40 one-second epochs of the GEONET base through BaseCore (1004) and back through RtcmDecoder, the third
+    satellite's LLI (`lli_at(k)`) and every lock time (`lock_ms_at(k)`, NaN = none, as RXM-RAW) set per epoch k:
+    (k, decoded epoch, row of that satellite) per decoded epoch, and its PRN."""
     from onboard.receiver.framing import StreamFramer
     from onboard.receiver.rtcm import RtcmDecoder
-    from onboard.rtk.types import LLI_SLIP
 
     epochs, _ = _base_data()
     ep0 = epochs[0]
     prn = int(ep0.sv_id[2])
     core = BaseCore(BaseOptions(position_ecef_m=BASE_3040))
     dec = RtcmDecoder()
-    slips: list[int] = []
-    for k in range(40):  # 1 Hz, no lock times (as RXM-RAW); the receiver flags a slip on `prn` at k = 25
+    decoded = []
+    for k in range(40):
         lli = np.zeros(len(ep0), np.uint8)
-        if k == 25:
-            lli[2] = LLI_SLIP
-        ep = replace(ep0, time=ep0.time.add_s(k), lock_ms=np.full(len(ep0), np.nan), lli=lli)
+        lli[2] = lli_at(k)
+        ep = replace(ep0, time=ep0.time.add_s(k), lock_ms=np.full(len(ep0), lock_ms_at(k)), lli=lli)
         for f in StreamFramer().feed(b"".join(f for _, f in core.on_item(ep))):
             out = dec.decode(f, ep0.time)
             if out is not None and hasattr(out, "sv_id"):
-                j = int(np.flatnonzero(out.sv_id == prn)[0])
-                if out.lli[j] & LLI_SLIP:
-                    slips.append(k)
-                assert np.all(out.lli[np.arange(len(out)) != j] & LLI_SLIP == 0)
+                decoded.append((k, out, int(np.flatnonzero(out.sv_id == prn)[0])))
+    return decoded
+
+
+def test_a_slip_at_an_rxm_raw_base_reaches_the_rover_as_a_lock_time_reset() -> None:
+    from onboard.rtk.types import LLI_SLIP
+
+    # 1 Hz, no lock times (as RXM-RAW); the receiver flags a slip on the satellite at k = 25
+    decoded = _third_satellite_through_1004(lambda k: LLI_SLIP if k == 25 else 0, lambda k: np.nan)
+    slips = [k for k, out, j in decoded if out.lli[j] & LLI_SLIP]
     assert slips == [25]
+    assert all(np.all(out.lli[np.arange(len(out)) != j] & LLI_SLIP == 0) for _, out, j in decoded)
 
 
 @pytest.mark.parametrize("receiver_lock", [False, True], ids=["rxm-raw", "rxm-rawx"])
@@ -168,34 +176,16 @@ def test_an_unresolved_half_cycle_at_the_base_is_withheld_and_its_resolution_sta
     """1004 cannot flag a half cycle: phase flagged unresolved (LLI bit 1) is not sent, and when the flag clears
     (the receiver may move the phase half a cycle then) the lock time restarts, so the rover sees a new arc.
     hil_sim seed 10 (undetected slips): sent as it was, a base half-cycle arc ended in 10 wrong rover fixes."""
-    from onboard.receiver.framing import StreamFramer
-    from onboard.receiver.rtcm import RtcmDecoder
     from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP
 
-    epochs, _ = _base_data()
-    ep0 = epochs[0]
-    prn = int(ep0.sv_id[2])
-    core = BaseCore(BaseOptions(position_ecef_m=BASE_3040))
-    dec = RtcmDecoder()
-    phase_sent: list[bool] = []
-    slips: list[int] = []
-    for k in range(40):  # the receiver flags an unresolved half cycle on `prn` at k = 10-19, resolved at 20
-        lli = np.zeros(len(ep0), np.uint8)
-        if 10 <= k < 20:
-            lli[2] = LLI_HALF_CYCLE
-        lock = np.full(len(ep0), 600_000.0 + 1000.0 * k) if receiver_lock else np.full(len(ep0), np.nan)
-        ep = replace(ep0, time=ep0.time.add_s(k), lock_ms=lock, lli=lli)
-        for f in StreamFramer().feed(b"".join(f for _, f in core.on_item(ep))):
-            out = dec.decode(f, ep0.time)
-            if out is not None and hasattr(out, "sv_id"):
-                j = int(np.flatnonzero(out.sv_id == prn)[0])
-                phase_sent.append(bool(np.isfinite(out.cp_cyc[j])))
-                if out.lli[j] & LLI_SLIP:
-                    slips.append(k)
-                others = np.arange(len(out)) != j
-                assert np.all(np.isfinite(out.cp_cyc[others])) and np.all(out.lli[others] & LLI_SLIP == 0)
-    assert phase_sent == [not 10 <= k < 20 for k in range(40)]
-    assert slips == [20]
+    # the receiver flags an unresolved half cycle on the satellite at k = 10-19, resolved at 20
+    decoded = _third_satellite_through_1004(lambda k: LLI_HALF_CYCLE if 10 <= k < 20 else 0,
+                                            lambda k: 600_000.0 + 1000.0 * k if receiver_lock else np.nan)
+    assert [bool(np.isfinite(out.cp_cyc[j])) for _, out, j in decoded] == [not 10 <= k < 20 for k in range(40)]
+    assert [k for k, out, j in decoded if out.lli[j] & LLI_SLIP] == [20]
+    for _, out, j in decoded:
+        others = np.arange(len(out)) != j
+        assert np.all(np.isfinite(out.cp_cyc[others])) and np.all(out.lli[others] & LLI_SLIP == 0)
 
 
 def test_radio_sender_drops_when_the_radio_is_stuck_and_logs_only_what_it_queued(tmp_path) -> None:
