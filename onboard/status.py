@@ -103,11 +103,11 @@ def read_status(path: Path) -> dict[str, Any]:
 
 def read_rtk_status(status_path: Path) -> dict[str, Any] | None:
     """The real-time RTK snapshot beside the status snapshot at `status_path`, None when the daemon runs no RTK
-    (no file). Raises ValueError when the file is there but is not a JSON object (half-written by a foreign tool)."""
+    (no file). Raises ValueError when it is not JSON (half-written, foreign), TypeError when not a JSON object."""
     try:
         obj = json.loads(Path(status_path).with_name(RTK_STATUS_NAME).read_bytes())
     except FileNotFoundError:
         return None
     if not isinstance(obj, dict):
-        raise ValueError(f"{RTK_STATUS_NAME} is not a JSON object")
+        raise TypeError(f"{RTK_STATUS_NAME} is not a JSON object")
     return obj

@@ -52,7 +52,7 @@ def create_app(status_path: Path | None = None, options: PreflightOptions | None
         if status is not None:
             try:
                 rtk = read_rtk_status(status_path)
-            except (ValueError, OSError) as exc:  # a torn or foreign rtk.json: say so, keep the other checks
+            except (ValueError, TypeError, OSError) as exc:  # torn or foreign rtk.json: say so, keep the rest
                 rtk = {"unreadable": str(exc)}
         checks = preflight_checks(status, time.time_ns(), options, rtk)
         return {"overall": overall(checks), "checks": checks_json(checks), "status": status, "rtk": rtk,

@@ -92,13 +92,13 @@ def test_rtk_problems_are_warnings_with_their_cause() -> None:
     (a warning, not a no-go: the journals still let the ground compute the trajectory)."""
     now = time.time_ns()
     cases = {
-        "not fixed yet": dict(q=2, ratio=1.8),
-        "no base corrections yet": dict(base_epochs=0, q=5),
-        "base radio closed: device disappeared": dict(radio_open=False, radio_error="device disappeared"),
-        "base corrections 45 s old": dict(age_s=45.0, q=2),
-        "6 s behind the receiver": dict(last_gpst="1590:345594.992000000"),
-        "no solution yet": dict(last_gpst=None),
-        "not running (2 errors": dict(running=False, errors=2),
+        "not fixed yet": {"q": 2, "ratio": 1.8},
+        "no base corrections yet": {"base_epochs": 0, "q": 5},
+        "base radio closed: device disappeared": {"radio_open": False, "radio_error": "device disappeared"},
+        "base corrections 45 s old": {"age_s": 45.0, "q": 2},
+        "6 s behind the receiver": {"last_gpst": "1590:345594.992000000"},
+        "no solution yet": {"last_gpst": None},
+        "not running (2 errors": {"running": False, "errors": 2},
     }
     for expect, change in cases.items():
         rtk = _rtk_fixed()
@@ -185,6 +185,9 @@ def test_api_survives_a_garbage_rtk_snapshot(live_page: tuple[str, Path]) -> Non
     levels = {c["name"]: c["level"] for c in body["checks"]}
     assert levels["RTK"] == WARN and levels["recorder"] == OK
     assert any("RTK status unreadable" in c["detail"] for c in body["checks"])
+    status_path.with_name(RTK_STATUS_NAME).write_text("[1, 2]")  # JSON, but not an RTK snapshot
+    body = httpx.get(url + "/api/preflight", timeout=5).json()
+    assert any("not a JSON object" in c["detail"] for c in body["checks"] if c["name"] == "RTK")
     write_rtk_status(status_path.with_name(RTK_STATUS_NAME), _rtk_fixed().to_json())
     body = httpx.get(url + "/api/preflight", timeout=5).json()
     assert body["overall"] == OK and body["rtk"]["q"] == 1
