@@ -5,7 +5,6 @@ Follows IS-GPS-200 20.3.3.4.3 and RTKLIB ephemeris.c eph2pos()/eph2clk()/satposs
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 

@@ -14,7 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
-from onboard.rtk.ephemeris import SatState, geometric_range
+from onboard.rtk.ephemeris import SatState
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.models import klobuchar_m, saastamoinen_m
 
