@@ -307,6 +307,12 @@ def _solution(t: GpsTime, pos: Arr, vel: Arr, q: int, ns: int, cov: Arr, covv: A
                     ratio=min(ratio, RATIO_CAP))
 
 
+def _in_use(st: RtkState, first: int = NX0) -> npt.NDArray[np.bool_]:
+    """Per PRN slot, whether its state in the block starting at `first` (ambiguities at NX0, ionosphere at
+    NXI) is in use: a state out of use has zero variance. A view-derived array, not a copy to keep."""
+    return st.p.diagonal()[first:first + NSAT] > 0
+
+
 def _reset_amb(st: RtkState, k: npt.NDArray[np.int64]) -> None:
     """Forget the ambiguities of slots `k` (they are re-initialised from phase − code when next seen)."""
     j = NX0 + np.asarray(k, int)
@@ -378,7 +384,7 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
         st.p[:, :3] = 0.0
         st.p[:3, :3] = np.eye(3) * o.initial_pos_sigma_m**2
     amb = np.arange(NX0, NXI)
-    active = st.p[amb, amb] > 0
+    active = _in_use(st)
     # with the ionosphere estimated (st.iono_on, last epoch's verdict) the per-km random walk is left to
     # geodetic code, which can follow the drift it stands for (see RtkOptions.iono_sigma_m_per_km)
     per_km = None if st.iono_on and not _geodetic_code(st) else base_pos
@@ -479,8 +485,9 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
                 d = d - median_of_few(rate[clean] if np.count_nonzero(clean) >= 2 else rate[ok]) * dt_all
                 # a held set absorbs a missed slip (wrong fixes): tighter then; before a fix a false alarm
                 # only restarts a float
-                thr_cyc = o.slip_threshold_held_cyc if st.held_prns.any() else o.slip_threshold_cyc
-                if st.held_prns.any() and clean.sum() >= 5 and o.slip_outlier_factor > 0:
+                held = bool(st.held_prns.any())
+                thr_cyc = o.slip_threshold_held_cyc if held else o.slip_threshold_cyc
+                if held and np.count_nonzero(clean) >= 5 and o.slip_outlier_factor > 0:
                     # a quiet epoch (the Doppler follows every other satellite's phase closely) shows a slip
                     # well under the fixed threshold: a robust spread of the others sets a lower one
                     spread = 1.4826 * median_of_few(np.abs(d[clean]))
@@ -491,7 +498,7 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
         # a phase gap the Doppler could not bridge: receivers do not always flag a loss of lock inside the
         # gap (the Septentrio rover of GEONET 3034 comes back a whole cycle off with LLI 0), so the continuity
         # of such phase is unknown and its ambiguity starts afresh
-        amb_on = st.p.diagonal()[NX0:NX0 + NSAT] > 0
+        amb_on = _in_use(st)
         slip |= common & ~st.prev_phase_r & amb_on & ~bridged
     return slip
 
@@ -618,14 +625,13 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
             if ok.sum() >= 3 and 0.0 < dt_r <= 2.0:
                 step = step - median_of_few(step[ok & ~cleared] if (ok & ~cleared).sum() >= 2 else step[ok])
                 slip = slip | (cleared & ok & (np.abs(step) > 0.25))
-    lost = (st.outage > o.max_outage_epochs) & (st.p.diagonal()[NX0:NX0 + NSAT] > 0)
+    lost = (st.outage > o.max_outage_epochs) & _in_use(st)
     reset = np.flatnonzero(lost | (slip & valid_phase))
     if reset.size:
         st.slips += int(np.count_nonzero(slip & valid_phase))
         _reset_amb(st, reset)
     st.outage[valid_phase] = 0
-    amb = NX0 + np.arange(NSAT)
-    new = valid_phase & (st.p[amb, amb] <= 0)
+    new = valid_phase & ~_in_use(st)
     if new.any():
         if st.init_pos_ecef_m is not None and st.fix_count == 0 and st.p[0, 0] <= (2 * o.init_pos_sigma_m) ** 2:
             sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b)) / LAMBDA_L1_M
@@ -687,7 +693,7 @@ def _drop_iono(st: RtkState, drop: npt.NDArray[np.bool_], el: Arr) -> None:
     """Remove the ionosphere states of the `drop` slots, folding each into its ambiguity where both exist
     (N' = N − m(el)·I/λ, the phase then carries the delay as without the states), so that the ambiguities keep
     the ionosphere's estimate and uncertainty instead of losing them."""
-    k = np.flatnonzero(drop & (st.p[NXI + np.arange(NSAT), NXI + np.arange(NSAT)] > 0))
+    k = np.flatnonzero(drop & _in_use(st, NXI))
     if k.size == 0:
         return
     fold = k[(st.p[NX0 + k, NX0 + k] > 0) & np.isfinite(el[k])]
@@ -727,7 +733,7 @@ def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float, 
         st.x, st.p = x, p
     st.iono_on = True
     j = NXI + np.arange(NSAT)
-    active = st.p[j, j] > 0
+    active = _in_use(st, NXI)
     lost = active & (st.outage > o.max_outage_epochs)
     if lost.any():
         _drop_iono(st, lost, el)
@@ -1154,7 +1160,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     base_zb_cyc = base_zb / LAMBDA_L1_M
     slip = _detect_slips(st, rov, bas, base_zb_cyc, rover.time, base.time, phase_ok)
     if st.pending_slip.any():  # rover slips seen while the base was missing
-        gone = np.flatnonzero(st.pending_slip & ~phase_ok & (st.p.diagonal()[NX0:NX0 + NSAT] > 0))
+        gone = np.flatnonzero(st.pending_slip & ~phase_ok & _in_use(st))
         if gone.size:
             _reset_amb(st, gone)
             st.slips += int(gone.size)
@@ -1209,7 +1215,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
                 # ambiguities afresh rather than keep a possibly slipped one (and a wrong hold) alive
                 log.debug("%s: phase outliers on %d of %d DDs -> all ambiguities reset", rover.time,
                           int(phase_bad.sum()), n_phase)
-                reset = np.flatnonzero(st.p.diagonal()[NX0:NX0 + NSAT] > 0)
+                reset = np.flatnonzero(_in_use(st))
                 _reset_amb(st, reset)
                 st.slips += int(reset.size)
                 use_phase = phase_ok & code_ok
@@ -1257,7 +1263,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         if bad_phase.size > 1:
             # several misfits point at the set rather than at one satellite: it no longer vouches for a re-fix
             st.validated_int[:] = np.nan
-        amb = NX0 + np.flatnonzero(st.p.diagonal()[NX0:NX0 + NSAT] > 0)
+        amb = NX0 + np.flatnonzero(_in_use(st))
         st.p[amb, amb] += 0.5**2
         rows = dd_post.kind == 0
         if bad_phase.size >= 3 and bad_phase.size == int(rows.sum()) and dd_post.ref_phase >= 0:
