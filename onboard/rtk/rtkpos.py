@@ -174,19 +174,6 @@ def _slot_arrays(epochs: list[ObsEpoch]) -> tuple[Arr, Arr, Arr, npt.NDArray[np.
     return pr, cp, dop, lli
 
 
-def slot_pseudoranges(obs: ObsEpoch) -> Arr:
-    """The epoch's GPS pseudoranges (m) on the 32 PRN slots, NaN where absent."""
-    return _slot_arrays([obs])[0][0]
-
-
-def epoch_satellites(epochs: list[ObsEpoch], store: EphemerisStore) -> list[SatState]:
-    """Satellite states on the 32 slots of every epoch (satposs at each epoch's own time tag), in one batch:
-    what _slots computes per epoch, when the epochs are known ahead (post-processing)."""
-    if not epochs:
-        return []
-    return satellite_states_batch(store, _PRNS, [e.time.total_ns for e in epochs], _slot_arrays(epochs)[0])
-
-
 def epoch_receivers(epochs: list[ObsEpoch], store: EphemerisStore, pos_ecef_m: Arr | None = None
                     ) -> list[_Receiver]:
     """What _slots gives for each epoch (slot arrays, satellite states), for rtk_pos's `receivers` when the
@@ -230,13 +217,12 @@ def epoch_spp(epochs: list[ObsEpoch], rcvs: list[_Receiver], nav: NavData, o: Rt
     return pntpos_batch(prs, sats, tows, *args, x0=x0, **kw)
 
 
-def _slots(obs: ObsEpoch, store: EphemerisStore, sats: SatState | None = None) -> _Receiver:
-    """Scatter a GPS epoch onto 32 PRN slots and compute satellite states at its own time tag (satposs),
-    unless given (`sats`, from epoch_satellites)."""
+def _slots(obs: ObsEpoch, store: EphemerisStore) -> _Receiver:
+    """Scatter a GPS epoch onto 32 PRN slots and compute satellite states at its own time tag (satposs): the
+    real-time path's epoch_receivers of one epoch."""
     pr, cp, dop, lli = (a[0] for a in _slot_arrays([obs]))
-    if sats is None:
-        # straight onto the 32 slots: a batch of one leaves slots without a pseudorange zero and not ok
-        sats = satellite_states_batch(store, _PRNS, [obs.time.total_ns], pr.reshape(1, NSAT))[0]
+    # straight onto the 32 slots: a batch of one leaves slots without a pseudorange zero and not ok
+    sats = satellite_states_batch(store, _PRNS, [obs.time.total_ns], pr.reshape(1, NSAT))[0]
     return _Receiver(pr, cp, dop, lli, sats, np.isfinite(pr) & sats.ok)
 
 

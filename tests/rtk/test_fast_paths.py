@@ -134,9 +134,12 @@ def test_lambda_skips_the_search_only_when_the_ratio_provably_reaches_the_cap() 
 
 
 def test_satellite_states_of_all_epochs_in_one_batch_equal_the_per_epoch_calls() -> None:
-    """Post-processing computes every epoch's satellites before the filter (epoch_satellites): the batch must
+    """Post-processing computes every epoch's satellites before the filter (epoch_receivers): the batch must
     give each epoch exactly what the one-epoch call (the real-time path) gives, ephemeris choice included."""
-    from onboard.rtk.rtkpos import epoch_satellites, slot_pseudoranges
+    from onboard.rtk.rtkpos import epoch_receivers
+
+    def epoch_satellites(epochs, store):  # type: ignore[no-untyped-def]
+        return [r.sats for r in epoch_receivers(epochs, store)]
 
     nav = read_rinex_nav(shared_file(M8P + "rover-20181004-1237.nav.gz"))
     obs = read_rinex_obs(shared_file(M8P + "rover-20181004-1237.obs.gz"))
@@ -145,7 +148,7 @@ def test_satellite_states_of_all_epochs_in_one_batch_equal_the_per_epoch_calls()
     batch = epoch_satellites(epochs, store)
     assert len(batch) == len(epochs)
     for ep, b in zip(epochs, batch):
-        one = satellite_states(store, np.arange(1, 33), ep.time, slot_pseudoranges(ep))
+        one = satellite_states(store, np.arange(1, 33), ep.time, epoch_receivers([ep], store)[0].pr_m)
         for name in ("pos_m", "vel_m_s", "clock_s", "drift_s_s", "var_m2", "ok"):
             assert np.array_equal(getattr(b, name), getattr(one, name)), name
         assert b.ok.sum() >= 5
@@ -185,14 +188,15 @@ def test_spp_of_many_epochs_in_one_batch_equals_each_epoch_alone() -> None:
     """pntpos_batch over many epochs (post-processing) gives each epoch what pntpos (its batch of one, the
     real-time path) gives: same satellites used, same RAIM exclusion, positions/clock within micrometres."""
     from onboard.rtk.pntpos import pntpos, pntpos_batch
-    from onboard.rtk.rtkpos import epoch_satellites, slot_pseudoranges
+    from onboard.rtk.rtkpos import epoch_receivers
 
     nav = read_rinex_nav(shared_file(M8P + "rover-20181004-1237.nav.gz"))
     obs = read_rinex_obs(shared_file(M8P + "rover-20181004-1237.obs.gz"))
     store = EphemerisStore(nav.ephemerides)
     epochs = [e.gps_only() for e in obs.epochs[::25]]
-    sats = epoch_satellites(epochs, store)
-    prs = np.array([slot_pseudoranges(e) for e in epochs])
+    rcvs = epoch_receivers(epochs, store)
+    sats = [r.sats for r in rcvs]
+    prs = np.array([r.pr_m for r in rcvs])
     prs[3, np.flatnonzero(np.isfinite(prs[3]))[0]] += 400.0  # one epoch with a code outlier: RAIM must drop it
     dops = np.full(prs.shape, np.nan)
     for k, e in enumerate(epochs):
