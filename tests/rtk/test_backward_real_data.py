@@ -19,7 +19,8 @@ ROVER_REF_ECEF_M = np.array([3774088.6821, -601663.0350, 5089318.2304])  # datas
 def test_backward_pass_from_the_end_of_the_m8p_glw1_run_never_fixes_wrong():
     """Processed backward, the last minute starts on a float 3.4 m off (correlated code multipath, σ ≈ 1 m):
     an integer set winning the ratio test for 5 s is wrong (3.4 m, 4 epochs); 10 s of confirmation rejects
-    it (and the pass then fixes right within the minute)."""
+    it (and the pass then fixes right within the minute: 20+ epochs, 6 since the standing rover's code counts
+    once per static_code_correlation_s)."""
     d = "gnss/ublox-m8p-galway-2018/"
     rover = read_rinex_obs(shared_file(d + "rinex/rover-20181004-1237.obs.gz")).epochs[-70:]
     base = read_rinex_obs(shared_file(d + "cors-glw1/glw1277m.18o.gz"))
@@ -27,7 +28,7 @@ def test_backward_pass_from_the_end_of_the_m8p_glw1_run_never_fixes_wrong():
     nav = Nav(EphemerisStore(f.ephemerides), (f.iono_alpha, f.iono_beta))
     sols, _ = postprocess(rover, base.epochs, nav, base.header.antenna_position_ecef_m(), RtkOptions(), "backward")
     fixed = [s for s in sols if s.q == Q_FIX]
-    assert len(fixed) >= 20
+    assert len(fixed) >= 5
     err = [float(np.linalg.norm(s.pos_ecef_m - ROVER_REF_ECEF_M)) for s in fixed]
     assert max(err) <= 0.10, err
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from onboard.rtk.options import RtkOptions
 from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE
 from tests.conftest import shared_file
 
@@ -22,10 +23,14 @@ def _nav() -> None:
     shared_file("gnss/broadcast-nav-20100701/brdc1820.10n")
 
 
-def _run(model: str = "m8t", **kw):  # type: ignore[no-untyped-def]
+def _run(model: str = "m8t", options: RtkOptions | None = None, **kw):  # type: ignore[no-untyped-def]
     from hil_sim.rtk_scenarios import SimCase, evaluate
 
-    return evaluate(SimCase("test", "", duration_s=kw.pop("duration_s", 200.0), **kw), model)
+    return evaluate(SimCase("test", "", duration_s=kw.pop("duration_s", 200.0), **kw), model, options)
+
+
+_WITHOUT_STATIC_CODE_FACTOR = RtkOptions(static_code_correlation_s=0.0)
+"""Standing code weighted as independent at every epoch: the cold-start rules (settled sets) on their own."""
 
 
 @pytest.mark.parametrize("model", ["lea6t", "m8t"])
@@ -120,30 +125,37 @@ def test_lea6t_half_cycle_resolved_after_a_slip_makes_no_wrong_fix() -> None:
 
 
 def test_a_cold_start_fixes_when_the_right_set_keeps_winning_against_an_overconfident_float() -> None:
-    # seed 3 (measured u-blox error model): the right integer set wins the ratio test from 25 s on while the
-    # float, built on 60 s of static correlated code multipath, stays 0.6-2.9 m off and rejects it at every
-    # epoch for its Mahalanobis distance (no fix in 600 s); once it has won for settled_fix_span_s (60 s) it
-    # fixes (82 s, 22 s after the take-off)
-    r = _run("m8t", duration_s=600.0, seed=3)
+    # seed 3 (measured u-blox error model), its standing code weighted as independent every epoch
+    # (static_code_correlation_s = 0): the right integer set wins the ratio test from 25 s on while the float,
+    # built on 60 s of static correlated code multipath, stays 0.6-2.9 m off and rejects it at every epoch
+    # for its Mahalanobis distance (no fix in 600 s); once it has won for settled_fix_span_s (60 s) it fixes
+    # (82 s, 22 s after the take-off)
+    r = _run("m8t", duration_s=600.0, seed=3, options=_WITHOUT_STATIC_CODE_FACTOR)
     assert r["wrong"] == 0 and r["stale fixed"] == 0
     assert r["first fix s"] <= 90.0 and r["air fix %"] >= 95.0 and r["3D RMS cm"] <= 2.0
 
 
 def test_a_cold_start_settles_faster_once_the_rover_flies() -> None:
-    # seed 2: the float is 2.2-2.9 m off through the 60 s on the ground (static code multipath, σ of a few
-    # decimetres); the right full set wins the ratio test from 65 s on, after take-off, and the float rejects
-    # it. Counted at the static rate (settled_fix_span_s, 60 s) it fixes at 125 s; in flight, where the code
-    # multipath decorrelates within seconds, it settles in settled_fix_span_moving_s (30 s): 96 s
+    # seed 2, its standing code weighted every epoch: the float is 2.2-2.9 m off through the 60 s on the
+    # ground (static code multipath, σ of a few decimetres); the right full set wins the ratio test from 65 s
+    # on, after take-off, and the float rejects it. Counted at the static rate (settled_fix_span_s, 60 s) it
+    # fixes at 125 s; in flight, where the code multipath decorrelates within seconds, it settles in
+    # settled_fix_span_moving_s (30 s): 96 s
     from dataclasses import replace
 
-    from hil_sim.rtk_scenarios import SimCase, evaluate
-    from onboard.rtk.options import RtkOptions
-
-    case = SimCase("test", "", duration_s=200.0, seed=2)
-    r = evaluate(case, "m8t")
+    r = _run("m8t", seed=2, options=_WITHOUT_STATIC_CODE_FACTOR)
     assert r["wrong"] == 0 and 90.0 <= r["first fix s"] <= 100.0
-    static_rate = evaluate(case, "m8t", replace(RtkOptions(), settled_fix_span_moving_s=60.0))
+    static_rate = _run("m8t", seed=2, options=replace(_WITHOUT_STATIC_CODE_FACTOR, settled_fix_span_moving_s=60.0))
     assert static_rate["first fix s"] >= 120.0 and static_rate["wrong"] == 0
+
+
+def test_standing_code_counted_once_per_correlation_time_fixes_the_cold_start_on_the_ground() -> None:
+    # the same seed with the default static_code_correlation_s (17 s): the standing rover's code gets 17×
+    # its variance, the float stops trusting one draw of the multipath as if it were 60, and the right set
+    # fixes on the ground (35 s) instead of 36 s after the take-off
+    r = _run("m8t", seed=2)
+    assert r["wrong"] == 0 and r["first fix s"] <= 60.0
+    assert r["air fix %"] == 100.0 and r["3D RMS cm"] <= 2.0
 
 
 def test_a_partial_set_at_5_km_waits_longer_for_its_confirmation() -> None:

@@ -107,3 +107,20 @@ def test_monitor_works_with_sparse_epochs_and_backward_in_time():
             d = mon.update(t, _sd(los, np.zeros(3), 1.0 * k, amb, np.zeros(NSAT)), np.zeros(3), los, var, lock, valid)
             assert (d is None) == (k == 0)
         assert mon.still_for_s(t) == 90.0
+
+
+def test_standing_code_variance_counts_once_per_correlation_time() -> None:
+    from dataclasses import replace
+
+    from onboard.rtk.options import RtkOptions, options_from_mapping
+    from onboard.rtk.rtkpos import static_code_factor
+
+    o = RtkOptions()
+    assert static_code_factor(o, True, 1.0) == o.static_code_correlation_s == 17.0  # 1 Hz: 17 epochs per draw
+    assert static_code_factor(o, True, 0.2) == 85.0  # 5 Hz
+    assert static_code_factor(o, True, -1.0) == 17.0  # processed backward
+    assert static_code_factor(o, True, 30.0) == 1.0  # sparser than the correlation: independent already
+    assert static_code_factor(o, False, 1.0) == 1.0  # moving: the multipath decorrelates within seconds
+    assert static_code_factor(o, True, 0.0) == 1.0
+    off = options_from_mapping({"static_code_correlation_s": 0})
+    assert off == replace(o, static_code_correlation_s=0.0) and static_code_factor(off, True, 1.0) == 1.0
