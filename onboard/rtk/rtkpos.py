@@ -380,14 +380,25 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
 
 
 def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, rng_b: Arr, los_r: Arr, el: Arr,
-                      valid: npt.NDArray[np.bool_], t: GpsTime, dt: float) -> None:
+                      valid: npt.NDArray[np.bool_], t: GpsTime, dt: float) -> int:
     """Start or end the static hold from the time-differenced phase displacement (see onboard.rtk.standstill),
-    after this epoch's time update: motion re-opens the position at once, before the measurement update."""
+    after this epoch's time update: motion re-opens the position at once, before the measurement update.
+    Held static and not moving by Doppler, a failed test that one satellite's slip explains restarts that
+    satellite's ambiguity instead (a slip too small for the Doppler test before a fix is held, e.g. 1 cycle
+    against its 2): the slot is returned, −1 for none."""
     o = st.options
     sd = LAMBDA_L1_M * (rov.cp_cyc - bas.cp_cyc) - (rng_r - rng_b)
     var = _var_sd_m2(o, rov, el)
     t_ns = t.total_ns
-    disp = st.standstill.update(t_ns, sd, st.x[:3], los_r, var, st.lock, valid)
+    disp = st.standstill.update(t_ns, sd, st.x[:3], los_r, var, st.lock, valid,
+                                exclude_one=st.static and not st.moving)
+    slipped = st.standstill.slipped_slot
+    if slipped >= 0:
+        log.info("%s: PRN %d slipped while standing (%.2f m over %.0f s without it): its ambiguity restarts", t,
+                 slipped + 1, float(np.linalg.norm(disp.d_m)) if disp is not None else float("nan"),
+                 disp.span_s if disp is not None else 0.0)
+        _reset_amb(st, np.array([slipped]))
+        st.slips += 1
     if st.static:
         if disp is not None and st.standstill.still_since_ns is None:
             log.info("%s: motion detected (%.3f m over %.0f s, χ² %.0f), leaving static mode", t,
@@ -401,6 +412,7 @@ def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, 
         h = np.zeros((3, st.x.size))
         h[:, 3:6] = np.eye(3)
         st.x, st.p = _kf_update(st.x, st.p, -st.x[3:6], h, np.eye(3) * 1e-8)
+    return slipped
 
 
 def _leave_static(st: RtkState, dt: float) -> None:
@@ -1176,7 +1188,9 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     _udion(st, common, base_pos, dt, el)
     st.code_var_scale = code_variance_scale(st, rov, bas, phase_ok, slip, el, dt)
     if o.standstill or st.static:
-        _watch_standstill(st, rov, bas, rng_r, rng_b, los_r, el, phase_ok & ~slip & ~half, rover.time, dt)
+        slipped = _watch_standstill(st, rov, bas, rng_r, rng_b, los_r, el, phase_ok & ~slip & ~half, rover.time, dt)
+        if slipped >= 0:
+            phase_ok[slipped] = False  # its ambiguity starts again next epoch
     st.static_code_factor = static_code_factor(o, st.static, dt)
 
     # remember raw data for next epoch's slip tests

@@ -84,6 +84,22 @@ def tdcp_displacement(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m:
     return Displacement(u + (np.asarray(pos_now_m) - np.asarray(pos_then_m)), cov_u, normal, 0.0, int(k.size))
 
 
+SLIP_MIN_M = 0.4 * 0.19029367279836487
+"""Smallest time-differenced phase misfit (m) read as a slip by the one-satellite exclusion: 0.4 L1 cycle,
+below the half cycle a receiver's phase jumps by, above the few millimetres of phase noise."""
+
+
+def tdcp_misfit_m(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m: Arr, los_now: Arr,
+                  var_sd_m2: Arr, usable: npt.NDArray[np.bool_], slot: int, disp: Displacement) -> float:
+    """Time-differenced DD phase misfit (m) of satellite `slot` against the displacement `disp` solved from the
+    `usable` satellites without it (same reference choice as tdcp_displacement)."""
+    k = np.flatnonzero(usable & np.isfinite(sd_then_m) & np.isfinite(sd_now_m))
+    ref = int(k[np.argmin(var_sd_m2[k])])
+    y = (sd_now_m - sd_then_m)
+    u = disp.d_m - (np.asarray(pos_now_m) - np.asarray(pos_then_m))
+    return float((y[slot] - y[ref]) + (los_now[slot] - los_now[ref]) @ u)
+
+
 @dataclass
 class StandstillMonitor:
     """Sliding-window standstill test over a rover's relative epochs (pure; one `update` per epoch)."""
@@ -96,14 +112,21 @@ class StandstillMonitor:
     """(time ns, epoch number, SD phase − range per slot (m), position used (ECEF m), lock counts), oldest first."""
     still_since_ns: int | None = None
     """Start of the current run of windows that passed the test (ns), None while moving or unknown."""
+    slipped_slot: int = -1
+    """The slot the last update found slipped by the one-satellite exclusion, −1 for none."""
 
     def update(self, t_ns: int, sd_m: Arr, pos_m: Arr, los: Arr, var_sd_m2: Arr,
-               lock: npt.NDArray[np.int64], valid: npt.NDArray[np.bool_]) -> Displacement | None:
+               lock: npt.NDArray[np.int64], valid: npt.NDArray[np.bool_],
+               exclude_one: bool = False) -> Displacement | None:
         """Add an epoch and return the displacement since the window's start (None when it cannot be told).
 
         `lock` the per-slot count of consecutive epochs with phase (reset to 0 by a slip), after this epoch's
         bookkeeping: a slot is continuous over the window when its count grew by the number of epochs since.
+        `exclude_one` (a rover believed standing): when the test fails, and leaving out exactly one satellite
+        makes the rest pass while that satellite misfits by SLIP_MIN_M or more, that satellite slipped
+        (`slipped_slot`) and the displacement without it stands.
         """
+        self.slipped_slot = -1
         self.epochs += 1
         hist = self.hist
         if hist and (t_ns == hist[-1][0] or abs(t_ns - hist[-1][0]) / 1e9 > self.max_anchor_age_s):
@@ -121,6 +144,8 @@ class StandstillMonitor:
             t_a, ep_a, sd_a, pos_a, lock_a = anchor
             continuous = valid & (lock - lock_a == self.epochs - ep_a)
             disp = tdcp_displacement(sd_a, pos_a, sd_m, pos_m, los, var_sd_m2, continuous)
+            if exclude_one and disp is not None and disp.chi2 > CHI2_3DOF_999:
+                disp = self._exclude_one_slip(sd_a, pos_a, sd_m, pos_m, los, var_sd_m2, continuous, disp)
             if disp is not None:  # with its span (built directly: dataclasses.replace introspects the fields)
                 disp = Displacement(disp.d_m, disp.cov_m2, disp.info_m2, abs(t_ns - t_a) / 1e9, disp.n_sats)
         hist.append((t_ns, self.epochs, np.where(valid, sd_m, np.nan), np.array(pos_m, float), lock.copy()))
@@ -132,6 +157,23 @@ class StandstillMonitor:
         elif self.still_since_ns is None:
             self.still_since_ns = anchor[0] if anchor is not None else t_ns
         return disp
+
+    def _exclude_one_slip(self, sd_a: Arr, pos_a: Arr, sd_m: Arr, pos_m: Arr, los: Arr, var_sd_m2: Arr,
+                          continuous: npt.NDArray[np.bool_], disp: Displacement) -> Displacement:
+        """The displacement without the one satellite whose slip explains a failed test (sets slipped_slot),
+        else `disp` unchanged: motion moves every line of sight, a slip one."""
+        found: list[tuple[int, Displacement]] = []
+        for j in np.flatnonzero(continuous & np.isfinite(sd_a) & np.isfinite(sd_m)):
+            rest = continuous.copy()
+            rest[j] = False
+            d = tdcp_displacement(sd_a, pos_a, sd_m, pos_m, los, var_sd_m2, rest)
+            if d is not None and d.chi2 <= CHI2_3DOF_999 and \
+                    abs(tdcp_misfit_m(sd_a, pos_a, sd_m, pos_m, los, var_sd_m2, rest, int(j), d)) >= SLIP_MIN_M:
+                found.append((int(j), d))
+        if len(found) != 1:
+            return disp
+        self.slipped_slot = found[0][0]
+        return found[0][1]
 
     def still_for_s(self, t_ns: int) -> float:
         """How long (s) the windows up to `t_ns` have shown no motion; 0 when the last one did or was unknown."""

@@ -91,6 +91,50 @@ def test_monitor_leaves_out_a_satellite_that_slipped_inside_the_window():
             assert d.n_sats == (6 if 4 <= k <= 8 else 7)
 
 
+def _standing_with_a_hidden_slip(cycles: float, exclude_one: bool, motion_m=(0.0, 0.0, 0.0), n: int = 8):
+    """A rover standing 12 epochs; slot 3 jumps `cycles` at epoch 8 with its lock count running on (no LLI),
+    the rover moves `motion_m` from epoch 8 too. Returns (monitor, displacements, slipped slots per epoch)."""
+    los = _los(n)
+    rng = np.random.default_rng(5)
+    amb = np.where(np.arange(NSAT) < n, 20.0, np.nan)
+    var = np.full(NSAT, 0.003**2)
+    valid = np.arange(NSAT) < n
+    mon = StandstillMonitor(window_s=5.0)
+    lock = np.zeros(NSAT, np.int64)
+    disps, slipped = [], []
+    for k in range(12):
+        lock[valid] += 1
+        a = amb.copy()
+        if k >= 8:
+            a[3] += cycles
+        move = np.asarray(motion_m) if k >= 8 else np.zeros(3)
+        sd = _sd(los, move, rng.normal(0, 5.0), a, rng.normal(0, 0.002, NSAT))
+        disps.append(mon.update(10**15 + k * 10**9, sd, np.zeros(3), los, var, lock, valid, exclude_one))
+        slipped.append(mon.slipped_slot)
+    return mon, disps, slipped
+
+
+def test_a_standing_rover_names_the_one_satellite_whose_hidden_slip_fails_the_test():
+    # one cycle (19 cm) on slot 3: the full set fails the test; without slot 3 the rest stands still
+    mon, disps, slipped = _standing_with_a_hidden_slip(1.0, exclude_one=True)
+    assert slipped[:8] == [-1] * 8 and slipped[8] == 3
+    assert disps[8] is not None and disps[8].chi2 <= CHI2_3DOF_999 and disps[8].n_sats == 7
+    assert mon.still_for_s(10**15 + 8 * 10**9) == 8.0  # the standstill goes on
+    # asked not to (the rover moving by Doppler, or not held static), the same slip is motion
+    mon, disps, slipped = _standing_with_a_hidden_slip(1.0, exclude_one=False)
+    assert slipped[8] == -1 and disps[8].chi2 > CHI2_3DOF_999 and mon.still_for_s(10**15 + 8 * 10**9) == 0.0
+
+
+def test_motion_is_not_mistaken_for_a_slip():
+    # 15 cm of real motion moves every line of sight: no single exclusion explains it
+    mon, disps, slipped = _standing_with_a_hidden_slip(0.0, exclude_one=True, motion_m=(0.12, -0.06, 0.06))
+    assert slipped[8] == -1 and disps[8].chi2 > CHI2_3DOF_999 and mon.still_for_s(10**15 + 8 * 10**9) == 0.0
+    # with 6 satellites a slip still has 5 to be judged by (one redundant); with 5, no exclusion is tried
+    _, _, slipped6 = _standing_with_a_hidden_slip(1.0, exclude_one=True, n=6)
+    _, d5, slipped5 = _standing_with_a_hidden_slip(1.0, exclude_one=True, n=5)
+    assert slipped6[8] == 3 and slipped5[8] == -1 and d5[8].chi2 > CHI2_3DOF_999
+
+
 def test_monitor_works_with_sparse_epochs_and_backward_in_time():
     """30 s epochs (GEONET) leave no earlier epoch inside a 10 s window: the previous one serves; a backward
     pass runs time downward."""
