@@ -86,7 +86,10 @@ def reduction(lmat_in: Arr, d_in: Arr) -> tuple[Arr, Arr, Arr]:
 def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list[float]], list[float],
                                                                           list[list[float]]]:
     """reduction() on lists, in place on `lmat` and `d`; returns (L, D, Zᵀ): Z by columns, which its transforms
-    change (a permutation then swaps two list items). Z stays integer, so exact whatever the order."""
+    change (a permutation then swaps two list items). Z stays integer, so exact whatever the order.
+
+    The integer Gauss transformation (RTKLIB gauss()) and the permutation (perm(), as _perm) are inlined: on a
+    poorly determined float (M8P walk) the loop runs ~30 times per call with ~16 permutations."""
     n = len(d)
     zt = [[1.0 if r == c else 0.0 for r in range(n)] for c in range(n)]
     j = n - 2
@@ -94,7 +97,6 @@ def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list
     while j >= 0:
         if j <= k:
             for i in range(j + 1, n):
-                # integer Gauss transformation (RTKLIB gauss()), inlined: it runs ~100 times per call
                 mu = round(lmat[i][j])
                 if mu != 0:
                     for kk in range(i, n):
@@ -103,14 +105,30 @@ def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list
                     zj, zi = zt[j], zt[i]
                     for r in range(n):
                         zj[r] -= mu * zi[r]
-        delta = d[j] + lmat[j + 1][j] ** 2 * d[j + 1]
-        if delta + 1e-6 < d[j + 1]:
-            _perm(lmat, d, j, delta, zt)
+        lj, lj1 = lmat[j], lmat[j + 1]
+        l10 = lj1[j]
+        dj1 = d[j + 1]
+        delta = d[j] + l10 ** 2 * dj1
+        if delta + 1e-6 < dj1:
+            # permute ambiguities j and j + 1 (_perm's operations, inlined)
+            eta = d[j] / delta
+            lam = dj1 * l10 / delta
+            d[j] = eta * dj1
+            d[j + 1] = delta
+            for c in range(j):
+                a0, a1 = lj[c], lj1[c]
+                lj[c] = -l10 * a0 + a1
+                lj1[c] = eta * a0 + lam * a1
+            lj1[j] = lam
+            for c in range(j + 2, n):
+                row = lmat[c]
+                row[j], row[j + 1] = row[j + 1], row[j]
+            zt[j], zt[j + 1] = zt[j + 1], zt[j]
             # RTKLIB restarts at j = n − 2; the tests above j + 1 would repeat exactly (their d and L entries are
             # untouched by the permutation and by the transforms since, which only change columns ≤ j + 1):
             # all passed, so they pass again, without a transform (j > k) or any other effect
             k = j
-            j = min(j + 1, n - 2)
+            j = j + 1 if j < n - 2 else n - 2
         else:
             j -= 1
     return lmat, d, zt
