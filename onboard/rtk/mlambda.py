@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from onboard.rtk.linsolve import solve
+
 Arr = npt.NDArray[np.float64]
 
 _LOOP_MAX = 10000
@@ -282,8 +284,8 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None) ->
     if ratio_cap is not None:
         leaf, dist, bound = _babai_bound(lmat, d, zs_list)
         if bound >= ratio_cap * max(dist, 1e-12) * _BOUND_MARGIN:
-            f = np.linalg.solve(z.T, np.array(leaf).reshape(n, 1))
+            f = solve(z.T, np.array(leaf).reshape(n, 1))
             return LambdaResult(np.round(f), np.array([dist, bound]), np.array(d))
     e, s = _search_lists(lmat, d, zs_list, m)
-    f = np.linalg.solve(z.T, e)
+    f = solve(z.T, e)
     return LambdaResult(np.round(f), s, np.array(d))

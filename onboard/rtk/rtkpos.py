@@ -29,6 +29,7 @@ from onboard.gnsstime import GpsTime
 from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
 from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states_batch
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
+from onboard.rtk.linsolve import LinAlgError, solve
 from onboard.rtk.mlambda import LambdaError, mlambda
 from onboard.rtk.models import CodeScatter, iono_mapping, median_of_few, phase_variance_m2, saastamoinen_m
 from onboard.rtk.options import RtkOptions
@@ -861,7 +862,7 @@ def _kf_update(x: Arr, p: Arr, v: Arr, h: Arr, r: Arr,
     `innov` = _innovation(p, h, r) when the caller already has it (gating)."""
     act, pa, ph, s = _innovation(p, h, r) if innov is None else innov
     rows, cols = act[:, None], act[None, :]
-    k = np.linalg.solve(s, ph.T).T
+    k = solve(s, ph.T).T
     x = x.copy()
     x[act] += k @ v
     pn = pa - k @ ph.T
@@ -904,7 +905,7 @@ def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver,
                 return int(c), (x_c, p_c)
             rows = post.kind == 0
             v = post.v[rows]
-            chi2 = float(v @ np.linalg.solve(post.r[np.ix_(rows, rows)], v)) if v.size else 0.0
+            chi2 = float(v @ solve(post.r[np.ix_(rows, rows)], v)) if v.size else 0.0
             found.append((chi2, int(c), (x_c, p_c)))
     if not found:
         return -1, (x_prior, p_prior)
@@ -1028,8 +1029,8 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         if accept:
             ints = res.fixed[:, 0]
             try:
-                gain = np.linalg.solve(qa, qba.T).T
-            except np.linalg.LinAlgError:
+                gain = solve(qa, qba.T).T
+            except LinAlgError:
                 return None
             pos = x[:3] - gain @ (a - ints)
             cov = p[:3, :3] - gain @ qba.T
@@ -1037,7 +1038,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             iono = None
             if st.iono_on:
                 qia = p[NXI:NX, ja] @ d.T
-                iono = x[NXI:NX] - qia @ np.linalg.solve(qa, a - ints)
+                iono = x[NXI:NX] - qia @ solve(qa, a - ints)
             return _Fix(pos, cov, ratio, others, ref, ints, others.size, settled, iono)
         # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
         # whose ambiguity is still code-level, else mostly the lowest one), not blindly the lowest satellite:
@@ -1275,8 +1276,8 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             # validate: float-fix consistency and post-fit residuals of the fixed solution
             dpos = fix.pos - st.x[:3]
             try:
-                maha = float(dpos @ np.linalg.solve(st.p[:3, :3], dpos))
-            except np.linalg.LinAlgError:
+                maha = float(dpos @ solve(st.p[:3, :3], dpos))
+            except LinAlgError:
                 maha = np.inf
             xf = _fixed_ambiguity_state(st.x, fix)
             use_fix = np.zeros(NSAT, bool)

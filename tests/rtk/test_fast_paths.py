@@ -8,10 +8,12 @@ edit that changes the numbers (not only the speed) shows up here rather than as 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from onboard.formats.rinex_nav import read_rinex_nav
 from onboard.formats.rinex_obs import read_rinex_obs
 from onboard.gnsstime import GpsTime
+from onboard.rtk import linsolve
 from onboard.rtk.ephemeris import EphemerisStore, eph_position_velocity, satellite_states
 from onboard.rtk.mlambda import ld_factor, mlambda
 from onboard.rtk.models import median_of_few
@@ -28,6 +30,19 @@ def test_small_median_and_norm_equal_numpy_to_the_bit() -> None:
         a = rng.normal(0.0, 3.0, n) * 10.0 ** rng.integers(-3, 4)
         assert median_of_few(a) == np.median(a)
         assert _norm(a) == np.linalg.norm(a)
+
+
+def test_linsolve_equals_numpy_solve_to_the_bit_and_raises_on_singular() -> None:
+    rng = np.random.default_rng(11)
+    for n in (1, 3, 8, 24):
+        a = rng.normal(size=(n, n))
+        s = a @ a.T + np.eye(n) * 10.0 ** rng.integers(-6, 2)
+        for b in (rng.normal(size=n), rng.normal(size=(n, 5)), rng.normal(size=(5, n)).T):  # also a transposed view
+            assert linsolve.solve(s, b).tobytes() == np.linalg.solve(s, b).tobytes()
+    with pytest.raises(linsolve.LinAlgError), np.errstate(invalid="ignore"):
+        linsolve.solve(np.ones((3, 3)), np.ones(3))
+    with pytest.raises(np.linalg.LinAlgError), np.errstate(invalid="ignore"):
+        linsolve.solve(np.zeros((2, 2)), np.ones((2, 2)))
 
 
 def test_satellite_states_on_32_slots_equal_the_per_satellite_formulas() -> None:
