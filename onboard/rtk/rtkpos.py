@@ -734,13 +734,22 @@ def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float, 
         st.p[k, k] = (o.iono_sigma_m_per_km * bl_km) ** 2
 
 
-def _dd_matrix(idx: npt.NDArray[np.int64], ref: int) -> Arr:
-    """Rows i − ref over the slots `idx` (ref excluded): shape (len(idx)−1, len(idx))."""
-    others = (idx != ref).nonzero()[0]
-    d = np.zeros((others.size, idx.size))
-    d[np.arange(others.size), others] = 1.0
-    d[:, int((idx == ref).nonzero()[0][0])] = -1.0
-    return d
+def _dd_ambiguities(x: Arr, p: Arr, idx: npt.NDArray[np.int64], ref: int) -> tuple[Arr, Arr, Arr, Arr | None]:
+    """Double-difference ambiguities (slot i − `ref` for every other slot of `idx`, in slot order) of the state
+    (x, p): their values a = D·x (cycles), covariance Qa = (D·P)·Dᵀ, cross-covariance with the position P·Dᵀ
+    (3, n) and, while the ionosphere states are in use, with them (32, n), else None.
+
+    D's rows hold one +1 and one −1 (RTKLIB's DD matrix): index arithmetic instead of the dense products, the
+    same numbers to the bit (each entry of those products is one difference; the other terms add exact zeros).
+    """
+    jo = NX0 + idx[idx != ref]
+    jr = NX0 + ref
+    a = x.take(jo) - x[jr]
+    p_o = p.take(jo, 0)  # rows of the other ambiguities
+    qa = (p_o.take(jo, 1) - p[jr].take(jo)) - (p_o[:, jr] - p[jr, jr])[:, None]
+    qba = p[:3].take(jo, 1) - p[:3, jr][:, None]
+    qia = p[NXI:NX].take(jo, 1) - p[NXI:NX, jr][:, None] if p.shape[0] == NX else None
+    return a, qa, qba, qia
 
 
 @dataclass
@@ -967,11 +976,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             break
         ref = int(idx[el[idx].argmax()])
         others = idx[idx != ref]
-        ja = NX0 + idx
-        d = _dd_matrix(idx, ref)
-        a = d @ x[ja]
-        qa = d @ p[ja[:, None], ja[None, :]] @ d.T  # np.ix_ without its per-call overhead
-        qba = p[:3, ja] @ d.T
+        a, qa, qba, qia = _dd_ambiguities(x, p, idx, ref)
         try:
             res = mlambda(a, qa, ratio_cap=RATIO_CAP)
         except LambdaError:
@@ -1036,8 +1041,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             cov = p[:3, :3] - gain @ qba.T
             st.last_ratio = ratio
             iono = None
-            if st.iono_on:
-                qia = p[NXI:NX, ja] @ d.T
+            if st.iono_on and qia is not None:
                 iono = x[NXI:NX] - qia @ solve(qa, a - ints)
             return _Fix(pos, cov, ratio, others, ref, ints, others.size, settled, iono)
         # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
