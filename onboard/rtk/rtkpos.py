@@ -859,8 +859,8 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
 def _innovation(p: Arr, h: Arr, r: Arr) -> tuple[npt.NDArray[np.int64], Arr, Arr, Arr]:
     """(active states, P on them, P·Hᵀ, innovation covariance S = H·P·Hᵀ + R) over the active states."""
     act = (p.diagonal() > 0).nonzero()[0]
-    pa = p[act[:, None], act[None, :]]  # np.ix_ without its per-call overhead
-    ha = h[:, act]
+    pa = p.take(act, 0).take(act, 1)  # p[np.ix_(act, act)] without its indexing overhead
+    ha = h.take(act, 1)
     ph = pa @ ha.T
     return act, pa, ph, ha @ ph + r
 
@@ -1094,7 +1094,6 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     """
     o = st.options
     rov = _slots(rover, nav.store) if receivers[0] is None else receivers[0]
-    nan3 = np.full(3, np.nan)
     if spp is None or not st.initialized:
         # the filter starts on this epoch's own solution from a cold start (precomputed ones start elsewhere)
         spp = pntpos(rov.pr_m, rov.sats, rover.time.tow_s, o.elmask_rad, rov.dop_hz, nav.iono,
@@ -1104,7 +1103,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         st.clock_bias_m = spp.clock_bias_m
     if not spp.ok:
         log.debug("%s: no single-point solution (%s)", rover.time, spp.message)
-        return _solution(rover.time, st.x[:3] if st.initialized else np.zeros(3), nan3, Q_NONE, 0,
+        return _solution(rover.time, st.x[:3] if st.initialized else np.zeros(3), np.full(3, np.nan), Q_NONE, 0,
                          np.zeros((3, 3)), np.zeros((3, 3)), 0.0, 0.0)
     t_sol = rover.time.add_s(-spp.clock_bias_m / CLIGHT_M_S)
     ns_spp = int(np.count_nonzero(spp.used))
@@ -1113,9 +1112,10 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         cov = np.eye(3) * (spp.gdop * 1.5) ** 2
         return _solution(t_sol, spp.pos_ecef_m, spp.vel_ecef_m_s, Q_SINGLE, ns_spp, cov, np.eye(3) * 0.01, age, 0.0)
 
-    st.moving = bool(np.all(np.isfinite(spp.vel_ecef_m_s)) and np.linalg.norm(spp.vel_ecef_m_s) > o.takeoff_speed_m_s)
+    speed = _norm(spp.vel_ecef_m_s)  # not finite unless every component is
+    st.moving = math.isfinite(speed) and speed > o.takeoff_speed_m_s
     if st.static and st.moving:
-        log.info("%s: take-off detected (%.2f m/s), leaving static mode", rover.time, np.linalg.norm(spp.vel_ecef_m_s))
+        log.info("%s: take-off detected (%.2f m/s), leaving static mode", rover.time, speed)
         st.static = False
         st.p[3:6, 3:6] = np.eye(3) * o.initial_vel_sigma_m_s**2
     if base is None or base_pos_ecef_m is None or abs(rover.time.diff_s(base.time)) > o.max_age_s:
@@ -1319,7 +1319,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     st.fail_count = 0
     if st.init_pos_ecef_m is not None:
         st.init_pos_ecef_m = None  # the known point only seeds the first fix
-    weak = float(np.sqrt(max(np.trace(fix.cov), 0.0))) > o.max_fix_sigma_m
+    weak = math.sqrt(max(float(fix.cov.trace()), 0.0)) > o.max_fix_sigma_m
     sol = _solution(t_sol, fix.pos, st.x[3:6], Q_FLOAT if weak else Q_FIX, ns, fix.cov, st.p[3:6, 3:6], age,
                     fix.ratio)
     if o.ar_mode == "fix-and-hold" and st.fix_count >= o.min_hold_epochs:
