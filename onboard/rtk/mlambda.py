@@ -59,26 +59,6 @@ def _ld_lists(q: Arr) -> tuple[list[list[float]], list[float]]:
     return lmat, d
 
 
-def _perm(lmat: list[list[float]], d: list[float], j: int, delta: float, zt: list[list[float]]) -> None:
-    """Permute ambiguities j and j+1 (RTKLIB perm()); `zt` holds Z by columns (swapped as two list items)."""
-    n = len(lmat)
-    eta = d[j] / delta
-    lam = d[j + 1] * lmat[j + 1][j] / delta
-    d[j] = eta * d[j + 1]
-    d[j + 1] = delta
-    lj, lj1 = lmat[j], lmat[j + 1]
-    l10 = lj1[j]
-    for k in range(j):
-        a0, a1 = lj[k], lj1[k]
-        lj[k] = -l10 * a0 + a1
-        lj1[k] = eta * a0 + lam * a1
-    lj1[j] = lam
-    for k in range(j + 2, n):
-        row = lmat[k]
-        row[j], row[j + 1] = row[j + 1], row[j]
-    zt[j], zt[j + 1] = zt[j + 1], zt[j]
-
-
 def reduction(lmat_in: Arr, d_in: Arr) -> tuple[Arr, Arr, Arr]:
     """Decorrelate (integer Gauss transforms + permutations, RTKLIB reduction()): returns (L, D, Z)."""
     lmat, d, zt = _reduction_lists(lmat_in.tolist(), d_in.tolist())
@@ -90,7 +70,7 @@ def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list
     """reduction() on lists, in place on `lmat` and `d`; returns (L, D, Zᵀ): Z by columns, which its transforms
     change (a permutation then swaps two list items). Z stays integer, so exact whatever the order.
 
-    The integer Gauss transformation (RTKLIB gauss()) and the permutation (perm(), as _perm) are inlined: on a
+    The integer Gauss transformation (RTKLIB gauss()) and the permutation (RTKLIB perm()) are inlined: on a
     poorly determined float (M8P walk) the loop runs ~30 times per call with ~16 permutations."""
     n = len(d)
     zt = [[1.0 if r == c else 0.0 for r in range(n)] for c in range(n)]
@@ -112,7 +92,7 @@ def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list
         dj1 = d[j + 1]
         delta = d[j] + l10 ** 2 * dj1
         if delta + 1e-6 < dj1:
-            # permute ambiguities j and j + 1 (_perm's operations, inlined)
+            # permute ambiguities j and j + 1 (RTKLIB perm()); Z by columns: a swap of two list items
             eta = d[j] / delta
             lam = dj1 * l10 / delta
             d[j] = eta * dj1
