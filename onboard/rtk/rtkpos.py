@@ -851,8 +851,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         kinds[rows] = kind
         slots[rows] = others
         k += m
-    diag = _ROWS[:nrow]
-    r[diag, diag] += np.concatenate(var_other)
+    r.ravel()[:: nrow + 1] += np.concatenate(var_other)  # the diagonal as a strided view: no fancy indexing
     return _DD(v, h, r, kinds, slots, ref_phase), e
 
 
