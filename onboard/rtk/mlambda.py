@@ -121,41 +121,21 @@ def search(lmat_a: Arr, d_a: Arr, zs_a: Arr, m: int = 2) -> tuple[Arr, Arr]:
     return _search_lists(lmat_a.tolist(), d_a.tolist(), zs_a.tolist(), m)
 
 
-def _babai_bound(lmat: list[list[float]], d: list[float], zs: list[float]) -> tuple[list[float], float, float]:
-    """The search's first leaf (sequential rounding from the last ambiguity down, the bootstrapped / Babai
-    point) with its squared distance, and a lower bound of the squared distance of every other integer vector.
+def _search_lists(lmat: list[list[float]], d: list[float], zs: list[float], m: int,
+                  ratio_cap: float | None = None) -> tuple[Arr, Arr]:
+    """search() on lists; with `ratio_cap`, mlambda's early exit on its first leaf (see there).
 
-    Any other vector first differs from the leaf at some level k (counting from the top); above k it follows the
+    The first descent reaches the bootstrapped (Babai) point, sequential rounding from the last ambiguity down.
+    Any other vector first differs from it at some level k (counting from the top); above k it follows the
     leaf's path, so its distance is at least the path's distance above k plus (1 − |yₖ|)²/Dₖ, yₖ the leaf's
     rounding residual at k (the conditional mean is the leaf's, the integer at least 1 − |yₖ| from it). The
-    minimum over k bounds the second-best distance from below. Same arithmetic as _search_lists' first descent.
+    minimum over k, taken along that descent, bounds the second-best distance from below: when it is at least
+    `ratio_cap` times the leaf's distance, the leaf alone (n, 1) and [its distance, the bound] are returned.
     """
     n = len(d)
-    s_prev = [0.0] * n
-    z = [0.0] * n
-    dist = 0.0
+    first = ratio_cap is not None  # on the first descent, bounding the second-best distance
+    cap = math.inf if ratio_cap is None else ratio_cap
     bound = float("inf")
-    k = n - 1
-    zb = zs[k]
-    while True:
-        z[k] = float(round(zb))
-        y = zb - z[k]
-        miss = 1.0 - abs(y)
-        bound = min(bound, dist + miss * miss / d[k])
-        dist = dist + y * y / d[k]
-        if k == 0:
-            return z, dist, bound
-        k -= 1
-        dz = z[k + 1] - zb
-        lrow = lmat[k + 1]
-        s_row = [s_prev[i] + dz * lrow[i] for i in range(k + 1)]
-        zb = zs[k] + s_row[k]
-        s_prev = s_row
-
-
-def _search_lists(lmat: list[list[float]], d: list[float], zs: list[float], m: int) -> tuple[Arr, Arr]:
-    """search() on lists."""
-    n = len(d)
     s_mat = [[0.0] * n for _ in range(n)]
     dist = [0.0] * n
     zb = [0.0] * n
@@ -171,6 +151,9 @@ def _search_lists(lmat: list[list[float]], d: list[float], zs: list[float], m: i
     y = zb[k] - z[k]
     step[k] = 1.0 if y > 0 else -1.0
     for _ in range(_LOOP_MAX):
+        if first:
+            miss = 1.0 - abs(y)
+            bound = min(bound, dist[k] + miss * miss / d[k])
         newdist = dist[k] + y * y / d[k]
         if newdist < maxdist:
             if k != 0:
@@ -186,6 +169,10 @@ def _search_lists(lmat: list[list[float]], d: list[float], zs: list[float], m: i
                 y = zb[k] - z[k]
                 step[k] = 1.0 if y > 0 else -1.0
             else:
+                if first:
+                    first = False
+                    if bound >= cap * max(newdist, 1e-12) * _BOUND_MARGIN:
+                        return np.array(z).reshape(n, 1), np.array([newdist, bound])
                 if nn < m:
                     if nn == 0 or newdist > sdist[imax]:
                         imax = nn
@@ -261,11 +248,6 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None) ->
     z: Arr = np.array(zt, dtype=float).T.copy()  # Z row-major as RTKLIB's: the products below the same
     zs = z.T @ a
     zs_list = zs.tolist()
-    if ratio_cap is not None:
-        leaf, dist, bound = _babai_bound(lmat, d, zs_list)
-        if bound >= ratio_cap * max(dist, 1e-12) * _BOUND_MARGIN:
-            f = solve(z.T, np.array(leaf).reshape(n, 1))
-            return LambdaResult(np.round(f), np.array([dist, bound]), np.array(d))
-    e, s = _search_lists(lmat, d, zs_list, m)
+    e, s = _search_lists(lmat, d, zs_list, m, ratio_cap)
     f = solve(z.T, e)
     return LambdaResult(np.round(f), s, np.array(d))
