@@ -16,8 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from numpy.linalg import LinAlgError
-from numpy.linalg import _umath_linalg  # the gufuncs behind np.linalg (numpy 1.x and 2.x)
+from numpy.linalg import (
+    LinAlgError,
+    _umath_linalg,  # the gufuncs behind np.linalg (numpy 1.x and 2.x)
+)
 
 Arr = npt.NDArray[np.float64]
 
