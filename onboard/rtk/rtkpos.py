@@ -613,7 +613,7 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
                 step = step - median_of_few(step[ok & ~cleared] if (ok & ~cleared).sum() >= 2 else step[ok])
                 slip = slip | (cleared & ok & (np.abs(step) > 0.25))
     lost = (st.outage > o.max_outage_epochs) & _in_use(st)
-    reset = np.flatnonzero(lost | (slip & valid_phase))
+    reset = (lost | (slip & valid_phase)).nonzero()[0]
     if reset.size:
         st.slips += int(np.count_nonzero(slip & valid_phase))
         _reset_amb(st, reset)
@@ -634,7 +634,7 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
         else:
             sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rov.pr_m - base.pr_m)) / LAMBDA_L1_M
             var = o.initial_bias_sigma_cyc**2
-        k = np.flatnonzero(new)
+        k = new.nonzero()[0]
         st.x[NX0 + k] = sd[k]
         st.p[NX0 + k, NX0 + k] = var
     if count_lock:
@@ -680,7 +680,7 @@ def _drop_iono(st: RtkState, drop: npt.NDArray[np.bool_], el: Arr) -> None:
     """Remove the ionosphere states of the `drop` slots, folding each into its ambiguity where both exist
     (N' = N − m(el)·I/λ, the phase then carries the delay as without the states), so that the ambiguities keep
     the ionosphere's estimate and uncertainty instead of losing them."""
-    k = np.flatnonzero(drop & _in_use(st, NXI))
+    k = (drop & _in_use(st, NXI)).nonzero()[0]
     if k.size == 0:
         return
     fold = k[(st.p[NX0 + k, NX0 + k] > 0) & np.isfinite(el[k])]
@@ -703,7 +703,7 @@ def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float, 
     from NXI to NX for them and shrink back); see _drop_iono. `el` the
     satellites' elevations (rad) this epoch."""
     o = st.options
-    bl_km = float(np.linalg.norm(st.x[:3] - base_pos)) / 1000.0
+    bl_km = _norm(st.x[:3] - base_pos) / 1000.0
     # a little hysteresis: a rover flying about a threshold does not drop and restart them every few seconds
     lo, hi = (0.75 * o.iono_min_baseline_km, 1.1 * o.iono_max_baseline_km) if st.iono_on else \
         (o.iono_min_baseline_km, o.iono_max_baseline_km)
@@ -894,7 +894,7 @@ def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver,
     """
     o = st.options
     found: list[tuple[float, int, tuple[Arr, Arr]]] = []
-    held = np.flatnonzero(use_phase & st.held_prns)
+    held = (use_phase & st.held_prns).nonzero()[0]
     # a lone suspect may also be a newcomer not yet held (its float ambiguity still off by a fraction of a
     # cycle): leaving it out keeps the hold whole
     lone = suspects[use_phase[suspects]] if suspects.size == 1 else suspects[:0]
@@ -966,7 +966,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
     """Integer ambiguity resolution on the DD ambiguities of `cand` slots (RTKLIB resamb_LAMBDA) with
     partial fixing: drop the lowest satellite and retry while the ratio test fails."""
     o = st.options
-    idx = np.flatnonzero(cand)
+    idx = cand.nonzero()[0]
     best_ratio = 0.0
     seen_candidate = False
     settled = False
@@ -1150,7 +1150,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     base_zb_cyc = base_zb / LAMBDA_L1_M
     slip = _detect_slips(st, rov, bas, base_zb_cyc, rover.time, base.time, phase_ok)
     if st.pending_slip.any():  # rover slips seen while the base was missing
-        gone = np.flatnonzero(st.pending_slip & ~phase_ok & _in_use(st))
+        gone = (st.pending_slip & ~phase_ok & _in_use(st)).nonzero()[0]
         if gone.size:
             _reset_amb(st, gone)
             st.slips += int(gone.size)
@@ -1205,7 +1205,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
                 # ambiguities afresh rather than keep a possibly slipped one (and a wrong hold) alive
                 log.debug("%s: phase outliers on %d of %d DDs -> all ambiguities reset", rover.time,
                           int(phase_bad.sum()), n_phase)
-                reset = np.flatnonzero(_in_use(st))
+                reset = _in_use(st).nonzero()[0]
                 _reset_amb(st, reset)
                 st.slips += int(reset.size)
                 use_phase = phase_ok & code_ok
@@ -1253,7 +1253,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         if bad_phase.size > 1:
             # several misfits point at the set rather than at one satellite: it no longer vouches for a re-fix
             st.validated_int[:] = np.nan
-        amb = NX0 + np.flatnonzero(_in_use(st))
+        amb = NX0 + _in_use(st).nonzero()[0]
         st.p[amb, amb] += 0.5**2
         rows = dd_post.kind == 0
         if bad_phase.size >= 3 and bad_phase.size == int(rows.sum()) and dd_post.ref_phase >= 0:

@@ -58,7 +58,7 @@ def tdcp_displacement(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m:
     phase variance of one epoch, `usable` the slots tracked without a slip from one epoch to the other. With
     fewer than `min_sats` (one redundant) satellites, None.
     """
-    k = np.flatnonzero(usable & np.isfinite(sd_then_m) & np.isfinite(sd_now_m))
+    k = (usable & np.isfinite(sd_then_m) & np.isfinite(sd_now_m)).nonzero()[0]
     if k.size < min_sats:
         return None
     # λφ − ρ(x_a) = −e·(x − x_a) + ambiguity + clocks: the time difference keeps −e·(Δx − Δx_a) + Δclocks
