@@ -370,12 +370,12 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
         st.p[:3, :] = 0.0
         st.p[:, :3] = 0.0
         st.p[:3, :3] = np.eye(3) * o.initial_pos_sigma_m**2
-    amb = np.arange(NX0, NXI)
-    active = _in_use(st)
     # with the ionosphere estimated (st.iono_on, last epoch's verdict) the per-km random walk is left to
     # geodetic code, which can follow the drift it stands for (see RtkOptions.iono_sigma_m_per_km)
     per_km = None if st.iono_on and not _geodetic_code(st) else base_pos
-    st.p[amb[active], amb[active]] += bias_process_noise_cyc2_s(o, st.x[:3], per_km) * abs(dt)
+    nx = st.p.shape[0]
+    amb_var = st.p.ravel()[NX0 * (nx + 1) : NXI * (nx + 1) : nx + 1]  # the ambiguities' variances, a view
+    amb_var[amb_var > 0] += bias_process_noise_cyc2_s(o, st.x[:3], per_km) * abs(dt)
 
 
 def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, rng_b: Arr, los_r: Arr, el: Arr,
