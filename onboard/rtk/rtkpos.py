@@ -456,7 +456,7 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
     if st.prev_time_r is not None:
         seen = st.last_t_r_ns != _NO_TIME_NS
         dt_all = np.where(seen, (t_r.total_ns - np.where(seen, st.last_t_r_ns, 0)) / 1e9, np.nan)
-        if np.isfinite(dt_all).any():
+        if np.count_nonzero(np.isfinite(dt_all)):
             dop_avg = np.where(np.isfinite(st.prev_dop_r), 0.5 * (rov.dop_hz + st.prev_dop_r), rov.dop_hz)
             d = (rov.cp_cyc - st.prev_cp_r) + dop_avg * dt_all  # RINEX: phase follows range, Doppler = −rate
             d[~(np.abs(dt_all) <= 30.0)] = np.nan
@@ -472,7 +472,7 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
                 d = d - median_of_few(rate[clean] if np.count_nonzero(clean) >= 2 else rate[ok]) * dt_all
                 # a held set absorbs a missed slip (wrong fixes): tighter then; before a fix a false alarm
                 # only restarts a float
-                held = bool(st.held_prns.any())
+                held = np.count_nonzero(st.held_prns) > 0
                 thr_cyc = o.slip_threshold_held_cyc if held else o.slip_threshold_cyc
                 if held and np.count_nonzero(clean) >= 5 and o.slip_outlier_factor > 0:
                     # a quiet epoch (the Doppler follows every other satellite's phase closely) shows a slip
@@ -605,7 +605,7 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
         half = (rov.lli & LLI_HALF_CYCLE) != 0
         cleared = valid_phase & st.half_cycle & ~half
         st.half_cycle = half & valid_phase
-        if cleared.any() and st.prev_time_r is not None and t_r is not None:
+        if np.count_nonzero(cleared) and st.prev_time_r is not None and t_r is not None:
             dt_r = t_r.diff_s(st.prev_time_r)
             step = (rov.cp_cyc - st.prev_cp_r) + 0.5 * (rov.dop_hz + st.prev_dop_r) * dt_r
             ok = np.isfinite(step) & valid_phase
@@ -619,7 +619,7 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
         _reset_amb(st, reset)
     st.outage[valid_phase] = 0
     new = valid_phase & ~_in_use(st)
-    if new.any():
+    if np.count_nonzero(new):
         if st.init_pos_ecef_m is not None and st.fix_count == 0 and st.p[0, 0] <= (2 * o.init_pos_sigma_m) ** 2:
             sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b)) / LAMBDA_L1_M
             # phase − modelled range keeps the receivers' clock difference (0.5 ms = 150 km on hil_sim), which
@@ -984,7 +984,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         best_ratio = max(best_ratio, ratio)
         # a fix resting on the bare minimum of double differences (no held set to lean on) must be
         # nearly certain: a stricter success rate and twice the ratio
-        strict = (idx.size - 1 <= o.min_amb_dd or _drop >= o.strict_partial_drop_sats) and not st.held_prns.any()
+        strict = (idx.size - 1 <= o.min_amb_dd or _drop >= o.strict_partial_drop_sats) and not np.count_nonzero(st.held_prns)
         need_ratio = o.ratio_threshold * (2.0 if strict else 1.0)
         need_sr = max(o.min_success_rate, o.min_success_rate_minimal_set) if strict else o.min_success_rate
         accept = False
@@ -1020,7 +1020,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
                 # measured u-blox-like code: the differential ionosphere biases its float for minutes
                 need_span += o.confirm_fix_span_per_km_s * st.baseline_m / 1000.0
             wins = st.pending_fix[2]
-            trusted = bool(st.held_prns.any() or st.known_amb[idx].all()) \
+            trusted = bool(np.count_nonzero(st.held_prns) or st.known_amb[idx].all()) \
                 or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_amb_dd + 1)
             if res.success_rate >= need_sr:
                 accept = trusted or span >= need_span or (full and wins >= o.full_set_confirm_epochs)
@@ -1149,7 +1149,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     base_zb = LAMBDA_L1_M * bas.cp_cyc - rng_b
     base_zb_cyc = base_zb / LAMBDA_L1_M
     slip = _detect_slips(st, rov, bas, base_zb_cyc, rover.time, base.time, phase_ok)
-    if st.pending_slip.any():  # rover slips seen while the base was missing
+    if np.count_nonzero(st.pending_slip):  # rover slips seen while the base was missing
         gone = (st.pending_slip & ~phase_ok & _in_use(st)).nonzero()[0]
         if gone.size:
             _reset_amb(st, gone)
@@ -1190,7 +1190,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         norm = np.abs(dd.v) / np.sqrt(innov[-1].diagonal())
         bad = norm > 6.0
         bad &= ~((dd.kind == 0) & (np.abs(dd.v) < o.max_innovation_phase_m * 0.1))
-        if not bad.any():
+        if not np.count_nonzero(bad):
             x_prior, p_prior = st.x, st.p
             x_post, p_post = _kf_update(st.x, st.p, dd.v, dd.h, dd.r, innov)
             break
@@ -1224,7 +1224,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             rov.dop_hz[slot] = np.nan
     st.x, st.p = x_post, p_post
     ns = int(np.count_nonzero(use_phase))
-    if dd is None or ns < 2 or not (dd.kind == 0).any():
+    if dd is None or ns < 2 or not np.count_nonzero(dd.kind == 0):
         # no phase double differences at all: report the filter position as float only if it is constrained
         return _solution(t_sol, st.x[:3], st.x[3:6], Q_FLOAT if ns >= 2 else Q_SINGLE, ns, st.p[:3, :3],
                          st.p[3:6, 3:6], age, 0.0)
@@ -1289,7 +1289,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False, trop_r,
                                  jacobian=False)
             valid = _valid_residuals(dd_fix, o.validation_sigma_factor)
-            if (maha <= _CHI2_3DOF_999 or fix.settled) and valid.all():
+            if (maha <= _CHI2_3DOF_999 or fix.settled) and np.count_nonzero(valid) == valid.size:
                 break
             log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", rover.time, maha, bool(valid.all()))
             # a second look at this epoch: without the one satellite whose phase does not fit the fixed solution
