@@ -250,4 +250,4 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None) ->
     zs_list = zs.tolist()
     e, s = _search_lists(lmat, d, zs_list, m, ratio_cap)
     f = solve(z.T, e)
-    return LambdaResult(np.round(f), s, np.array(d))
+    return LambdaResult(f.round(), s, np.array(d))  # np.round's own call, without its wrapper
