@@ -1046,7 +1046,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
         # whose ambiguity is still code-level, else mostly the lowest one), not blindly the lowest satellite:
         # one fresh ambiguity would otherwise sink the ratio of a set determined long ago
-        idx = idx[idx != others[np.argmax(np.diag(qa))]]
+        idx = idx[idx != others[qa.diagonal().argmax()]]
     st.last_ratio = best_ratio
     if not seen_candidate:
         st.pending_fix = None
