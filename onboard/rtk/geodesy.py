@@ -24,7 +24,7 @@ def llh_to_ecef(lat_rad: float, lon_rad: float, h_m: float) -> Vec:
 def ecef_to_llh(xyz_m: npt.ArrayLike) -> Vec:
     """ECEF position (m) → array [lat_rad, lon_rad, h_m] (iterative, converges to < 1e-4 mm)."""
     # plain floats and math: this runs several times per epoch in the RTK engine
-    x, y, z = (float(v) for v in np.asarray(xyz_m, dtype=float))
+    x, y, z = np.asarray(xyz_m, dtype=float).tolist()
     r2 = x * x + y * y
     zk, v = 0.0, WGS84_A_M
     znew = z

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from onboard.rtk.linsolve import solve
+
 Arr = npt.NDArray[np.float64]
 
 _LOOP_MAX = 10000
@@ -57,26 +59,6 @@ def _ld_lists(q: Arr) -> tuple[list[list[float]], list[float]]:
     return lmat, d
 
 
-def _perm(lmat: list[list[float]], d: list[float], j: int, delta: float, zt: list[list[float]]) -> None:
-    """Permute ambiguities j and j+1 (RTKLIB perm()); `zt` holds Z by columns (swapped as two list items)."""
-    n = len(lmat)
-    eta = d[j] / delta
-    lam = d[j + 1] * lmat[j + 1][j] / delta
-    d[j] = eta * d[j + 1]
-    d[j + 1] = delta
-    lj, lj1 = lmat[j], lmat[j + 1]
-    l10 = lj1[j]
-    for k in range(j):
-        a0, a1 = lj[k], lj1[k]
-        lj[k] = -l10 * a0 + a1
-        lj1[k] = eta * a0 + lam * a1
-    lj1[j] = lam
-    for k in range(j + 2, n):
-        row = lmat[k]
-        row[j], row[j + 1] = row[j + 1], row[j]
-    zt[j], zt[j + 1] = zt[j + 1], zt[j]
-
-
 def reduction(lmat_in: Arr, d_in: Arr) -> tuple[Arr, Arr, Arr]:
     """Decorrelate (integer Gauss transforms + permutations, RTKLIB reduction()): returns (L, D, Z)."""
     lmat, d, zt = _reduction_lists(lmat_in.tolist(), d_in.tolist())
@@ -86,7 +68,10 @@ def reduction(lmat_in: Arr, d_in: Arr) -> tuple[Arr, Arr, Arr]:
 def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list[float]], list[float],
                                                                           list[list[float]]]:
     """reduction() on lists, in place on `lmat` and `d`; returns (L, D, Zᵀ): Z by columns, which its transforms
-    change (a permutation then swaps two list items). Z stays integer, so exact whatever the order."""
+    change (a permutation then swaps two list items). Z stays integer, so exact whatever the order.
+
+    The integer Gauss transformation (RTKLIB gauss()) and the permutation (RTKLIB perm()) are inlined: on a
+    poorly determined float (M8P walk) the loop runs ~30 times per call with ~16 permutations."""
     n = len(d)
     zt = [[1.0 if r == c else 0.0 for r in range(n)] for c in range(n)]
     j = n - 2
@@ -94,7 +79,6 @@ def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list
     while j >= 0:
         if j <= k:
             for i in range(j + 1, n):
-                # integer Gauss transformation (RTKLIB gauss()), inlined: it runs ~100 times per call
                 mu = round(lmat[i][j])
                 if mu != 0:
                     for kk in range(i, n):
@@ -103,14 +87,30 @@ def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list
                     zj, zi = zt[j], zt[i]
                     for r in range(n):
                         zj[r] -= mu * zi[r]
-        delta = d[j] + lmat[j + 1][j] ** 2 * d[j + 1]
-        if delta + 1e-6 < d[j + 1]:
-            _perm(lmat, d, j, delta, zt)
+        lj, lj1 = lmat[j], lmat[j + 1]
+        l10 = lj1[j]
+        dj1 = d[j + 1]
+        delta = d[j] + l10 ** 2 * dj1
+        if delta + 1e-6 < dj1:
+            # permute ambiguities j and j + 1 (RTKLIB perm()); Z by columns: a swap of two list items
+            eta = d[j] / delta
+            lam = dj1 * l10 / delta
+            d[j] = eta * dj1
+            d[j + 1] = delta
+            for c in range(j):
+                a0, a1 = lj[c], lj1[c]
+                lj[c] = -l10 * a0 + a1
+                lj1[c] = eta * a0 + lam * a1
+            lj1[j] = lam
+            for c in range(j + 2, n):
+                row = lmat[c]
+                row[j], row[j + 1] = row[j + 1], row[j]
+            zt[j], zt[j + 1] = zt[j + 1], zt[j]
             # RTKLIB restarts at j = n − 2; the tests above j + 1 would repeat exactly (their d and L entries are
             # untouched by the permutation and by the transforms since, which only change columns ≤ j + 1):
             # all passed, so they pass again, without a transform (j > k) or any other effect
             k = j
-            j = min(j + 1, n - 2)
+            j = j + 1 if j < n - 2 else n - 2
         else:
             j -= 1
     return lmat, d, zt
@@ -121,41 +121,21 @@ def search(lmat_a: Arr, d_a: Arr, zs_a: Arr, m: int = 2) -> tuple[Arr, Arr]:
     return _search_lists(lmat_a.tolist(), d_a.tolist(), zs_a.tolist(), m)
 
 
-def _babai_bound(lmat: list[list[float]], d: list[float], zs: list[float]) -> tuple[list[float], float, float]:
-    """The search's first leaf (sequential rounding from the last ambiguity down, the bootstrapped / Babai
-    point) with its squared distance, and a lower bound of the squared distance of every other integer vector.
+def _search_lists(lmat: list[list[float]], d: list[float], zs: list[float], m: int,
+                  ratio_cap: float | None = None) -> tuple[Arr, Arr]:
+    """search() on lists; with `ratio_cap`, mlambda's early exit on its first leaf (see there).
 
-    Any other vector first differs from the leaf at some level k (counting from the top); above k it follows the
+    The first descent reaches the bootstrapped (Babai) point, sequential rounding from the last ambiguity down.
+    Any other vector first differs from it at some level k (counting from the top); above k it follows the
     leaf's path, so its distance is at least the path's distance above k plus (1 − |yₖ|)²/Dₖ, yₖ the leaf's
     rounding residual at k (the conditional mean is the leaf's, the integer at least 1 − |yₖ| from it). The
-    minimum over k bounds the second-best distance from below. Same arithmetic as _search_lists' first descent.
+    minimum over k, taken along that descent, bounds the second-best distance from below: when it is at least
+    `ratio_cap` times the leaf's distance, the leaf alone (n, 1) and [its distance, the bound] are returned.
     """
     n = len(d)
-    s_prev = [0.0] * n
-    z = [0.0] * n
-    dist = 0.0
+    first = ratio_cap is not None  # on the first descent, bounding the second-best distance
+    cap = math.inf if ratio_cap is None else ratio_cap
     bound = float("inf")
-    k = n - 1
-    zb = zs[k]
-    while True:
-        z[k] = float(round(zb))
-        y = zb - z[k]
-        miss = 1.0 - abs(y)
-        bound = min(bound, dist + miss * miss / d[k])
-        dist = dist + y * y / d[k]
-        if k == 0:
-            return z, dist, bound
-        k -= 1
-        dz = z[k + 1] - zb
-        lrow = lmat[k + 1]
-        s_row = [s_prev[i] + dz * lrow[i] for i in range(k + 1)]
-        zb = zs[k] + s_row[k]
-        s_prev = s_row
-
-
-def _search_lists(lmat: list[list[float]], d: list[float], zs: list[float], m: int) -> tuple[Arr, Arr]:
-    """search() on lists."""
-    n = len(d)
     s_mat = [[0.0] * n for _ in range(n)]
     dist = [0.0] * n
     zb = [0.0] * n
@@ -171,6 +151,9 @@ def _search_lists(lmat: list[list[float]], d: list[float], zs: list[float], m: i
     y = zb[k] - z[k]
     step[k] = 1.0 if y > 0 else -1.0
     for _ in range(_LOOP_MAX):
+        if first:
+            miss = 1.0 - abs(y)
+            bound = min(bound, dist[k] + miss * miss / d[k])
         newdist = dist[k] + y * y / d[k]
         if newdist < maxdist:
             if k != 0:
@@ -186,6 +169,10 @@ def _search_lists(lmat: list[list[float]], d: list[float], zs: list[float], m: i
                 y = zb[k] - z[k]
                 step[k] = 1.0 if y > 0 else -1.0
             else:
+                if first:
+                    first = False
+                    if bound >= cap * max(newdist, 1e-12) * _BOUND_MARGIN:
+                        return np.array(z).reshape(n, 1), np.array([newdist, bound])
                 if nn < m:
                     if nn == 0 or newdist > sdist[imax]:
                         imax = nn
@@ -261,11 +248,6 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None) ->
     z: Arr = np.array(zt, dtype=float).T.copy()  # Z row-major as RTKLIB's: the products below the same
     zs = z.T @ a
     zs_list = zs.tolist()
-    if ratio_cap is not None:
-        leaf, dist, bound = _babai_bound(lmat, d, zs_list)
-        if bound >= ratio_cap * max(dist, 1e-12) * _BOUND_MARGIN:
-            f = np.linalg.solve(z.T, np.array(leaf).reshape(n, 1))
-            return LambdaResult(np.round(f), np.array([dist, bound]), np.array(d))
-    e, s = _search_lists(lmat, d, zs_list, m)
-    f = np.linalg.solve(z.T, e)
-    return LambdaResult(np.round(f), s, np.array(d))
+    e, s = _search_lists(lmat, d, zs_list, m, ratio_cap)
+    f = solve(z.T, e)
+    return LambdaResult(f.round(), s, np.array(d))  # np.round's own call, without its wrapper

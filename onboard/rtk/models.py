@@ -23,9 +23,9 @@ def saastamoinen_m(lat_rad: float, h_m: float, el_rad: Arr, humidity: float = 0.
     """Slant tropospheric delay (m) by Saastamoinen with a standard atmosphere (RTKLIB tropmodel); `lat_rad`
     and `h_m` may be (k, 1) for k receivers, `el_rad` (k, n) (a row each)."""
     el = np.asarray(el_rad, dtype=float)
-    if np.ndim(h_m):
+    if getattr(h_m, "ndim", 0):  # np.ndim without its wrapper (a float or a numpy scalar: 0)
         return _saastamoinen_rows(np.ravel(lat_rad).astype(float), np.ravel(h_m).astype(float), el, humidity)
-    out = np.zeros_like(el)
+    out = np.zeros(el.shape)
     if h_m < -100.0 or h_m > 1e4:
         return out
     hgt = max(h_m, 0.0)

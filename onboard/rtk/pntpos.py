@@ -220,12 +220,13 @@ def _pntpos_batch(pr: Arr, sats: list[SatState], tow_s: Arr, elmask_rad: float, 
             masks[:] = mask[good]
             vel, drift = _doppler_batch(None if dop_hz is None else dop_hz[ks], [sats[k] for k in ks.tolist()],
                                         e[good], x[ks, :3], masks)
-            for j, k in enumerate(ks.tolist()):
-                g, rm = float(gdop[good][j]), float(rms[good][j])
+            # per-epoch rows of whole-batch arrays (one selection each, not one per epoch)
+            az_ok, el_ok = np.where(valid[ks], az[ks], 0.0), np.where(valid[ks], el[ks], 0.0)
+            pos_ok, clk_ok = x[ks, :3], x[ks, 3].tolist()
+            for j, (k, g, rm) in enumerate(zip(ks.tolist(), gdop[good].tolist(), rms[good].tolist(), strict=True)):
                 ok = g <= max_gdop and rm <= outlier_m
-                out[k] = SppSolution(x[k, :3].copy(), float(x[k, 3]), vel[j], float(drift[j]), masks[j],
-                                     np.where(valid[k], az[k], 0.0), np.where(valid[k], el[k], 0.0), ok, g, rm,
-                                     "" if ok else f"gdop {g:.1f} / rms {rm:.1f} m too large")
+                out[k] = SppSolution(pos_ok[j], clk_ok[j], vel[j], float(drift[j]), masks[j], az_ok[j], el_ok[j], ok,
+                                     g, rm, "" if ok else f"gdop {g:.1f} / rms {rm:.1f} m too large")
         stuck = ~good & (dof < 2)
         for j in np.flatnonzero(stuck).tolist():
             fail(int(todo[j]), np.zeros(n, bool), "no consistent solution")

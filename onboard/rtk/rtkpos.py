@@ -29,6 +29,7 @@ from onboard.gnsstime import GpsTime
 from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
 from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states_batch
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
+from onboard.rtk.linsolve import LinAlgError, solve
 from onboard.rtk.mlambda import LambdaError, mlambda
 from onboard.rtk.models import CodeScatter, iono_mapping, median_of_few, phase_variance_m2, saastamoinen_m
 from onboard.rtk.options import RtkOptions
@@ -371,12 +372,12 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
         st.p[:3, :] = 0.0
         st.p[:, :3] = 0.0
         st.p[:3, :3] = np.eye(3) * o.initial_pos_sigma_m**2
-    amb = np.arange(NX0, NXI)
-    active = _in_use(st)
     # with the ionosphere estimated (st.iono_on, last epoch's verdict) the per-km random walk is left to
     # geodetic code, which can follow the drift it stands for (see RtkOptions.iono_sigma_m_per_km)
     per_km = None if st.iono_on and not _geodetic_code(st) else base_pos
-    st.p[amb[active], amb[active]] += bias_process_noise_cyc2_s(o, st.x[:3], per_km) * abs(dt)
+    nx = st.p.shape[0]
+    amb_var = st.p.ravel()[NX0 * (nx + 1) : NXI * (nx + 1) : nx + 1]  # the ambiguities' variances, a view
+    amb_var[amb_var > 0] += bias_process_noise_cyc2_s(o, st.x[:3], per_km) * abs(dt)
 
 
 def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, rng_b: Arr, los_r: Arr, el: Arr,
@@ -469,7 +470,7 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
     if st.prev_time_r is not None:
         seen = st.last_t_r_ns != _NO_TIME_NS
         dt_all = np.where(seen, (t_r.total_ns - np.where(seen, st.last_t_r_ns, 0)) / 1e9, np.nan)
-        if np.isfinite(dt_all).any():
+        if np.count_nonzero(np.isfinite(dt_all)):
             dop_avg = np.where(np.isfinite(st.prev_dop_r), 0.5 * (rov.dop_hz + st.prev_dop_r), rov.dop_hz)
             d = (rov.cp_cyc - st.prev_cp_r) + dop_avg * dt_all  # RINEX: phase follows range, Doppler = −rate
             d[~(np.abs(dt_all) <= 30.0)] = np.nan
@@ -485,7 +486,7 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
                 d = d - median_of_few(rate[clean] if np.count_nonzero(clean) >= 2 else rate[ok]) * dt_all
                 # a held set absorbs a missed slip (wrong fixes): tighter then; before a fix a false alarm
                 # only restarts a float
-                held = bool(st.held_prns.any())
+                held = np.count_nonzero(st.held_prns) > 0
                 thr_cyc = o.slip_threshold_held_cyc if held else o.slip_threshold_cyc
                 if held and np.count_nonzero(clean) >= 5 and o.slip_outlier_factor > 0:
                     # a quiet epoch (the Doppler follows every other satellite's phase closely) shows a slip
@@ -618,7 +619,7 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
         half = (rov.lli & LLI_HALF_CYCLE) != 0
         cleared = valid_phase & st.half_cycle & ~half
         st.half_cycle = half & valid_phase
-        if cleared.any() and st.prev_time_r is not None and t_r is not None:
+        if np.count_nonzero(cleared) and st.prev_time_r is not None and t_r is not None:
             dt_r = t_r.diff_s(st.prev_time_r)
             step = (rov.cp_cyc - st.prev_cp_r) + 0.5 * (rov.dop_hz + st.prev_dop_r) * dt_r
             ok = np.isfinite(step) & valid_phase
@@ -626,13 +627,13 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
                 step = step - median_of_few(step[ok & ~cleared] if (ok & ~cleared).sum() >= 2 else step[ok])
                 slip = slip | (cleared & ok & (np.abs(step) > 0.25))
     lost = (st.outage > o.max_outage_epochs) & _in_use(st)
-    reset = np.flatnonzero(lost | (slip & valid_phase))
+    reset = (lost | (slip & valid_phase)).nonzero()[0]
     if reset.size:
         st.slips += int(np.count_nonzero(slip & valid_phase))
         _reset_amb(st, reset)
     st.outage[valid_phase] = 0
     new = valid_phase & ~_in_use(st)
-    if new.any():
+    if np.count_nonzero(new):
         if st.init_pos_ecef_m is not None and st.fix_count == 0 and st.p[0, 0] <= (2 * o.init_pos_sigma_m) ** 2:
             sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b)) / LAMBDA_L1_M
             # phase − modelled range keeps the receivers' clock difference (0.5 ms = 150 km on hil_sim), which
@@ -647,7 +648,7 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
         else:
             sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rov.pr_m - base.pr_m)) / LAMBDA_L1_M
             var = o.initial_bias_sigma_cyc**2
-        k = np.flatnonzero(new)
+        k = new.nonzero()[0]
         st.x[NX0 + k] = sd[k]
         st.p[NX0 + k, NX0 + k] = var
     if count_lock:
@@ -705,7 +706,7 @@ def _drop_iono(st: RtkState, drop: npt.NDArray[np.bool_], el: Arr) -> None:
     """Remove the ionosphere states of the `drop` slots, folding each into its ambiguity where both exist
     (N' = N − m(el)·I/λ, the phase then carries the delay as without the states), so that the ambiguities keep
     the ionosphere's estimate and uncertainty instead of losing them."""
-    k = np.flatnonzero(drop & _in_use(st, NXI))
+    k = (drop & _in_use(st, NXI)).nonzero()[0]
     if k.size == 0:
         return
     fold = k[(st.p[NX0 + k, NX0 + k] > 0) & np.isfinite(el[k])]
@@ -728,7 +729,7 @@ def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float, 
     from NXI to NX for them and shrink back); see _drop_iono. `el` the
     satellites' elevations (rad) this epoch."""
     o = st.options
-    bl_km = float(np.linalg.norm(st.x[:3] - base_pos)) / 1000.0
+    bl_km = _norm(st.x[:3] - base_pos) / 1000.0
     # a little hysteresis: a rover flying about a threshold does not drop and restart them every few seconds
     lo, hi = (0.75 * o.iono_min_baseline_km, 1.1 * o.iono_max_baseline_km) if st.iono_on else \
         (o.iono_min_baseline_km, o.iono_max_baseline_km)
@@ -759,13 +760,22 @@ def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float, 
         st.p[k, k] = (o.iono_sigma_m_per_km * bl_km) ** 2
 
 
-def _dd_matrix(idx: npt.NDArray[np.int64], ref: int) -> Arr:
-    """Rows i − ref over the slots `idx` (ref excluded): shape (len(idx)−1, len(idx))."""
-    others = (idx != ref).nonzero()[0]
-    d = np.zeros((others.size, idx.size))
-    d[np.arange(others.size), others] = 1.0
-    d[:, int((idx == ref).nonzero()[0][0])] = -1.0
-    return d
+def _dd_ambiguities(x: Arr, p: Arr, idx: npt.NDArray[np.int64], ref: int) -> tuple[Arr, Arr, Arr, Arr | None]:
+    """Double-difference ambiguities (slot i − `ref` for every other slot of `idx`, in slot order) of the state
+    (x, p): their values a = D·x (cycles), covariance Qa = (D·P)·Dᵀ, cross-covariance with the position P·Dᵀ
+    (3, n) and, while the ionosphere states are in use, with them (32, n), else None.
+
+    D's rows hold one +1 and one −1 (RTKLIB's DD matrix): index arithmetic instead of the dense products, the
+    same numbers to the bit (each entry of those products is one difference; the other terms add exact zeros).
+    """
+    jo = NX0 + idx[idx != ref]
+    jr = NX0 + ref
+    a = x.take(jo) - x[jr]
+    p_o = p.take(jo, 0)  # rows of the other ambiguities
+    qa = (p_o.take(jo, 1) - p[jr].take(jo)) - (p_o[:, jr] - p[jr, jr])[:, None]
+    qba = p[:3].take(jo, 1) - p[:3, jr][:, None]
+    qia = p[NXI:NX].take(jo, 1) - p[NXI:NX, jr][:, None] if p.shape[0] == NX else None
+    return a, qa, qba, qia
 
 
 @dataclass
@@ -867,16 +877,15 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         kinds[rows] = kind
         slots[rows] = others
         k += m
-    diag = _ROWS[:nrow]
-    r[diag, diag] += np.concatenate(var_other)
+    r.ravel()[:: nrow + 1] += np.concatenate(var_other)  # the diagonal as a strided view: no fancy indexing
     return _DD(v, h, r, kinds, slots, ref_phase), e
 
 
 def _innovation(p: Arr, h: Arr, r: Arr) -> tuple[npt.NDArray[np.int64], Arr, Arr, Arr]:
     """(active states, P on them, P·Hᵀ, innovation covariance S = H·P·Hᵀ + R) over the active states."""
     act = (p.diagonal() > 0).nonzero()[0]
-    pa = p[act[:, None], act[None, :]]  # np.ix_ without its per-call overhead
-    ha = h[:, act]
+    pa = p.take(act, 0).take(act, 1)  # p[np.ix_(act, act)] without its indexing overhead
+    ha = h.take(act, 1)
     ph = pa @ ha.T
     return act, pa, ph, ha @ ph + r
 
@@ -887,7 +896,7 @@ def _kf_update(x: Arr, p: Arr, v: Arr, h: Arr, r: Arr,
     `innov` = _innovation(p, h, r) when the caller already has it (gating)."""
     act, pa, ph, s = _innovation(p, h, r) if innov is None else innov
     rows, cols = act[:, None], act[None, :]
-    k = np.linalg.solve(s, ph.T).T
+    k = solve(s, ph.T).T
     x = x.copy()
     x[act] += k @ v
     pn = pa - k @ ph.T
@@ -911,7 +920,7 @@ def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver,
     """
     o = st.options
     found: list[tuple[float, int, tuple[Arr, Arr]]] = []
-    held = np.flatnonzero(use_phase & st.held_prns)
+    held = (use_phase & st.held_prns).nonzero()[0]
     # a lone suspect may also be a newcomer not yet held (its float ambiguity still off by a fraction of a
     # cycle): leaving it out keeps the hold whole
     lone = suspects[use_phase[suspects]] if suspects.size == 1 else suspects[:0]
@@ -930,7 +939,7 @@ def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver,
                 return int(c), (x_c, p_c)
             rows = post.kind == 0
             v = post.v[rows]
-            chi2 = float(v @ np.linalg.solve(post.r[np.ix_(rows, rows)], v)) if v.size else 0.0
+            chi2 = float(v @ solve(post.r[np.ix_(rows, rows)], v)) if v.size else 0.0
             found.append((chi2, int(c), (x_c, p_c)))
     if not found:
         return -1, (x_prior, p_prior)
@@ -983,7 +992,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
     """Integer ambiguity resolution on the DD ambiguities of `cand` slots (RTKLIB resamb_LAMBDA) with
     partial fixing: drop the lowest satellite and retry while the ratio test fails."""
     o = st.options
-    idx = np.flatnonzero(cand)
+    idx = cand.nonzero()[0]
     best_ratio = 0.0
     seen_candidate = False
     settled = False
@@ -992,11 +1001,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             break
         ref = int(idx[el[idx].argmax()])
         others = idx[idx != ref]
-        ja = NX0 + idx
-        d = _dd_matrix(idx, ref)
-        a = d @ x[ja]
-        qa = d @ p[ja[:, None], ja[None, :]] @ d.T  # np.ix_ without its per-call overhead
-        qba = p[:3, ja] @ d.T
+        a, qa, qba, qia = _dd_ambiguities(x, p, idx, ref)
         try:
             res = mlambda(a, qa, ratio_cap=RATIO_CAP)
         except LambdaError:
@@ -1005,7 +1010,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         best_ratio = max(best_ratio, ratio)
         # a fix resting on the bare minimum of double differences (no held set to lean on) must be
         # nearly certain: a stricter success rate and twice the ratio
-        strict = (idx.size - 1 <= o.min_amb_dd or _drop >= o.strict_partial_drop_sats) and not st.held_prns.any()
+        strict = (idx.size - 1 <= o.min_amb_dd or _drop >= o.strict_partial_drop_sats) and not np.count_nonzero(st.held_prns)
         need_ratio = o.ratio_threshold * (2.0 if strict else 1.0)
         need_sr = max(o.min_success_rate, o.min_success_rate_minimal_set) if strict else o.min_success_rate
         accept = False
@@ -1041,7 +1046,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
                 # measured u-blox-like code: the differential ionosphere biases its float for minutes
                 need_span += o.confirm_fix_span_per_km_s * st.baseline_m / 1000.0
             wins = st.pending_fix[2]
-            trusted = bool(st.held_prns.any() or st.known_amb[idx].all()) \
+            trusted = bool(np.count_nonzero(st.held_prns) or st.known_amb[idx].all()) \
                 or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_amb_dd + 1)
             if res.success_rate >= need_sr:
                 accept = trusted or span >= need_span or (full and wins >= o.full_set_confirm_epochs)
@@ -1054,21 +1059,20 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         if accept:
             ints = res.fixed[:, 0]
             try:
-                gain = np.linalg.solve(qa, qba.T).T
-            except np.linalg.LinAlgError:
+                gain = solve(qa, qba.T).T
+            except LinAlgError:
                 return None
             pos = x[:3] - gain @ (a - ints)
             cov = p[:3, :3] - gain @ qba.T
             st.last_ratio = ratio
             iono = None
-            if st.iono_on:
-                qia = p[NXI:NX, ja] @ d.T
-                iono = x[NXI:NX] - qia @ np.linalg.solve(qa, a - ints)
+            if st.iono_on and qia is not None:
+                iono = x[NXI:NX] - qia @ solve(qa, a - ints)
             return _Fix(pos, cov, ratio, others, ref, ints, others.size, settled, iono)
         # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
         # whose ambiguity is still code-level, else mostly the lowest one), not blindly the lowest satellite:
         # one fresh ambiguity would otherwise sink the ratio of a set determined long ago
-        idx = idx[idx != others[np.argmax(np.diag(qa))]]
+        idx = idx[idx != others[qa.diagonal().argmax()]]
     st.last_ratio = best_ratio
     if not seen_candidate:
         st.pending_fix = None
@@ -1115,7 +1119,6 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     """
     o = st.options
     rov = _slots(rover, nav.store) if receivers[0] is None else receivers[0]
-    nan3 = np.full(3, np.nan)
     if spp is None or not st.initialized:
         # the filter starts on this epoch's own solution from a cold start (precomputed ones start elsewhere)
         spp = pntpos(rov.pr_m, rov.sats, rover.time.tow_s, o.elmask_rad, rov.dop_hz, nav.iono,
@@ -1125,7 +1128,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         st.clock_bias_m = spp.clock_bias_m
     if not spp.ok:
         log.debug("%s: no single-point solution (%s)", rover.time, spp.message)
-        return _solution(rover.time, st.x[:3] if st.initialized else np.zeros(3), nan3, Q_NONE, 0,
+        return _solution(rover.time, st.x[:3] if st.initialized else np.zeros(3), np.full(3, np.nan), Q_NONE, 0,
                          np.zeros((3, 3)), np.zeros((3, 3)), 0.0, 0.0)
     t_sol = rover.time.add_s(-spp.clock_bias_m / CLIGHT_M_S)
     ns_spp = int(np.count_nonzero(spp.used))
@@ -1134,9 +1137,10 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         cov = np.eye(3) * (spp.gdop * 1.5) ** 2
         return _solution(t_sol, spp.pos_ecef_m, spp.vel_ecef_m_s, Q_SINGLE, ns_spp, cov, np.eye(3) * 0.01, age, 0.0)
 
-    st.moving = bool(np.all(np.isfinite(spp.vel_ecef_m_s)) and np.linalg.norm(spp.vel_ecef_m_s) > o.takeoff_speed_m_s)
+    speed = _norm(spp.vel_ecef_m_s)  # not finite unless every component is
+    st.moving = math.isfinite(speed) and speed > o.takeoff_speed_m_s
     if st.static and st.moving:
-        log.info("%s: take-off detected (%.2f m/s), leaving static mode", rover.time, np.linalg.norm(spp.vel_ecef_m_s))
+        log.info("%s: take-off detected (%.2f m/s), leaving static mode", rover.time, speed)
         st.static = False
         st.p[3:6, 3:6] = np.eye(3) * o.initial_vel_sigma_m_s**2
     if base is None or base_pos_ecef_m is None or abs(rover.time.diff_s(base.time)) > o.max_age_s:
@@ -1171,8 +1175,8 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     base_zb = LAMBDA_L1_M * bas.cp_cyc - rng_b
     base_zb_cyc = base_zb / LAMBDA_L1_M
     slip = _detect_slips(st, rov, bas, base_zb_cyc, rover.time, base.time, phase_ok)
-    if st.pending_slip.any():  # rover slips seen while the base was missing
-        gone = np.flatnonzero(st.pending_slip & ~phase_ok & _in_use(st))
+    if np.count_nonzero(st.pending_slip):  # rover slips seen while the base was missing
+        gone = (st.pending_slip & ~phase_ok & _in_use(st)).nonzero()[0]
         if gone.size:
             _reset_amb(st, gone)
             st.slips += int(gone.size)
@@ -1215,7 +1219,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         norm = np.abs(dd.v) / np.sqrt(innov[-1].diagonal())
         bad = norm > 6.0
         bad &= ~((dd.kind == 0) & (np.abs(dd.v) < o.max_innovation_phase_m * 0.1))
-        if not bad.any():
+        if not np.count_nonzero(bad):
             x_prior, p_prior = st.x, st.p
             x_post, p_post = _kf_update(st.x, st.p, dd.v, dd.h, dd.r, innov)
             break
@@ -1230,7 +1234,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
                 # ambiguities afresh rather than keep a possibly slipped one (and a wrong hold) alive
                 log.debug("%s: phase outliers on %d of %d DDs -> all ambiguities reset", rover.time,
                           int(phase_bad.sum()), n_phase)
-                reset = np.flatnonzero(_in_use(st))
+                reset = _in_use(st).nonzero()[0]
                 _reset_amb(st, reset)
                 st.slips += int(reset.size)
                 use_phase = phase_ok & code_ok
@@ -1249,7 +1253,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             rov.dop_hz[slot] = np.nan
     st.x, st.p = x_post, p_post
     ns = int(np.count_nonzero(use_phase))
-    if dd is None or ns < 2 or not (dd.kind == 0).any():
+    if dd is None or ns < 2 or not np.count_nonzero(dd.kind == 0):
         # no phase double differences at all: report the filter position as float only if it is constrained
         return _solution(t_sol, st.x[:3], st.x[3:6], Q_FLOAT if ns >= 2 else Q_SINGLE, ns, st.p[:3, :3],
                          st.p[3:6, 3:6], age, 0.0)
@@ -1278,7 +1282,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         if bad_phase.size > 1:
             # several misfits point at the set rather than at one satellite: it no longer vouches for a re-fix
             st.validated_int[:] = np.nan
-        amb = NX0 + np.flatnonzero(_in_use(st))
+        amb = NX0 + _in_use(st).nonzero()[0]
         st.p[amb, amb] += 0.5**2
         rows = dd_post.kind == 0
         if bad_phase.size >= 3 and bad_phase.size == int(rows.sum()) and dd_post.ref_phase >= 0:
@@ -1304,8 +1308,8 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             # validate: float-fix consistency and post-fit residuals of the fixed solution
             dpos = fix.pos - st.x[:3]
             try:
-                maha = float(dpos @ np.linalg.solve(st.p[:3, :3], dpos))
-            except np.linalg.LinAlgError:
+                maha = float(dpos @ solve(st.p[:3, :3], dpos))
+            except LinAlgError:
                 maha = np.inf
             xf = _fixed_ambiguity_state(st.x, fix)
             use_fix = np.zeros(NSAT, bool)
@@ -1314,7 +1318,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False, trop_r,
                                  jacobian=False)
             valid = _valid_residuals(dd_fix, o.validation_sigma_factor)
-            if (maha <= _CHI2_3DOF_999 or fix.settled) and valid.all():
+            if (maha <= _CHI2_3DOF_999 or fix.settled) and np.count_nonzero(valid) == valid.size:
                 break
             log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", rover.time, maha, bool(valid.all()))
             # a second look at this epoch: without the one satellite whose phase does not fit the fixed solution
@@ -1343,7 +1347,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     st.fail_count = 0
     if st.init_pos_ecef_m is not None:
         st.init_pos_ecef_m = None  # the known point only seeds the first fix
-    weak = float(np.sqrt(max(np.trace(fix.cov), 0.0))) > o.max_fix_sigma_m
+    weak = math.sqrt(max(float(fix.cov.trace()), 0.0)) > o.max_fix_sigma_m
     sol = _solution(t_sol, fix.pos, st.x[3:6], Q_FLOAT if weak else Q_FIX, ns, fix.cov, st.p[3:6, 3:6], age,
                     fix.ratio)
     if o.ar_mode == "fix-and-hold" and st.fix_count >= o.min_hold_epochs:

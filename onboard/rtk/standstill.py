@@ -50,15 +50,17 @@ class Displacement:
 
 
 def tdcp_displacement(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m: Arr, los_now: Arr,
-                      var_sd_m2: Arr, usable: npt.NDArray[np.bool_], min_sats: int = 5) -> Displacement | None:
+                      var_sd_m2: Arr, usable: npt.NDArray[np.bool_], min_sats: int = 5,
+                      span_s: float = 0.0) -> Displacement | None:
     """Displacement (ECEF m) of the rover between two epochs from time-differenced double differences.
 
     `sd_*_m` per satellite slot: λ(φ_rover − φ_base) − (modelled rover range from `pos_*_m` − base range);
     `los_now` unit lines of sight (rover → satellite, one row per slot), `var_sd_m2` the single-difference
-    phase variance of one epoch, `usable` the slots tracked without a slip from one epoch to the other. With
-    fewer than `min_sats` (one redundant) satellites, None.
+    phase variance of one epoch, `usable` the slots tracked without a slip from one epoch to the other, `span_s`
+    the time between them (s, reported with the displacement). With fewer than `min_sats` (one redundant)
+    satellites, None.
     """
-    k = np.flatnonzero(usable & np.isfinite(sd_then_m) & np.isfinite(sd_now_m))
+    k = (usable & np.isfinite(sd_then_m) & np.isfinite(sd_now_m)).nonzero()[0]
     if k.size < min_sats:
         return None
     # λφ − ρ(x_a) = −e·(x − x_a) + ambiguity + clocks: the time difference keeps −e·(Δx − Δx_a) + Δclocks
@@ -81,7 +83,7 @@ def tdcp_displacement(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m:
     except np.linalg.LinAlgError:
         return None
     u = cov_u @ rhs
-    return Displacement(u + (np.asarray(pos_now_m) - np.asarray(pos_then_m)), cov_u, normal, 0.0, int(k.size))
+    return Displacement(u + (np.asarray(pos_now_m) - np.asarray(pos_then_m)), cov_u, normal, span_s, int(k.size))
 
 
 SLIP_MIN_M = 0.4 * 0.19029367279836487
@@ -143,11 +145,10 @@ class StandstillMonitor:
         if anchor is not None:
             t_a, ep_a, sd_a, pos_a, lock_a = anchor
             continuous = valid & (lock - lock_a == self.epochs - ep_a)
-            disp = tdcp_displacement(sd_a, pos_a, sd_m, pos_m, los, var_sd_m2, continuous)
+            disp = tdcp_displacement(sd_a, pos_a, sd_m, pos_m, los, var_sd_m2, continuous,
+                                     span_s=abs(t_ns - t_a) / 1e9)
             if exclude_one and disp is not None and disp.chi2 > CHI2_3DOF_999:
                 disp = self._exclude_one_slip(sd_a, pos_a, sd_m, pos_m, los, var_sd_m2, continuous, disp)
-            if disp is not None:  # with its span (built directly: dataclasses.replace introspects the fields)
-                disp = Displacement(disp.d_m, disp.cov_m2, disp.info_m2, abs(t_ns - t_a) / 1e9, disp.n_sats)
         hist.append((t_ns, self.epochs, np.where(valid, sd_m, np.nan), np.array(pos_m, float), lock.copy()))
         # keep the newest entry older than the window (the next anchor) and everything inside it
         while len(hist) > 2 and abs(t_ns - hist[1][0]) / 1e9 > self.window_s:
@@ -166,7 +167,7 @@ class StandstillMonitor:
         for j in np.flatnonzero(continuous & np.isfinite(sd_a) & np.isfinite(sd_m)):
             rest = continuous.copy()
             rest[j] = False
-            d = tdcp_displacement(sd_a, pos_a, sd_m, pos_m, los, var_sd_m2, rest)
+            d = tdcp_displacement(sd_a, pos_a, sd_m, pos_m, los, var_sd_m2, rest, span_s=disp.span_s)
             if d is not None and d.chi2 <= CHI2_3DOF_999 and \
                     abs(tdcp_misfit_m(sd_a, pos_a, sd_m, pos_m, los, var_sd_m2, rest, int(j), d)) >= SLIP_MIN_M:
                 found.append((int(j), d))

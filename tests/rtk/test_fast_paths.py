@@ -8,15 +8,17 @@ edit that changes the numbers (not only the speed) shows up here rather than as 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from onboard.formats.rinex_nav import read_rinex_nav
 from onboard.formats.rinex_obs import read_rinex_obs
 from onboard.gnsstime import GpsTime
+from onboard.rtk import linsolve
 from onboard.rtk.ephemeris import EphemerisStore, eph_position_velocity, satellite_states
 from onboard.rtk.mlambda import ld_factor, mlambda
 from onboard.rtk.models import median_of_few
 from onboard.rtk.pntpos import _norm
-from onboard.rtk.rtkpos import _dd_matrix
+from onboard.rtk.rtkpos import NSAT, NX, NX0, NXI, _dd_ambiguities
 from tests.conftest import shared_file
 
 M8P = "gnss/ublox-m8p-galway-2018/rinex/"
@@ -28,6 +30,19 @@ def test_small_median_and_norm_equal_numpy_to_the_bit() -> None:
         a = rng.normal(0.0, 3.0, n) * 10.0 ** rng.integers(-3, 4)
         assert median_of_few(a) == np.median(a)
         assert _norm(a) == np.linalg.norm(a)
+
+
+def test_linsolve_equals_numpy_solve_to_the_bit_and_raises_on_singular() -> None:
+    rng = np.random.default_rng(11)
+    for n in (1, 3, 8, 24):
+        a = rng.normal(size=(n, n))
+        s = a @ a.T + np.eye(n) * 10.0 ** rng.integers(-6, 2)
+        for b in (rng.normal(size=n), rng.normal(size=(n, 5)), rng.normal(size=(5, n)).T):  # also a transposed view
+            assert linsolve.solve(s, b).tobytes() == np.linalg.solve(s, b).tobytes()
+    with pytest.raises(linsolve.LinAlgError), np.errstate(invalid="ignore"):
+        linsolve.solve(np.ones((3, 3)), np.ones(3))
+    with pytest.raises(np.linalg.LinAlgError), np.errstate(invalid="ignore"):
+        linsolve.solve(np.zeros((2, 2)), np.ones((2, 2)))
 
 
 def test_satellite_states_on_32_slots_equal_the_per_satellite_formulas() -> None:
@@ -87,12 +102,28 @@ def test_ld_factor_and_lambda_on_list_code_match_the_numpy_formulation() -> None
         assert best @ qi @ best <= rounded @ qi @ rounded + 1e-9
 
 
-def test_dd_matrix_rows_are_other_minus_reference() -> None:
-    idx = np.array([2, 5, 9, 17])
-    d = _dd_matrix(idx, 9)
-    assert np.array_equal(d, [[1, 0, -1, 0], [0, 1, -1, 0], [0, 0, -1, 1]])
-    x = np.array([10.0, 20.0, 30.0, 40.0])
-    assert np.array_equal(d @ x, [-20.0, -10.0, 10.0])
+def test_dd_ambiguities_equal_the_dense_dd_matrix_products_to_the_bit() -> None:
+    rng = np.random.default_rng(5)
+    for nx in (NXI, NX):
+        for _ in range(50):
+            g = rng.normal(size=(nx, nx))
+            p = g @ g.T * 10.0 ** rng.integers(-4, 3)
+            x = rng.normal(size=nx) * 100.0
+            idx = np.sort(rng.choice(NSAT, size=int(rng.integers(2, 12)), replace=False))
+            ref = int(rng.choice(idx))
+            d = np.zeros((idx.size - 1, idx.size))  # RTKLIB's DD matrix: rows e_i − e_ref
+            others = (idx != ref).nonzero()[0]
+            d[np.arange(others.size), others] = 1.0
+            d[:, int((idx == ref).nonzero()[0][0])] = -1.0
+            ja = NX0 + idx
+            a, qa, qba, qia = _dd_ambiguities(x, p, idx, ref)
+            assert a.tobytes() == (d @ x[ja]).tobytes()
+            assert qa.tobytes() == (d @ p[np.ix_(ja, ja)] @ d.T).tobytes()
+            assert qba.tobytes() == (p[:3, ja] @ d.T).tobytes()
+            if nx == NX:
+                assert qia is not None and qia.tobytes() == (p[NXI:NX, ja] @ d.T).tobytes()
+            else:
+                assert qia is None
 
 
 def test_gps_only_epoch_is_itself_and_mixed_epochs_are_filtered() -> None:
