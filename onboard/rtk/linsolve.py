@@ -14,12 +14,17 @@ input likewise raises, where numpy would return NaN.
 
 from __future__ import annotations
 
+from types import ModuleType
+
 import numpy as np
 import numpy.typing as npt
-from numpy.linalg import (
-    LinAlgError,
-    _umath_linalg,  # the gufuncs behind np.linalg (numpy 1.x and 2.x)
-)
+from numpy.linalg import LinAlgError
+
+_umath_linalg: ModuleType | None
+try:
+    from numpy.linalg import _umath_linalg  # the gufuncs behind np.linalg (numpy 1.x and 2.x)
+except ImportError:  # a numpy that moved its private module: its public wrapper, same results, slower
+    _umath_linalg = None
 
 Arr = npt.NDArray[np.float64]
 
@@ -35,6 +40,8 @@ def _checked(x: Arr) -> Arr:
 
 def solve(a: Arr, b: Arr) -> Arr:
     """x with a·x = b: `a` (n, n), `b` (n,) or (n, k), float64 (np.linalg.solve to the bit)."""
+    if _umath_linalg is None:
+        return np.asarray(np.linalg.solve(a, b), np.float64)
     if b.ndim == 1:
         return _checked(_umath_linalg.solve1(a, b, signature="dd->d"))
     return _checked(_umath_linalg.solve(a, b, signature="dd->d"))

@@ -45,6 +45,18 @@ def test_linsolve_equals_numpy_solve_to_the_bit_and_raises_on_singular() -> None
         linsolve.solve(np.zeros((2, 2)), np.ones((2, 2)))
 
 
+def test_linsolve_falls_back_to_numpy_where_its_private_gufuncs_are_gone(monkeypatch: pytest.MonkeyPatch) -> None:
+    # numpy.linalg._umath_linalg is private: a numpy without it must still solve, through the public wrapper
+    rng = np.random.default_rng(12)
+    a = rng.normal(size=(6, 6))
+    s, b = a @ a.T + np.eye(6), rng.normal(size=6)
+    fast = linsolve.solve(s, b)
+    monkeypatch.setattr(linsolve, "_umath_linalg", None)
+    assert linsolve.solve(s, b).tobytes() == fast.tobytes()
+    with pytest.raises(linsolve.LinAlgError):
+        linsolve.solve(np.ones((3, 3)), np.ones(3))
+
+
 def test_satellite_states_on_32_slots_equal_the_per_satellite_formulas() -> None:
     nav = read_rinex_nav(shared_file(M8P + "rover-20181004-1237.nav.gz"))
     obs = read_rinex_obs(shared_file(M8P + "rover-20181004-1237.obs.gz"))
