@@ -130,13 +130,13 @@ class RtkOptions:
     every seed; radio gaps 100 % on every seed; 5 km 71.3 / 94.6 / 90.7 → 87.7 / 100 / 97.6 % (seed 1 98.5 →
     97.0 %, its float at take-off had been a lucky 0.9 m); LEA-6T nominal 99.8 % on every seed, 5 km 87.5 /
     99.8 / 97.4 %. 5, 7, 9, 15 and 30 s gave the same within a seed or two (5: nominal seed 2 99.1 %, the M8P
-    walk 4 fixes). Real data, forward (backward): M8P static with the RAWX
-    base 97.4 → 96.3 %, lossy RTCM as RINEX 97.8 → 97.2 % (91.8 → 89.5), the raw RTCM3 stream 97.9 → 96.3 %,
-    first fix 21 → 41 s (87.0 → 88.8), GLW1 99.1 % either way (97.2 → 94.4), Septentrio 80.3 → 80.0 % (57.5
-    → 56.7), GEONET (30 s epochs, factor 1) unchanged; combined 99.7-100 % as before. The M8P walk under
-    trees (stop-and-go, no truth) fixes no epoch forward (176 before, 119 of them more than 10 cm from the
-    M8P's own RTK), 21 backward as before. Those real starts were already right at 21 s: this costs them 20 s
-    of waiting, for a cold start that on hil_sim's u-blox base and rover no longer depends on the draw."""
+    walk 4 fixes). Real data, forward (backward): M8P static with the RAWX base 97.4 → 96.3 %, lossy RTCM as
+    RINEX 97.8 → 97.2 % (91.8 → 89.5), the raw RTCM3 stream 97.9 → 96.3 %, first fix 21 → 41 s (87.0 →
+    88.8), GLW1 99.1 % either way (97.2 → 94.4), Septentrio 80.3 → 80.0 % (57.5 → 56.7), GEONET (30 s epochs,
+    factor 1) unchanged; combined 99.7-100 % as before. The M8P walk under trees (stop-and-go, no truth) fixes
+    no epoch forward (176 before, 119 of them more than 10 cm from the M8P's own RTK), 21 backward as before.
+    Those real starts were already right at 21 s: this costs them 20 s of waiting, for a cold start that on
+    hil_sim's u-blox base and rover no longer depends on the draw."""
     code_scatter_min_epochs: int = 30
     """Epochs of code-minus-carrier statistics before the code variance is scaled (starts as modelled)."""
     doppler_sigma_m_s: float = 0.1

@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from onboard.rtk.consts import LAMBDA_L1_M
+
 Arr = npt.NDArray[np.float64]
 
 CHI2_3DOF_999 = 16.266
@@ -86,7 +88,7 @@ def tdcp_displacement(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m:
     return Displacement(u + (np.asarray(pos_now_m) - np.asarray(pos_then_m)), cov_u, normal, span_s, int(k.size))
 
 
-SLIP_MIN_M = 0.4 * 0.19029367279836487
+SLIP_MIN_M = 0.4 * LAMBDA_L1_M
 """Smallest time-differenced phase misfit (m) read as a slip by the one-satellite exclusion: 0.4 L1 cycle,
 below the half cycle a receiver's phase jumps by, above the few millimetres of phase noise."""
 
@@ -97,7 +99,7 @@ def tdcp_misfit_m(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m: Arr
     `usable` satellites without it (same reference choice as tdcp_displacement)."""
     k = np.flatnonzero(usable & np.isfinite(sd_then_m) & np.isfinite(sd_now_m))
     ref = int(k[np.argmin(var_sd_m2[k])])
-    y = (sd_now_m - sd_then_m)
+    y = sd_now_m - sd_then_m
     u = disp.d_m - (np.asarray(pos_now_m) - np.asarray(pos_then_m))
     return float((y[slot] - y[ref]) + (los_now[slot] - los_now[ref]) @ u)
 
