@@ -39,10 +39,13 @@ def test_linsolve_equals_numpy_solve_to_the_bit_and_raises_on_singular() -> None
         s = a @ a.T + np.eye(n) * 10.0 ** rng.integers(-6, 2)
         for b in (rng.normal(size=n), rng.normal(size=(n, 5)), rng.normal(size=(5, n)).T):  # also a transposed view
             assert linsolve.solve(s, b).tobytes() == np.linalg.solve(s, b).tobytes()
+        assert linsolve.inv(s).tobytes() == np.linalg.inv(s).tobytes()
     with pytest.raises(linsolve.LinAlgError), np.errstate(invalid="ignore"):
         linsolve.solve(np.ones((3, 3)), np.ones(3))
     with pytest.raises(np.linalg.LinAlgError), np.errstate(invalid="ignore"):
         linsolve.solve(np.zeros((2, 2)), np.ones((2, 2)))
+    with pytest.raises(linsolve.LinAlgError), np.errstate(invalid="ignore"):
+        linsolve.inv(np.ones((3, 3)))
 
 
 def test_linsolve_falls_back_to_numpy_where_its_private_gufuncs_are_gone(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -51,8 +54,10 @@ def test_linsolve_falls_back_to_numpy_where_its_private_gufuncs_are_gone(monkeyp
     a = rng.normal(size=(6, 6))
     s, b = a @ a.T + np.eye(6), rng.normal(size=6)
     fast = linsolve.solve(s, b)
+    fast_inv = linsolve.inv(s)
     monkeypatch.setattr(linsolve, "_umath_linalg", None)
     assert linsolve.solve(s, b).tobytes() == fast.tobytes()
+    assert linsolve.inv(s).tobytes() == fast_inv.tobytes()
     with pytest.raises(linsolve.LinAlgError):
         linsolve.solve(np.ones((3, 3)), np.ones(3))
 
