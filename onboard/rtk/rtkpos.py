@@ -282,6 +282,20 @@ def _model_range_rows(rcvs: list[_Receiver], pos_ecef_m: Arr) -> None:
         rc.memo[("model", pos_key)] = (model[k], e[k], az[k], el[k])
 
 
+def _sd_obs_m(rov: _Receiver, bas: _Receiver) -> tuple[Arr, Arr]:
+    """Single-differenced (rover − base) phase λ·(φ_r − φ_b) and code ρ_r − ρ_b (m) per slot, memoised on the
+    rover epoch for its base epoch (the slip, standstill and code-scatter tests and every _ddres call of the
+    epoch difference the same observations). Read-only."""
+    key = ("sd_obs", id(bas))  # one base epoch per rover epoch, alive while it is processed
+    hit = rov.memo.get(key)
+    if hit is None:
+        hit = (LAMBDA_L1_M * (rov.cp_cyc - bas.cp_cyc), rov.pr_m - bas.pr_m)
+        for a in hit:
+            a.flags.writeable = False
+        rov.memo[key] = hit
+    return hit[0], hit[1]
+
+
 def _range_with_trop_m(rcv: _Receiver, pos_ecef_m: Arr, trop_m: Arr) -> tuple[Arr, Arr]:
     """As _model_range_m with the troposphere already evaluated this epoch (it changes negligibly with
     the millimetre-to-metre position updates inside one epoch): modelled range and LOS."""
@@ -388,7 +402,7 @@ def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, 
     satellite's ambiguity instead (a slip too small for the Doppler test before a fix is held, e.g. 1 cycle
     against its 2): the slot is returned, −1 for none."""
     o = st.options
-    sd = LAMBDA_L1_M * (rov.cp_cyc - bas.cp_cyc) - (rng_r - rng_b)
+    sd = _sd_obs_m(rov, bas)[0] - (rng_r - rng_b)
     var = _var_sd_m2(o, rov, el)
     t_ns = t.total_ns
     disp = st.standstill.update(t_ns, sd, st.x[:3], los_r, var, st.lock, valid,
@@ -679,7 +693,8 @@ def code_variance_scale(st: RtkState, rov: _Receiver, base: _Receiver, phase_ok:
     proportionally less code variance, never below `code_variance_min_scale`.
     """
     o = st.options
-    cmc = (rov.pr_m - base.pr_m) - LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc)
+    sd_phase, sd_code = _sd_obs_m(rov, base)
+    cmc = sd_code - sd_phase
     ok = phase_ok & np.isfinite(cmc)
     var_code = _var_sd_m2(o, rov, el) * o.code_phase_ratio**2
     with np.errstate(invalid="ignore"):
@@ -819,6 +834,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     ref_phase = -1
     drng = rng_r - rng_b
     ion = _slant_iono_m(st, x, el) if st.iono_on else None
+    sd_phase, sd_code = _sd_obs_m(rov, base)
     for kind, ok in ((0, phase_ok), (1, code_ok)):
         idx = ok.nonzero()[0]
         if idx.size < 2:
@@ -826,12 +842,12 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         ref = int(idx[el[idx].argmax()])
         if kind == 0:
             ref_phase = ref
-            z = LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - drng - LAMBDA_L1_M * x[NX0:NXI]
+            z = sd_phase - drng - LAMBDA_L1_M * x[NX0:NXI]
             var = var_sd
             if ion is not None:
                 z = z + ion[0]  # the ionosphere advances the phase
         else:
-            z = (rov.pr_m - base.pr_m) - drng
+            z = sd_code - drng
             if ion is not None:
                 z = z - ion[0]  # and delays the code
             var = var_sd * o.code_phase_ratio**2 * st.code_var_scale * st.static_code_factor
