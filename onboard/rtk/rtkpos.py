@@ -234,8 +234,10 @@ def _geometry(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr]:
     key = ("geo", pos_ecef_m.tobytes())
     hit = rcv.memo.get(key)
     if hit is None:
-        with np.errstate(invalid="ignore", divide="ignore"):  # empty slots (zero positions) give NaN, unused
-            hit = geometric_range(rcv.sats.pos_m, pos_ecef_m)
+        # no errstate: empty slots hold zero satellite positions, whose range from a receiver off the Earth's
+        # centre is finite (the context cost ~2 µs, three times per epoch; no FP warning on any real set, the
+        # benchmarks and hil_sim run with numpy errors raising)
+        hit = geometric_range(rcv.sats.pos_m, pos_ecef_m)
         for a in hit:
             a.flags.writeable = False
         rcv.memo[key] = hit
@@ -259,9 +261,8 @@ def _model_range_m(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr, Arr, Arr]
 def _model_from_geometry(r: Arr, e: Arr, clock_s: Arr, pos_ecef_m: Arr) -> tuple[Arr, Arr, Arr]:
     """Modelled range (m), azimuth and elevation (rad) from geometric_range()'s range `r` and LOS `e` of the
     satellites seen from one position: one slot row (32,) / (32, 3), or several epochs' (k, 32) / (k, 32, 3)."""
-    with np.errstate(invalid="ignore", divide="ignore"):  # empty slots (zero positions) give NaN, unused
-        llh = ecef_to_llh(pos_ecef_m)
-        az, el = sat_az_el(pos_ecef_m, e.reshape(-1, 3), llh)
+    llh = ecef_to_llh(pos_ecef_m)
+    az, el = sat_az_el(pos_ecef_m, e.reshape(-1, 3), llh)  # empty slots: finite LOS (see _geometry)
     az, el = az.reshape(r.shape), el.reshape(r.shape)
     lat, _, h = llh
     return r - CLIGHT_M_S * clock_s + saastamoinen_m(lat, h, el), az, el
@@ -697,8 +698,7 @@ def code_variance_scale(st: RtkState, rov: _Receiver, base: _Receiver, phase_ok:
     cmc = sd_code - sd_phase
     ok = phase_ok & np.isfinite(cmc)
     var_code = _var_sd_m2(o, rov, el) * o.code_phase_ratio**2
-    with np.errstate(invalid="ignore"):
-        st.code_scatter.update(np.where(ok, cmc, 0.0), var_code, ok, slip, dt)
+    st.code_scatter.update(np.where(ok, cmc, 0.0), var_code, ok, slip, dt)
     cs = st.code_scatter
     if o.code_scatter_reference <= 0.0 or cs.epochs < o.code_scatter_min_epochs or not np.isfinite(cs.ratio):
         return 1.0
