@@ -198,11 +198,12 @@ class _EpochBuilder:
 
     def build(self, time: GpsTime) -> ObsEpoch:
         n = len(self.sv)
+        unknown = np.full((3, n), np.nan)  # RINEX has no lock time or precisions: rows of one array, one call
         return ObsEpoch(
             time=time, gnss_id=np.array(self.gnss, np.int8), sv_id=np.array(self.sv, np.int16),
             pr_m=np.array(self.pr, float), cp_cyc=np.array(self.cp, float), dop_hz=np.array(self.dop, float),
-            cn0_dbhz=np.array(self.cn0, float), lock_ms=np.full(n, np.nan), lli=np.array(self.lli, np.uint8),
-            half_cyc_sub=np.zeros(n, np.uint8), pr_std_m=np.full(n, np.nan), cp_std_cyc=np.full(n, np.nan),
+            cn0_dbhz=np.array(self.cn0, float), lock_ms=unknown[0], lli=np.array(self.lli, np.uint8),
+            half_cyc_sub=np.zeros(n, np.uint8), pr_std_m=unknown[1], cp_std_cyc=unknown[2],
         )
 
 
