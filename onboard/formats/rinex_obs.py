@@ -164,13 +164,8 @@ class _EpochBuilder:
     """Accumulates one epoch's rows and turns them into an ObsEpoch."""
 
     def __init__(self) -> None:
-        self.gnss: list[int] = []
-        self.sv: list[int] = []
-        self.pr: list[float] = []
-        self.cp: list[float] = []
-        self.dop: list[float] = []
-        self.cn0: list[float] = []
-        self.lli: list[int] = []
+        self.rows: list[tuple[int, int, float, float, float, float, int]] = []
+        """Per satellite: gnss id, PRN, pr (m), cp (cycles), Doppler (Hz), C/N0 (dB-Hz), LLI (one append each)."""
 
     def add_fields(self, sys_letter: str, prn: int, text: str, spans: tuple[slice, slice, slice, slice, slice],
                    force_slip: bool) -> None:
@@ -188,21 +183,18 @@ class _EpochBuilder:
             return
         lli_c = text[s_lli].strip()
         lli = int(lli_c) if lli_c.isdigit() else 0
-        self.gnss.append(SYSTEM_GNSS_ID.get(sys_letter, -1))
-        self.sv.append(prn)
-        self.pr.append(pr if pr != 0.0 else math.nan)
-        self.cp.append(cp if cp != 0.0 else math.nan)
-        self.dop.append(float(text[s_dop].strip() or "nan"))
-        self.cn0.append(float(text[s_cn0].strip() or "nan"))
-        self.lli.append((lli | LLI_SLIP) if force_slip else lli)
+        self.rows.append((SYSTEM_GNSS_ID.get(sys_letter, -1), prn, pr if pr != 0.0 else math.nan,
+                          cp if cp != 0.0 else math.nan, float(text[s_dop].strip() or "nan"),
+                          float(text[s_cn0].strip() or "nan"), (lli | LLI_SLIP) if force_slip else lli))
 
     def build(self, time: GpsTime) -> ObsEpoch:
-        n = len(self.sv)
-        unknown = np.full((3, n), np.nan)  # RINEX has no lock time or precisions: rows of one array, one call
+        n = len(self.rows)
+        gnss, sv, pr, cp, dop, cn0, lli = zip(*self.rows) if n else ((),) * 7
+        values = np.array((pr, cp, dop, cn0), float)  # one array, one row per quantity
+        unknown = np.full((3, n), np.nan)  # RINEX has no lock time or precisions
         return ObsEpoch(
-            time=time, gnss_id=np.array(self.gnss, np.int8), sv_id=np.array(self.sv, np.int16),
-            pr_m=np.array(self.pr, float), cp_cyc=np.array(self.cp, float), dop_hz=np.array(self.dop, float),
-            cn0_dbhz=np.array(self.cn0, float), lock_ms=unknown[0], lli=np.array(self.lli, np.uint8),
+            time=time, gnss_id=np.array(gnss, np.int8), sv_id=np.array(sv, np.int16), pr_m=values[0],
+            cp_cyc=values[1], dop_hz=values[2], cn0_dbhz=values[3], lock_ms=unknown[0], lli=np.array(lli, np.uint8),
             half_cyc_sub=np.zeros(n, np.uint8), pr_std_m=unknown[1], cp_std_cyc=unknown[2],
         )
 
