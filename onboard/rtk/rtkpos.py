@@ -1274,10 +1274,13 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         return _solution(t_sol, st.x[:3], st.x[3:6], Q_FLOAT if ns >= 2 else Q_SINGLE, ns, st.p[:3, :3],
                          st.p[3:6, 3:6], age, 0.0)
 
-    # post-fit residual check of the float solution
-    dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False, trop_r, jacobian=False)
-    ok_post = _valid_residuals(dd_post, o.validation_sigma_factor)
-    bad_phase = dd_post.slot[(dd_post.kind == 0) & ~ok_post]
+    # post-fit residual check of the float solution: it guards a held set (the fault exclusion and the release
+    # below act only on one), so without one it is not computed (a _ddres call per epoch of an unfixed rover)
+    bad_phase = np.zeros(0, np.int64)
+    if st.held_prns.any():
+        dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False, trop_r, jacobian=False)
+        ok_post = _valid_residuals(dd_post, o.validation_sigma_factor)
+        bad_phase = dd_post.slot[(dd_post.kind == 0) & ~ok_post]
     if bad_phase.size and st.held_prns.any():
         # one satellite slipping under a hold spreads its error over every row through the position: find
         # whether leaving out a single satellite makes the rest fit (fault exclusion) before releasing all
