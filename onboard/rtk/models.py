@@ -5,6 +5,7 @@ Follows RTKLIB rtkcmn.c tropmodel() / ionmodel() and rtkpos.c varerr() (vectoris
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,7 +36,7 @@ def saastamoinen_m(lat_rad: float, h_m: float, el_rad: Arr, humidity: float = 0.
     z = np.pi / 2.0 - el
     ok = el > 0
     cz = np.cos(z[ok])
-    trph = 0.0022768 * pres / (1.0 - 0.00266 * np.cos(2.0 * lat_rad) - 0.00028 * hgt / 1e3) / cz
+    trph = 0.0022768 * pres / (1.0 - 0.00266 * math.cos(2.0 * lat_rad) - 0.00028 * hgt / 1e3) / cz  # libm's cos
     trpw = 0.002277 * (1255.0 / temp + 0.05) * e / cz
     out[ok] = trph + trpw
     return out

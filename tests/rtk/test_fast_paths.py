@@ -7,6 +7,8 @@ edit that changes the numbers (not only the speed) shows up here rather than as 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -15,6 +17,7 @@ from onboard.formats.rinex_obs import read_rinex_obs
 from onboard.gnsstime import GpsTime
 from onboard.rtk import linsolve
 from onboard.rtk.ephemeris import EphemerisStore, eph_position_velocity, satellite_states
+from onboard.rtk.geodesy import enu_rotation
 from onboard.rtk.mlambda import ld_factor, mlambda
 from onboard.rtk.models import median_of_few
 from onboard.rtk.pntpos import _norm
@@ -287,3 +290,15 @@ def test_post_processing_with_precomputed_epoch_data_equals_the_real_time_path()
     assert [s.q for s in batch] == [s.q for s in live]
     assert sum(s.q == 1 for s in batch) >= 100
     assert max(float(np.abs(a.pos_ecef_m - b.pos_ecef_m).max()) for a, b in zip(batch, live)) < 1e-4
+
+
+def test_enu_rotation_on_math_sines_equals_the_numpy_formulation_to_the_bit() -> None:
+    # enu_rotation (and the Saastamoinen latitude term) take sin/cos from math: libm's, as numpy's float64 ufuncs
+    rng = np.random.default_rng(3)
+    angles = rng.uniform(-np.pi, np.pi, 200_000)
+    assert np.array_equal(np.sin(angles), np.array([math.sin(a) for a in angles.tolist()]))
+    assert np.array_equal(np.cos(angles), np.array([math.cos(a) for a in angles.tolist()]))
+    for lat, lon in rng.uniform(-np.pi / 2, np.pi / 2, (200, 2)).tolist():
+        sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+        dense = np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
+        assert enu_rotation(lat, lon).tobytes() == dense.tobytes()
