@@ -31,14 +31,14 @@ _VEL_ENU = ("vn(m/s)", "ve(m/s)", "vu(m/s)", "sdvn", "sdve", "sdvu", "sdvne", "s
 
 def _sqvar(c: float) -> float:
     """RTKLIB sqvar(): sign-preserving square root of a (co)variance."""
-    return math.copysign(math.sqrt(abs(c)), c) if np.isfinite(c) else 0.0
+    return math.copysign(math.sqrt(abs(c)), c) if math.isfinite(c) else 0.0
 
 
 def _cov_terms(cov: npt.NDArray[np.float64], order: tuple[int, int, int]) -> list[float]:
     """sd1 sd2 sd3 sd12 sd23 sd31 from a 3×3 covariance in the given axis order."""
     a, b, c = order
-    return [_sqvar(cov[a, a]), _sqvar(cov[b, b]), _sqvar(cov[c, c]),
-            _sqvar(cov[a, b]), _sqvar(cov[b, c]), _sqvar(cov[c, a])]
+    m = cov.tolist()  # Python floats: the same values, without a numpy scalar per entry and test (per line)
+    return [_sqvar(m[a][a]), _sqvar(m[b][b]), _sqvar(m[c][c]), _sqvar(m[a][b]), _sqvar(m[b][c]), _sqvar(m[c][a])]
 
 
 def format_time(t: GpsTime, calendar: bool) -> str:
@@ -72,7 +72,7 @@ def format_solution(sol: Solution, llh: bool = False, velocity: bool = False, ca
         parts.append(f"{math.degrees(lat):14.9f} {math.degrees(lon):14.9f} {h:10.4f}")
         sds = _cov_terms(cov_enu, (1, 0, 2))  # n, e, u
     else:
-        x, y, z = sol.pos_ecef_m
+        x, y, z = sol.pos_ecef_m.tolist()
         parts.append(f"{x:14.4f} {y:14.4f} {z:14.4f}")
         sds = _cov_terms(sol.cov_pos_m2, (0, 1, 2))
     parts.append(f"{sol.q:3d} {sol.ns:3d}")

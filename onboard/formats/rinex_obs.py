@@ -148,69 +148,60 @@ def _column_indices(types: list[str], version: float) -> dict[str, int]:
     return out
 
 
+def _field_spans(cols: dict[str, int], offset: int) -> tuple[slice, slice, slice, slice, slice]:
+    """Where a satellite's kept values are in its text, whose fixed 16-column fields (F14.3 + LLI + SSI) start at
+    `offset`: the pr, cp, dop and cn0 values and the phase's LLI digit; an empty slice for an absent quantity
+    (read as NaN, LLI 0). Computed once per system and file, not per satellite."""
+
+    def span(key: str, start: int, stop: int) -> slice:
+        k = cols[key]
+        return slice(offset + 16 * k + start, offset + 16 * k + stop) if k >= 0 else slice(0, 0)
+
+    return span("pr", 0, 14), span("cp", 0, 14), span("dop", 0, 14), span("cn0", 0, 14), span("cp", 14, 15)
+
+
 class _EpochBuilder:
     """Accumulates one epoch's rows and turns them into an ObsEpoch."""
 
     def __init__(self) -> None:
-        self.gnss: list[int] = []
-        self.sv: list[int] = []
-        self.pr: list[float] = []
-        self.cp: list[float] = []
-        self.dop: list[float] = []
-        self.cn0: list[float] = []
-        self.lli: list[int] = []
+        self.rows: list[tuple[int, int, float, float, float, float, int]] = []
+        """Per satellite: gnss id, PRN, pr (m), cp (cycles), Doppler (Hz), C/N0 (dB-Hz), LLI (one append each)."""
 
-    def add_fields(self, sys_letter: str, prn: int, text: str, offset: int, cols: dict[str, int],
+    def add_fields(self, sys_letter: str, prn: int, text: str, spans: tuple[slice, slice, slice, slice, slice],
                    force_slip: bool) -> None:
-        """Add one satellite from its fixed 16-column fields (F14.3 + LLI + SSI) starting at `text[offset]`.
+        """Add one satellite from its fixed 16-column fields, at `spans` (_field_spans) of `text`.
 
         Only the kept quantities are parsed (a blank or missing field is NaN, its LLI 0), straight from the
-        line: the reader's cost is per field, and most files carry more observation types than L1 C/A.
+        line: the reader's cost is per field, and most files carry more observation types than L1 C/A. Each
+        value is float() of its stripped field, "nan" when blank: no call or exception per field (a third of
+        the reading time went into them); a malformed field raises ValueError as float() does.
         """
-        pr = _field_value(text, offset, cols["pr"])
-        k = cols["cp"]
-        cp = _field_value(text, offset, k)
+        s_pr, s_cp, s_dop, s_cn0, s_lli = spans
+        pr = float(text[s_pr].strip() or "nan")
+        cp = float(text[s_cp].strip() or "nan")
         if math.isnan(pr) and math.isnan(cp):
             return
-        if k >= 0:
-            lli_c = text[offset + 16 * k + 14 : offset + 16 * k + 15].strip()
-            lli = int(lli_c) if lli_c.isdigit() else 0
-        else:
-            lli = 0
-        self.gnss.append(SYSTEM_GNSS_ID.get(sys_letter, -1))
-        self.sv.append(prn)
-        self.pr.append(pr if pr != 0.0 else math.nan)
-        self.cp.append(cp if cp != 0.0 else math.nan)
-        self.dop.append(_field_value(text, offset, cols["dop"]))
-        self.cn0.append(_field_value(text, offset, cols["cn0"]))
-        self.lli.append((lli | LLI_SLIP) if force_slip else lli)
+        lli_c = text[s_lli].strip()
+        lli = int(lli_c) if lli_c.isdigit() else 0
+        self.rows.append((SYSTEM_GNSS_ID.get(sys_letter, -1), prn, pr if pr != 0.0 else math.nan,
+                          cp if cp != 0.0 else math.nan, float(text[s_dop].strip() or "nan"),
+                          float(text[s_cn0].strip() or "nan"), (lli | LLI_SLIP) if force_slip else lli))
 
     def build(self, time: GpsTime) -> ObsEpoch:
-        n = len(self.sv)
+        n = len(self.rows)
+        gnss, sv, pr, cp, dop, cn0, lli = zip(*self.rows) if n else ((),) * 7
+        values = np.array((pr, cp, dop, cn0), float)  # one array, one row per quantity
+        unknown = np.full((3, n), np.nan)  # RINEX has no lock time or precisions
         return ObsEpoch(
-            time=time, gnss_id=np.array(self.gnss, np.int8), sv_id=np.array(self.sv, np.int16),
-            pr_m=np.array(self.pr, float), cp_cyc=np.array(self.cp, float), dop_hz=np.array(self.dop, float),
-            cn0_dbhz=np.array(self.cn0, float), lock_ms=np.full(n, np.nan), lli=np.array(self.lli, np.uint8),
-            half_cyc_sub=np.zeros(n, np.uint8), pr_std_m=np.full(n, np.nan), cp_std_cyc=np.full(n, np.nan),
+            time=time, gnss_id=np.array(gnss, np.int8), sv_id=np.array(sv, np.int16), pr_m=values[0],
+            cp_cyc=values[1], dop_hz=values[2], cn0_dbhz=values[3], lock_ms=unknown[0], lli=np.array(lli, np.uint8),
+            half_cyc_sub=np.zeros(n, np.uint8), pr_std_m=unknown[1], cp_std_cyc=unknown[2],
         )
-
-
-def _field_value(text: str, offset: int, k: int) -> float:
-    """Value of the k-th fixed 16-column field after `offset` (its F14.3 part); NaN for k < 0 or blank."""
-    if k < 0:
-        return math.nan
-    f = text[offset + 16 * k : offset + 16 * k + 14]
-    try:
-        return float(f)  # float() ignores the blanks around the number, as strip() would
-    except ValueError:
-        if f.strip():
-            raise
-        return math.nan
 
 
 def _iter_v3(path: Path, lines: list[str], start: int, hdr: RinexObsHeader,
              systems: str | None = None) -> Iterator[ObsEpoch]:
-    cols = {s: _column_indices(t, hdr.version) for s, t in hdr.obs_types.items()
+    spans = {s: _field_spans(_column_indices(t, hdr.version), 3) for s, t in hdr.obs_types.items()
             if systems is None or s in systems}
     i = start
     while i < len(lines):
@@ -235,14 +226,14 @@ def _iter_v3(path: Path, lines: list[str], start: int, hdr: RinexObsHeader,
         b = _EpochBuilder()
         for row in body:
             sys_letter = row[0:1]
-            if sys_letter not in cols:
+            if sys_letter not in spans:
                 continue
             try:
                 prn = int(row[1:3])
             except ValueError as exc:
                 raise InputError(f"{path}: malformed satellite id {row[:3]!r}") from exc
             try:
-                b.add_fields(sys_letter, prn, row, 3, cols[sys_letter], flag == 1)
+                b.add_fields(sys_letter, prn, row, spans[sys_letter], flag == 1)
             except ValueError as exc:
                 raise InputError(f"{path}: malformed observation for {row[:3]}: {exc}") from exc
         yield b.build(gpst_from_calendar(year, mo, dd, hh, mi, round(sec * 1e9)))
@@ -252,7 +243,7 @@ def _iter_v2(path: Path, lines: list[str], start: int, hdr: RinexObsHeader,
              systems: str | None = None) -> Iterator[ObsEpoch]:
     types = hdr.obs_types.get("G", [])
     ntypes = len(types)
-    cols = _column_indices(types, hdr.version)
+    spans = _field_spans(_column_indices(types, hdr.version), 0)
     lines_per_sat = (ntypes + 4) // 5
     i = start
     while i < len(lines):
@@ -296,7 +287,7 @@ def _iter_v2(path: Path, lines: list[str], start: int, hdr: RinexObsHeader,
                 raise InputError(f"{path}: malformed satellite id {sat!r}") from exc
             text = "".join(ln.ljust(80)[:80] for ln in body[k * lines_per_sat : (k + 1) * lines_per_sat])
             try:
-                b.add_fields(sys_letter, prn, text, 0, cols, flag == 1)
+                b.add_fields(sys_letter, prn, text, spans, flag == 1)
             except ValueError as exc:
                 raise InputError(f"{path}: malformed observation for {sat}: {exc}") from exc
         yield b.build(gpst_from_calendar(year, mo, dd, hh, mi, round(sec * 1e9)))

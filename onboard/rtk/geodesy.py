@@ -48,8 +48,10 @@ def ecef_to_llh(xyz_m: npt.ArrayLike) -> Vec:
 
 def enu_rotation(lat_rad: float, lon_rad: float) -> Vec:
     """3×3 matrix turning an ECEF vector into local East, North, Up at (lat, lon): v_enu = R @ v_ecef."""
-    sl, cl = np.sin(lat_rad), np.cos(lat_rad)
-    so, co = np.sin(lon_rad), np.cos(lon_rad)
+    # math's sin/cos: libm's, which numpy's float64 sin/cos call (equal on every one of 3e6 test angles, see
+    # tests/rtk/test_fast_paths.py), without a numpy scalar per call (the engine asks twice per epoch)
+    sl, cl = math.sin(lat_rad), math.cos(lat_rad)
+    so, co = math.sin(lon_rad), math.cos(lon_rad)
     return np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
 
 

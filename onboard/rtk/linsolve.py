@@ -1,4 +1,4 @@
-"""np.linalg.solve of one small float64 system, through the LAPACK gufunc numpy itself calls.
+"""np.linalg.solve (and inv) of one small float64 system, through the LAPACK gufunc numpy itself calls.
 
 np.linalg.solve spends more time in its wrapper (array conversion, shape and type checks, an errstate
 context) than LAPACK spends on the engine's 3×3 to 30×30 systems: about 2 µs of a 4-8 µs call, five to seven
@@ -28,7 +28,7 @@ except ImportError:  # a numpy that moved its private module: its public wrapper
 
 Arr = npt.NDArray[np.float64]
 
-__all__ = ["LinAlgError", "solve"]
+__all__ = ["LinAlgError", "inv", "solve"]
 
 
 def _checked(x: Arr) -> Arr:
@@ -45,3 +45,10 @@ def solve(a: Arr, b: Arr) -> Arr:
     if b.ndim == 1:
         return _checked(_umath_linalg.solve1(a, b, signature="dd->d"))
     return _checked(_umath_linalg.solve(a, b, signature="dd->d"))
+
+
+def inv(a: Arr) -> Arr:
+    """a⁻¹ of one float64 matrix `a` (n, n) (np.linalg.inv to the bit), LinAlgError when singular."""
+    if _umath_linalg is None:
+        return np.asarray(np.linalg.inv(a), np.float64)
+    return _checked(_umath_linalg.inv(a, signature="d->d"))

@@ -6,6 +6,7 @@ modified search of Chang, Yang & Zhou (2005), as RTKLIB lambda.c: LD(), reductio
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -205,10 +206,19 @@ def _search_lists(lmat: list[list[float]], d: list[float], zs: list[float], m: i
 class LambdaResult:
     """Best `m` integer candidates `fixed` (n, m), squared distances `sq_dist` (m,) and ratio s2/s1."""
 
-    fixed: Arr
     sq_dist: Arr
     cond_var: Arr
     """Conditional variances D of the decorrelated ambiguities (cycles²)."""
+    z_mat: Arr
+    """The decorrelating integer transform Z (n, n)."""
+    z_fixed: Arr
+    """The candidates in the decorrelated space, E (n, m)."""
+
+    @functools.cached_property
+    def fixed(self) -> Arr:
+        """The candidates F = Z⁻ᵀE (n, m), mapped back on first use: a failed ratio test (partial fixing's
+        retries) reads only the distances."""
+        return solve(self.z_mat.T, self.z_fixed).round()  # np.round's own call, without its wrapper
 
     @property
     def success_rate(self) -> float:
@@ -249,5 +259,4 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None) ->
     zs = z.T @ a
     zs_list = zs.tolist()
     e, s = _search_lists(lmat, d, zs_list, m, ratio_cap)
-    f = solve(z.T, e)
-    return LambdaResult(f.round(), s, np.array(d))  # np.round's own call, without its wrapper
+    return LambdaResult(s, np.array(d), z, e)

@@ -5,6 +5,7 @@ Follows RTKLIB rtkcmn.c tropmodel() / ionmodel() and rtkpos.c varerr() (vectoris
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,7 +36,7 @@ def saastamoinen_m(lat_rad: float, h_m: float, el_rad: Arr, humidity: float = 0.
     z = np.pi / 2.0 - el
     ok = el > 0
     cz = np.cos(z[ok])
-    trph = 0.0022768 * pres / (1.0 - 0.00266 * np.cos(2.0 * lat_rad) - 0.00028 * hgt / 1e3) / cz
+    trph = 0.0022768 * pres / (1.0 - 0.00266 * math.cos(2.0 * lat_rad) - 0.00028 * hgt / 1e3) / cz  # libm's cos
     trpw = 0.002277 * (1255.0 / temp + 0.05) * e / cz
     out[ok] = trph + trpw
     return out
@@ -139,14 +140,15 @@ class CodeScatter:
         fresh = ok & ~np.isfinite(self.mean_m)
         self.mean_m[fresh] = cmc_m[fresh]
         self.count[fresh] = 1.0
-        old = ok & ~fresh & (self.count >= 5)  # the arc mean has settled enough to measure against
-        w_time = min(1.0, abs(dt_s) / self.arc_time_s) if dt_s else 1.0 / self.arc_time_s
         upd = ok & ~fresh
+        settled = self.count >= 5
+        old = upd & settled  # the arc mean has settled enough to measure against
+        w_time = min(1.0, abs(dt_s) / self.arc_time_s) if dt_s else 1.0 / self.arc_time_s
         w = np.maximum(1.0 / (self.count[upd] + 1.0), w_time)
         dev = cmc_m - self.mean_m
         if np.count_nonzero(old) >= 3:
-            # deviation from a mean of n samples has variance σ²(1 + w) for weight w
-            wo = np.maximum(1.0 / (self.count[old] + 1.0), w_time)
+            # deviation from a mean of n samples has variance σ²(1 + w) for weight w (the old slots' w)
+            wo = w[settled[upd]]
             r = median_of_few(dev[old] ** 2 / (model_var_m2[old] * (1.0 + wo))) / CHI2_1DOF_MEDIAN
             a = max(1.0 / (self.epochs + 1), min(1.0, abs(dt_s) / self.window_s) if dt_s else 0.0)
             self.ratio = r if self.epochs == 0 else self.ratio + a * (r - self.ratio)

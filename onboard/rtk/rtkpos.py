@@ -234,8 +234,10 @@ def _geometry(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr]:
     key = ("geo", pos_ecef_m.tobytes())
     hit = rcv.memo.get(key)
     if hit is None:
-        with np.errstate(invalid="ignore", divide="ignore"):  # empty slots (zero positions) give NaN, unused
-            hit = geometric_range(rcv.sats.pos_m, pos_ecef_m)
+        # no errstate: empty slots hold zero satellite positions, whose range from a receiver off the Earth's
+        # centre is finite (the context cost ~2 µs, three times per epoch; no FP warning on any real set, the
+        # benchmarks and hil_sim run with numpy errors raising)
+        hit = geometric_range(rcv.sats.pos_m, pos_ecef_m)
         for a in hit:
             a.flags.writeable = False
         rcv.memo[key] = hit
@@ -259,9 +261,8 @@ def _model_range_m(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr, Arr, Arr]
 def _model_from_geometry(r: Arr, e: Arr, clock_s: Arr, pos_ecef_m: Arr) -> tuple[Arr, Arr, Arr]:
     """Modelled range (m), azimuth and elevation (rad) from geometric_range()'s range `r` and LOS `e` of the
     satellites seen from one position: one slot row (32,) / (32, 3), or several epochs' (k, 32) / (k, 32, 3)."""
-    with np.errstate(invalid="ignore", divide="ignore"):  # empty slots (zero positions) give NaN, unused
-        llh = ecef_to_llh(pos_ecef_m)
-        az, el = sat_az_el(pos_ecef_m, e.reshape(-1, 3), llh)
+    llh = ecef_to_llh(pos_ecef_m)
+    az, el = sat_az_el(pos_ecef_m, e.reshape(-1, 3), llh)  # empty slots: finite LOS (see _geometry)
     az, el = az.reshape(r.shape), el.reshape(r.shape)
     lat, _, h = llh
     return r - CLIGHT_M_S * clock_s + saastamoinen_m(lat, h, el), az, el
@@ -280,6 +281,20 @@ def _model_range_rows(rcvs: list[_Receiver], pos_ecef_m: Arr) -> None:
     for k, rc in enumerate(rcvs):
         rc.memo[("geo", pos_key)] = (r[k], e[k])
         rc.memo[("model", pos_key)] = (model[k], e[k], az[k], el[k])
+
+
+def _sd_obs_m(rov: _Receiver, bas: _Receiver) -> tuple[Arr, Arr]:
+    """Single-differenced (rover − base) phase λ·(φ_r − φ_b) and code ρ_r − ρ_b (m) per slot, memoised on the
+    rover epoch for its base epoch (the slip, standstill and code-scatter tests and every _ddres call of the
+    epoch difference the same observations). Read-only."""
+    key = ("sd_obs", id(bas))  # one base epoch per rover epoch, alive while it is processed
+    hit = rov.memo.get(key)
+    if hit is None:
+        hit = (LAMBDA_L1_M * (rov.cp_cyc - bas.cp_cyc), rov.pr_m - bas.pr_m)
+        for a in hit:
+            a.flags.writeable = False
+        rov.memo[key] = hit
+    return hit[0], hit[1]
 
 
 def _range_with_trop_m(rcv: _Receiver, pos_ecef_m: Arr, trop_m: Arr) -> tuple[Arr, Arr]:
@@ -388,7 +403,7 @@ def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, 
     satellite's ambiguity instead (a slip too small for the Doppler test before a fix is held, e.g. 1 cycle
     against its 2): the slot is returned, −1 for none."""
     o = st.options
-    sd = LAMBDA_L1_M * (rov.cp_cyc - bas.cp_cyc) - (rng_r - rng_b)
+    sd = _sd_obs_m(rov, bas)[0] - (rng_r - rng_b)
     var = _var_sd_m2(o, rov, el)
     t_ns = t.total_ns
     disp = st.standstill.update(t_ns, sd, st.x[:3], los_r, var, st.lock, valid,
@@ -679,11 +694,11 @@ def code_variance_scale(st: RtkState, rov: _Receiver, base: _Receiver, phase_ok:
     proportionally less code variance, never below `code_variance_min_scale`.
     """
     o = st.options
-    cmc = (rov.pr_m - base.pr_m) - LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc)
+    sd_phase, sd_code = _sd_obs_m(rov, base)
+    cmc = sd_code - sd_phase
     ok = phase_ok & np.isfinite(cmc)
     var_code = _var_sd_m2(o, rov, el) * o.code_phase_ratio**2
-    with np.errstate(invalid="ignore"):
-        st.code_scatter.update(np.where(ok, cmc, 0.0), var_code, ok, slip, dt)
+    st.code_scatter.update(np.where(ok, cmc, 0.0), var_code, ok, slip, dt)
     cs = st.code_scatter
     if o.code_scatter_reference <= 0.0 or cs.epochs < o.code_scatter_min_epochs or not np.isfinite(cs.ratio):
         return 1.0
@@ -819,6 +834,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     ref_phase = -1
     drng = rng_r - rng_b
     ion = _slant_iono_m(st, x, el) if st.iono_on else None
+    sd_phase, sd_code = _sd_obs_m(rov, base)
     for kind, ok in ((0, phase_ok), (1, code_ok)):
         idx = ok.nonzero()[0]
         if idx.size < 2:
@@ -826,12 +842,12 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         ref = int(idx[el[idx].argmax()])
         if kind == 0:
             ref_phase = ref
-            z = LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - drng - LAMBDA_L1_M * x[NX0:NXI]
+            z = sd_phase - drng - LAMBDA_L1_M * x[NX0:NXI]
             var = var_sd
             if ion is not None:
                 z = z + ion[0]  # the ionosphere advances the phase
         else:
-            z = (rov.pr_m - base.pr_m) - drng
+            z = sd_code - drng
             if ion is not None:
                 z = z - ion[0]  # and delays the code
             var = var_sd * o.code_phase_ratio**2 * st.code_var_scale * st.static_code_factor
@@ -1258,10 +1274,13 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         return _solution(t_sol, st.x[:3], st.x[3:6], Q_FLOAT if ns >= 2 else Q_SINGLE, ns, st.p[:3, :3],
                          st.p[3:6, 3:6], age, 0.0)
 
-    # post-fit residual check of the float solution
-    dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False, trop_r, jacobian=False)
-    ok_post = _valid_residuals(dd_post, o.validation_sigma_factor)
-    bad_phase = dd_post.slot[(dd_post.kind == 0) & ~ok_post]
+    # post-fit residual check of the float solution: it guards a held set (the fault exclusion and the release
+    # below act only on one), so without one it is not computed (a _ddres call per epoch of an unfixed rover)
+    bad_phase = np.zeros(0, np.int64)
+    if st.held_prns.any():
+        dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False, trop_r, jacobian=False)
+        ok_post = _valid_residuals(dd_post, o.validation_sigma_factor)
+        bad_phase = dd_post.slot[(dd_post.kind == 0) & ~ok_post]
     if bad_phase.size and st.held_prns.any():
         # one satellite slipping under a hold spreads its error over every row through the position: find
         # whether leaving out a single satellite makes the rest fit (fault exclusion) before releasing all

@@ -15,6 +15,7 @@ ends only enter: the noise does not grow with the window, and a slow creep adds 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -22,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from onboard.rtk.consts import LAMBDA_L1_M
+from onboard.rtk.linsolve import LinAlgError, inv
 
 Arr = npt.NDArray[np.float64]
 
@@ -40,9 +42,10 @@ class Displacement:
     span_s: float
     n_sats: int
 
-    @property
+    @functools.cached_property
     def chi2(self) -> float:
-        """Mahalanobis square of the displacement against zero (static hypothesis)."""
+        """Mahalanobis square of the displacement against zero (static hypothesis); computed once (a standing
+        rover's update reads it twice)."""
         return float(self.d_m @ self.info_m2 @ self.d_m)
 
     @property
@@ -81,8 +84,8 @@ def tdcp_displacement(sd_then_m: Arr, pos_then_m: Arr, sd_now_m: Arr, pos_now_m:
     normal = aw @ a - g * (aw1[:, None] * aw1[None, :])  # np.outer's product without its wrapper
     rhs = aw @ dd_y - g * aw1 * float(inv_d @ dd_y)
     try:
-        cov_u = np.linalg.inv(normal)
-    except np.linalg.LinAlgError:
+        cov_u = inv(normal)
+    except LinAlgError:
         return None
     u = cov_u @ rhs
     return Displacement(u + (np.asarray(pos_now_m) - np.asarray(pos_then_m)), cov_u, normal, span_s, int(k.size))

@@ -7,6 +7,8 @@ edit that changes the numbers (not only the speed) shows up here rather than as 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -15,6 +17,7 @@ from onboard.formats.rinex_obs import read_rinex_obs
 from onboard.gnsstime import GpsTime
 from onboard.rtk import linsolve
 from onboard.rtk.ephemeris import EphemerisStore, eph_position_velocity, satellite_states
+from onboard.rtk.geodesy import enu_rotation
 from onboard.rtk.mlambda import ld_factor, mlambda
 from onboard.rtk.models import median_of_few
 from onboard.rtk.pntpos import _norm
@@ -39,10 +42,13 @@ def test_linsolve_equals_numpy_solve_to_the_bit_and_raises_on_singular() -> None
         s = a @ a.T + np.eye(n) * 10.0 ** rng.integers(-6, 2)
         for b in (rng.normal(size=n), rng.normal(size=(n, 5)), rng.normal(size=(5, n)).T):  # also a transposed view
             assert linsolve.solve(s, b).tobytes() == np.linalg.solve(s, b).tobytes()
+        assert linsolve.inv(s).tobytes() == np.linalg.inv(s).tobytes()
     with pytest.raises(linsolve.LinAlgError), np.errstate(invalid="ignore"):
         linsolve.solve(np.ones((3, 3)), np.ones(3))
     with pytest.raises(np.linalg.LinAlgError), np.errstate(invalid="ignore"):
         linsolve.solve(np.zeros((2, 2)), np.ones((2, 2)))
+    with pytest.raises(linsolve.LinAlgError), np.errstate(invalid="ignore"):
+        linsolve.inv(np.ones((3, 3)))
 
 
 def test_linsolve_falls_back_to_numpy_where_its_private_gufuncs_are_gone(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -51,8 +57,10 @@ def test_linsolve_falls_back_to_numpy_where_its_private_gufuncs_are_gone(monkeyp
     a = rng.normal(size=(6, 6))
     s, b = a @ a.T + np.eye(6), rng.normal(size=6)
     fast = linsolve.solve(s, b)
+    fast_inv = linsolve.inv(s)
     monkeypatch.setattr(linsolve, "_umath_linalg", None)
     assert linsolve.solve(s, b).tobytes() == fast.tobytes()
+    assert linsolve.inv(s).tobytes() == fast_inv.tobytes()
     with pytest.raises(linsolve.LinAlgError):
         linsolve.solve(np.ones((3, 3)), np.ones(3))
 
@@ -282,3 +290,15 @@ def test_post_processing_with_precomputed_epoch_data_equals_the_real_time_path()
     assert [s.q for s in batch] == [s.q for s in live]
     assert sum(s.q == 1 for s in batch) >= 100
     assert max(float(np.abs(a.pos_ecef_m - b.pos_ecef_m).max()) for a, b in zip(batch, live)) < 1e-4
+
+
+def test_enu_rotation_on_math_sines_equals_the_numpy_formulation_to_the_bit() -> None:
+    # enu_rotation (and the Saastamoinen latitude term) take sin/cos from math: libm's, as numpy's float64 ufuncs
+    rng = np.random.default_rng(3)
+    angles = rng.uniform(-np.pi, np.pi, 200_000)
+    assert np.array_equal(np.sin(angles), np.array([math.sin(a) for a in angles.tolist()]))
+    assert np.array_equal(np.cos(angles), np.array([math.cos(a) for a in angles.tolist()]))
+    for lat, lon in rng.uniform(-np.pi / 2, np.pi / 2, (200, 2)).tolist():
+        sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+        dense = np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
+        assert enu_rotation(lat, lon).tobytes() == dense.tobytes()
