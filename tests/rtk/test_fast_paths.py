@@ -292,13 +292,16 @@ def test_post_processing_with_precomputed_epoch_data_equals_the_real_time_path()
     assert max(float(np.abs(a.pos_ecef_m - b.pos_ecef_m).max()) for a, b in zip(batch, live)) < 1e-4
 
 
-def test_enu_rotation_on_math_sines_equals_the_numpy_formulation_to_the_bit() -> None:
-    # enu_rotation (and the Saastamoinen latitude term) take sin/cos from math: libm's, as numpy's float64 ufuncs
+def test_enu_rotation_on_math_sines_equals_the_numpy_formulation() -> None:
+    # enu_rotation (and the Saastamoinen latitude term) take sin/cos from math (libm). On the x86-64 machine
+    # this was measured on, numpy's float64 sin/cos are libm's and the .pos files stayed byte-identical; other
+    # builds (aarch64, SIMD sin/cos) may differ in the last bit, which no figure can see: within 1 ulp here
     rng = np.random.default_rng(3)
     angles = rng.uniform(-np.pi, np.pi, 200_000)
-    assert np.array_equal(np.sin(angles), np.array([math.sin(a) for a in angles.tolist()]))
-    assert np.array_equal(np.cos(angles), np.array([math.cos(a) for a in angles.tolist()]))
+    ulp = np.spacing(1.0)
+    assert np.abs(np.sin(angles) - np.array([math.sin(a) for a in angles.tolist()])).max() <= ulp
+    assert np.abs(np.cos(angles) - np.array([math.cos(a) for a in angles.tolist()])).max() <= ulp
     for lat, lon in rng.uniform(-np.pi / 2, np.pi / 2, (200, 2)).tolist():
         sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
         dense = np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
-        assert enu_rotation(lat, lon).tobytes() == dense.tobytes()
+        assert np.abs(enu_rotation(lat, lon) - dense).max() <= 2 * ulp
