@@ -50,7 +50,10 @@ class RtkOptions:
     """Below min_success_rate a fix on a partial set is still accepted when the same integer set has passed the
     ratio test at every epoch over this span (s). GEONET 0759/3040 (30 s epochs): the bootstrapped rate, a lower bound, stays
     under 0.99 for 510 s while RTKLIB's ratio test is right from the second epoch; hil_sim at 1 Hz: a ratio
-    of 3 on a float metres off (correlated code) after 7 s is wrong. Geometry needs time, not epochs."""
+    of 3 on a float metres off (correlated code) after 7 s is wrong. Geometry needs time, not epochs. Never
+    shorter than the span a set above the success rate needs (confirm_fix_span_s with its per-km part): hil_sim
+    7 km seed 26, a partial set (ratio 3.1, success rate 0.94) was fixed 28 cm off after 60 s of wins where one
+    above the rate would have needed 72 s."""
     settled_fix_span_s: float = 60.0
     """A first-fix candidate that has won the ratio test with the same integer set at every epoch for this long
     (s) is no longer rejected for lying far from the float position (the Mahalanobis check; its fixed
@@ -104,6 +107,18 @@ class RtkOptions:
     exclude_half_cycle: bool = False
     """Drop phase flagged with an unresolved half cycle (LLI bit 1) from the filter, not only from AR."""
     max_partial_drop: int = 6
+    partial_agrees_with_full: bool = True
+    """A first fix on a partial set (nothing held, validated or known) must agree with the full candidate set's
+    best integers on the satellites they share. Partial AR drops the least determined satellites until a set
+    passes the ratio test; when the survivor's integers differ from the full set's best on satellites both
+    contain, the data hold two rival hypotheses, and the survivor wins only because the satellites that
+    contradict it were left out. hil_sim 5 km, seeds 17 and 29 (the same sky as every seed, other draws of the
+    errors): a 6-satellite survivor with PRN 11, 14 and 25 one cycle off the full set's best won at ratio 6-9
+    for 60 s on a float 10 cm from the truth, was fixed 35-43 cm off and held to the end (514 and 356 wrong
+    epochs); seed 14 at 8 km the same (433). The right partial fixes seen (seed 8 at 5 km: ratio 5, 60 s) agree
+    with their full set. Seeds 17-32 (the 16 after those the engine was tuned on), wrong epochs before /
+    after: M8T 5 km 870 / 0 (airborne fixed, mean 90.3 / 89.7 %), 6 km 858 / 0, LEA-6T 5 km 869 / 0; seeds
+    1-16 and every real set (forward, backward, combined) unchanged."""
     phase_sigma_a_m: float = 0.003
     phase_sigma_b_m: float = 0.003
     code_phase_ratio: float = 300.0
@@ -192,6 +207,18 @@ class RtkOptions:
     0 21.6 / 50.1 68.1 100 100 87.3 33.6 60.5 74.3 %, 0 wrong with them; 8.5 km seed 1: a
     5-satellite set 20-24 cm off won for 88 s (ratio 3 → 8) on a float 0.35-0.45 m off and was held (165 wrong
     epochs; 10 km: seed 8 9 wrong, 9-10 cm), where without them 8.5-10 km fix little but nothing wrong."""
+    max_first_fix_baseline_km: float = 6.0
+    """No first fix (nothing held or validated, no known take-off point) beyond this baseline (km; 0: no limit).
+    With L1 alone the differential ionosphere (millimetres per km per satellite) cannot be told from the
+    ambiguities; the longer the baseline, the more often a set that fits the ionosphere-biased float as well as
+    the right one wins, and a right set's fixed position carries the ionosphere too. hil_sim M8T cold starts,
+    seeds 1-16 / 17-32, wrong epochs without any limit: 8 km 433 / 929, 10 km 85 / 1114, 20 km 1200 / 1126
+    (sets 0.3-1.6 m off, held to the end). With partial_agrees_with_full a limit of 7.5 km still let seed 14
+    fix at 7.4 km 10-11 cm off (5 epochs: right integers, a partial set's position, σ 4.5 cm), 7 km seed 1 at
+    6.9 km 16 cm off; 6 km: 0 wrong on seeds 1-32 at 5, 6, 6.5, 7, 10 and 20 km. A fix held from a shorter
+    baseline or seeded from a surveyed take-off point is kept as the rover flies out (hil_sim with the known
+    take-off point: 10 km 100 % fixed, 0.7 cm 3D RMS; 20 km 100 %, 1.1 cm). The real sets (≤ 5.3 km) are
+    unchanged. The pre-flight page names this cause when the rover floats beyond it."""
     accel_h_sigma_m_s2: float = 3.0
     accel_v_sigma_m_s2: float = 1.0
     initial_pos_sigma_m: float = 30.0

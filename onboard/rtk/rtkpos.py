@@ -988,19 +988,30 @@ class _Fix:
     """The ionosphere states (m) conditioned on the integers, when they are in use."""
 
 
+def _slot_integers(ref: int, others: npt.NDArray[np.int64], ints: Arr) -> Arr:
+    """Per-slot integers of a DD integer set (cycles): 0 at `ref`, the DD integers at `others`, NaN elsewhere."""
+    c = np.full(NSAT, np.nan)
+    c[ref] = 0.0
+    c[others] = np.rint(ints)
+    return c
+
+
+def _same_integers(a: Arr, b: Arr, min_common: int) -> bool:
+    """True when per-slot integer sets `a` and `b` (see _slot_integers) share at least `min_common` satellites
+    and are equal on all of them, up to the choice of reference (a constant)."""
+    common = np.isfinite(a) & np.isfinite(b)
+    if common.sum() < min_common:
+        return False
+    d = a[common] - b[common]
+    return bool(np.all(d == d[0]))
+
+
 def _agrees_with_validated(st: RtkState, ref: int, others: npt.NDArray[np.int64], ints: Arr, min_common: int) -> bool:
     """True when at least `min_common` satellites of a candidate set belong to the last validated (held) set
     and the candidate's integers equal that set's on all of them: a re-fix of integers already validated and
     tracked without a slip since (e.g. after a hold released for one satellite's misfit, which that satellite's
     reset removed), extended at most by satellites that joined since, as a held set would be."""
-    c = np.full(NSAT, np.nan)
-    c[ref] = 0.0
-    c[others] = np.rint(ints)
-    common = np.isfinite(c) & np.isfinite(st.validated_int)
-    if common.sum() < min_common:
-        return False
-    d = c[common] - st.validated_int[common]  # equal integers up to the choice of reference: a constant
-    return bool(np.all(d == d[0]))
+    return _same_integers(_slot_integers(ref, others, ints), st.validated_int, min_common)
 
 
 def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el: Arr,
@@ -1012,6 +1023,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
     best_ratio = 0.0
     seen_candidate = False
     settled = False
+    full_best: Arr | None = None
     for _drop in range(o.max_partial_drop + 1 if o.partial_ar else 1):
         if idx.size < min_dd + 1:
             break
@@ -1024,6 +1036,8 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             return None
         ratio = res.ratio
         best_ratio = max(best_ratio, ratio)
+        if _drop == 0:
+            full_best = _slot_integers(ref, others, res.fixed[:, 0])
         # a fix resting on the bare minimum of double differences (no held set to lean on) must be
         # nearly certain: a stricter success rate and twice the ratio
         strict = (idx.size - 1 <= o.min_amb_dd or _drop >= o.strict_partial_drop_sats) and not np.count_nonzero(st.held_prns)
@@ -1064,10 +1078,18 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
             wins = st.pending_fix[2]
             trusted = bool(np.count_nonzero(st.held_prns) or st.known_amb[idx].all()) \
                 or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_amb_dd + 1)
-            if res.success_rate >= need_sr:
+            # a survivor contradicting the full set's best integers on the satellites they share: two rival
+            # integer hypotheses, the partial one winning only without the satellites that contradict it
+            rival = not full and o.partial_agrees_with_full and full_best is not None \
+                and not _same_integers(_slot_integers(ref, others, res.fixed[:, 0]), full_best, 2)
+            far = o.max_first_fix_baseline_km > 0.0 and st.baseline_m > 1000.0 * o.max_first_fix_baseline_km
+            if rival or far:
+                # no first fix on such data (see the options): only a set already trusted
+                accept = trusted and res.success_rate >= need_sr
+            elif res.success_rate >= need_sr:
                 accept = trusted or span >= need_span or (full and wins >= o.full_set_confirm_epochs)
             elif not strict:
-                accept = span >= o.consistent_fix_span_s or (
+                accept = span >= max(o.consistent_fix_span_s, need_span) or (
                     full and wins >= o.full_set_confirm_epochs and span >= need_span)
         elif ratio >= need_ratio:
             accept = res.success_rate >= need_sr and (bool(st.held_prns.any() or st.known_amb[idx].all())

@@ -240,3 +240,17 @@ def test_a_candidate_is_trusted_only_on_enough_satellites_of_the_validated_set_w
     assert not _agrees_with_validated(st, 3, others[1:], ints[1:], 5)  # only 4 validated satellites in common
     st.validated_int[8] = np.nan  # slot 8 slipped since (reset)
     assert not _agrees_with_validated(st, 3, others, ints, 5)
+
+
+def test_a_partial_survivor_agrees_with_the_full_set_only_with_its_integers_on_the_shared_satellites():
+    """partial_agrees_with_full compares per-slot integers up to the reference: dropping satellites, or taking
+    another reference, keeps agreement; one cycle off on a shared satellite is a rival set."""
+    from onboard.rtk.rtkpos import _same_integers, _slot_integers
+
+    full = _slot_integers(2, np.array([4, 7, 10, 11, 13, 20]), np.array([5.0, -3.0, 8.0, 1.0, 0.0, 2.0]))
+    survivor = _slot_integers(2, np.array([4, 7, 10, 13]), np.array([5.0, -3.0, 8.0, 0.0]))  # 11, 20 dropped
+    assert _same_integers(survivor, full, 2)
+    assert not _same_integers(_slot_integers(2, np.array([4, 7, 10, 13]), np.array([6.0, -3.0, 9.0, 0.0])), full, 2)
+    relative_to_4 = _slot_integers(4, np.array([2, 7, 10, 13]), np.array([-5.0, -8.0, 3.0, -5.0]))
+    assert _same_integers(relative_to_4, full, 2)
+    assert not _same_integers(_slot_integers(4, np.array([30]), np.array([1.0])), full, 2)  # one shared slot

@@ -165,6 +165,34 @@ def test_a_partial_set_at_5_km_waits_longer_for_its_confirmation() -> None:
     assert r["wrong"] == 0 and r["air fix %"] >= 70.0
 
 
+def test_a_partial_set_contradicting_the_full_set_is_not_a_first_fix() -> None:
+    # seed 17 at 5 km: partial AR's survivor (6 satellites) had PRN 11, 14 and 25 one cycle off the full set's
+    # best integers, won the ratio test at 6-9 for 60 s on a float 10 cm from the truth, and was fixed 35 cm off
+    # at 85 s and held (114 wrong epochs in these 200 s without the check)
+    from dataclasses import replace
+
+    r = _run("m8t", baseline_m=5000.0, seed=17)
+    assert r["wrong"] == 0 and r["first fix s"] <= 120.0 and r["3D RMS cm"] <= 2.0
+    unchecked = _run("m8t", replace(RtkOptions(), partial_agrees_with_full=False), baseline_m=5000.0, seed=17)
+    assert unchecked["wrong"] > 50
+
+
+def test_no_cold_first_fix_beyond_the_maximum_baseline_but_a_known_take_off_point_fixes() -> None:
+    # seed 7 at 12 km: the full set won the ratio test on a float biased by the differential ionosphere and was
+    # fixed 78 cm off at 287 s (held to the end) without max_first_fix_baseline_km
+    from dataclasses import replace
+
+    r = _run("m8t", duration_s=320.0, baseline_m=12000.0, seed=7)
+    assert r["wrong"] == 0 and not np.any(r["q"] == Q_FIX)
+    unlimited = _run("m8t", replace(RtkOptions(), max_first_fix_baseline_km=0.0), duration_s=320.0,
+                     baseline_m=12000.0, seed=7)
+    assert unlimited["wrong"] > 10
+    # integers from the surveyed take-off point are known, not guessed: they are held at 10 km
+    known = _run("m8t", baseline_m=10000.0, seed=14, known_start=True)
+    assert known["wrong"] == 0 and known["first fix s"] == 0.0
+    assert known["air fix %"] >= 99.0 and known["3D RMS cm"] <= 2.0
+
+
 def test_one_cycle_base_slips_are_caught_by_the_base_geometry_check() -> None:
     # seed 3, undetected slips 2/h: base PRN 11 and 17 slip by -1 cycle (no LLI) at 256.8 and 260.6 s, under a
     # held fix; a 1.0-cycle threshold on the base's phase - range step let both through and the hold settled

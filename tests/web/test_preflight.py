@@ -93,6 +93,8 @@ def test_rtk_problems_are_warnings_with_their_cause() -> None:
     now = time.time_ns()
     cases = {
         "not fixed yet": {"q": 2, "ratio": 1.8},
+        "float, base 9.8 km away": {"q": 2, "baseline_m": 9800.0},
+        "L1 RTK does not fix from a cold start": {"q": 2, "baseline_m": 9800.0},
         "no base corrections yet": {"base_epochs": 0, "q": 5},
         "base radio closed: device disappeared": {"radio_open": False, "radio_error": "device disappeared"},
         "base corrections 45 s old": {"age_s": 45.0, "q": 2},
@@ -106,6 +108,8 @@ def test_rtk_problems_are_warnings_with_their_cause() -> None:
             setattr(rtk, k, v)
         level, detail = _rtk_level(rtk, now)
         assert level == WARN and expect in detail, (change, detail)
+    level, detail = _rtk_level({**_rtk_fixed().to_json(), "baseline_m": 9800.0}, now)
+    assert level == OK  # a fix held from a shorter baseline (or a surveyed take-off point) stays ok
     level, detail = _rtk_level({**_rtk_fixed().to_json(), "ratio": "abc"}, now)
     assert level == WARN and "malformed" in detail
 
