@@ -20,7 +20,7 @@ KLOBUCHAR_DEFAULT_ALPHA = (0.1118e-07, -0.7451e-08, -0.5961e-07, 0.1192e-06)
 KLOBUCHAR_DEFAULT_BETA = (0.1167e06, -0.2294e06, -0.1311e06, 0.1049e07)
 
 
-def saastamoinen_m(lat_rad: float, h_m: float, el_rad: Arr, humidity: float = 0.7) -> Arr:
+def saastamoinen_m(lat_rad: float | Arr, h_m: float | Arr, el_rad: Arr, humidity: float = 0.7) -> Arr:
     """Slant tropospheric delay (m) by Saastamoinen with a standard atmosphere (RTKLIB tropmodel); `lat_rad`
     and `h_m` may be (k, 1) for k receivers, `el_rad` (k, n) (a row each)."""
     el = np.asarray(el_rad, dtype=float)
@@ -64,7 +64,7 @@ def _saastamoinen_rows(lat: Arr, h: Arr, el: Arr, humidity: float) -> Arr:
     return out
 
 
-def klobuchar_m(t_tow_s: float, lat_rad: float, lon_rad: float, az_rad: Arr, el_rad: Arr,
+def klobuchar_m(t_tow_s: float | Arr, lat_rad: float | Arr, lon_rad: float | Arr, az_rad: Arr, el_rad: Arr,
                 alpha: tuple[float, ...] | None, beta: tuple[float, ...] | None) -> Arr:
     """L1 ionospheric delay (m) by the broadcast Klobuchar model (IS-GPS-200 20.3.3.5.2.5, RTKLIB ionmodel)."""
     a = alpha if alpha is not None and any(alpha) else KLOBUCHAR_DEFAULT_ALPHA

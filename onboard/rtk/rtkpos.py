@@ -209,15 +209,15 @@ def epoch_spp(epochs: list[ObsEpoch], rcvs: list[_Receiver], nav: NavData, o: Rt
     dops = np.array([r.dop_hz for r in rcvs])
     sats = [r.sats for r in rcvs]
     tows = np.array([e.time.tow_s for e in epochs])
-    args = (o.elmask_rad, dops, nav.iono)
-    kw = {"outlier_m": o.spp_outlier_m, "max_gdop": o.spp_max_gdop}
     x0 = None
     for k in range(min(len(epochs), 10)):  # a start point: the first epoch with a cold-start solution
-        first = pntpos_batch(prs[k:k + 1], sats[k:k + 1], tows[k:k + 1], o.elmask_rad, dops[k:k + 1], nav.iono, **kw)[0]
+        first = pntpos_batch(prs[k:k + 1], sats[k:k + 1], tows[k:k + 1], o.elmask_rad, dops[k:k + 1], nav.iono,
+                             outlier_m=o.spp_outlier_m, max_gdop=o.spp_max_gdop)[0]
         if first.ok:
             x0 = np.tile(np.append(first.pos_ecef_m, first.clock_bias_m), (len(epochs), 1))
             break
-    return pntpos_batch(prs, sats, tows, *args, x0=x0, **kw)
+    return pntpos_batch(prs, sats, tows, o.elmask_rad, dops, nav.iono, x0=x0, outlier_m=o.spp_outlier_m,
+                        max_gdop=o.spp_max_gdop)
 
 
 def _slots(obs: ObsEpoch, store: EphemerisStore) -> _Receiver:

@@ -61,15 +61,20 @@ class ObsEpoch:
 
     def gps_only(self) -> ObsEpoch:
         """The same epoch restricted to GPS satellites (gnssId 0, PRN 1–32)."""
-        g = self.__dict__.get("_gps")  # the reader, the pairing, the satellite batch and the engine all ask
-        if g is not None:
-            return self if g is True else g
+        g: ObsEpoch | bool | None = self.__dict__.get("_gps")  # the reader, the pairing, the batch, the engine ask
+        if isinstance(g, ObsEpoch):
+            return g
+        if g is True:
+            return self
         keep = (self.gnss_id == GNSS_GPS) & (self.sv_id >= 1) & (self.sv_id <= 32)
         # frozen: the epoch itself is its GPS part (GPS-only files, every engine epoch), else kept once made
         # (True stands for the epoch itself: no reference cycle)
-        g = True if keep.all() else self.select(keep)
-        object.__setattr__(self, "_gps", g)
-        return self if g is True else g
+        if keep.all():
+            object.__setattr__(self, "_gps", True)
+            return self
+        gps = self.select(keep)
+        object.__setattr__(self, "_gps", gps)
+        return gps
 
     def select(self, keep: npt.NDArray[np.bool_]) -> ObsEpoch:
         """The same epoch keeping only the entries where `keep` is True."""
