@@ -58,29 +58,35 @@ def _runs(only: list[str] | None, models: tuple[str, ...]) -> Iterator[tuple[Sim
             yield from ((case, model) for model in models)
 
 
-def run_matrix(only: list[str] | None = None, models: tuple[str, ...] = ("lea6t", "m8t"), seed: int = 1) -> None:
+def _sky(hour: float | None) -> str:
+    return "" if hour is None else f", start {hour:g}:00 GPST"
+
+
+def run_matrix(only: list[str] | None = None, models: tuple[str, ...] = ("lea6t", "m8t"), seed: int = 1,
+               start_hour: float | None = None) -> None:
     """Print the matrix (scenarios whose name contains one of `only`, or all)."""
-    print(f"hil_sim flights (seed {seed}), directgeo onboard.rtk forward, GPS L1, 15 deg mask, fix-and-hold, "
-          "max age 30 s")
+    print(f"hil_sim flights (seed {seed}{_sky(start_hour)}), directgeo onboard.rtk forward, GPS L1, 15 deg mask, "
+          "fix-and-hold, max age 30 s")
     print(HEADER)
     print("-" * len(HEADER))
     for case, model in _runs(only, models):
-        c = replace(case, seed=seed)
+        c = replace(case, seed=seed, start_hour=start_hour)
         print(row(c, model, evaluate(c, model)), flush=True)
 
 
-def run_seeds(seeds: list[int], only: list[str] | None = None, models: tuple[str, ...] = ("lea6t", "m8t")) -> None:
+def run_seeds(seeds: list[int], only: list[str] | None = None, models: tuple[str, ...] = ("lea6t", "m8t"),
+              start_hour: float | None = None) -> None:
     """Print, per scenario and model, the airborne fix % over several World seeds (min, median, mean), the
     wrong fixes summed over the seeds (naming the seeds that had any) and the median first fix: one line each,
     so that a change is judged on more than one draw of the errors."""
-    print(f"hil_sim flights, seeds {seeds[0]}-{seeds[-1]} ({len(seeds)}), directgeo onboard.rtk forward, GPS L1, "
-          "15 deg mask, fix-and-hold, max age 30 s")
+    print(f"hil_sim flights, seeds {seeds[0]}-{seeds[-1]} ({len(seeds)}){_sky(start_hour)}, directgeo onboard.rtk "
+          "forward, GPS L1, 15 deg mask, fix-and-hold, max age 30 s")
     head = (f"{'scenario':30s} {'model':6s} {'air % min':>9s} {'median':>7s} {'mean':>6s} {'wrong':>6s}  "
             "seeds with wrong fixes / first fix s (median)")
     print(head)
     print("-" * len(head))
     for case, model in _runs(only, models):
-        runs = {seed: evaluate(replace(case, seed=seed), model) for seed in seeds}
+        runs = {seed: evaluate(replace(case, seed=seed, start_hour=start_hour), model) for seed in seeds}
         air = np.array([r["air fix %"] for r in runs.values()], float)
         wrong = {seed: r["wrong"] for seed, r in runs.items() if r["wrong"]}
         firsts = np.array([r["first fix s"] for r in runs.values()], float)
@@ -105,12 +111,14 @@ def main() -> None:
     ap.add_argument("--model", choices=("lea6t", "m8t"), action="append", help="default: both")
     ap.add_argument("--seed", type=int, default=1, help="World seed (errors, slips; default 1)")
     ap.add_argument("--seeds", type=_seed_range, help="several seeds, e.g. 1-16: one summary line per scenario")
+    ap.add_argument("--start-hour", type=float, help="start at this hour (GPST) of 2010-07-01 for another sky "
+                    "(default 13: the matrix's targets are set there)")
     args = ap.parse_args()
     models = tuple(args.model or ("lea6t", "m8t"))
     if args.seeds:
-        run_seeds(args.seeds, args.only, models)
+        run_seeds(args.seeds, args.only, models, args.start_hour)
     else:
-        run_matrix(args.only, models, args.seed)
+        run_matrix(args.only, models, args.seed, args.start_hour)
 
 
 if __name__ == "__main__":

@@ -45,6 +45,9 @@ class SimCase:
     max_sats: int | None = None
     known_start: bool = False
     seed: int = 1
+    start_hour: float | None = None
+    """Start at this hour (GPST) of the broadcast orbits' day, 2010-07-01, for another sky; None: the
+    Scenario's default start (13:00)."""
 
 
 @dataclass
@@ -63,7 +66,7 @@ class SimData:
 
 def scenario_for(case: SimCase, model: str) -> Any:
     """The hil_sim Scenario of `case` with both receivers of `model`."""
-    from hil_sim.scenario import Scenario
+    from hil_sim.scenario import DEFAULT_START, Scenario
 
     over: dict[str, Any] = {"duration_s": case.duration_s, "seed": case.seed}
     if case.baseline_m is not None:
@@ -71,6 +74,9 @@ def scenario_for(case: SimCase, model: str) -> Any:
     sc = Scenario.default(model, **over)
     if case.undetected_slips_per_h is not None:
         sc = replace(sc, errors=replace(sc.errors, slip_undetected_rate_per_h=case.undetected_slips_per_h))
+    if case.start_hour is not None:
+        midnight = DEFAULT_START.add_s(-(DEFAULT_START.tow_s % 86400.0))
+        sc = replace(sc, start=midnight.add_s(case.start_hour * 3600.0))
     if case.max_sats is not None:
         sc = replace(sc, rover_receiver=replace(sc.rover_receiver, max_sats=case.max_sats),
                      base_receiver=replace(sc.base_receiver, max_sats=case.max_sats))
@@ -150,6 +156,7 @@ def evaluate(case: SimCase, model: str, options: RtkOptions | None = None) -> di
         "stale": int(stale.sum()),
         "stale fixed": int(np.sum(fixed & stale)),
         "slips": sum(s.slips for s in stats),
+        "float restarts": sum(s.float_restarts for s in stats),
         "us/epoch": 1e6 * cpu / max(len(sols), 1),
         "q": q, "err_m": err, "armed": armed, "age_s": age,
     }

@@ -100,6 +100,20 @@ class RtkOptions:
     GEONET 3034 and RTKLIB 2.4.3 fix wrongly, 1.1 m off, at the first epoch with ratio 3.1). The known
     take-off point start is exempt (its ambiguities come from the surveyed position, not the code)."""
     min_fix_sats: int = 4
+    stuck_float_s: float = 60.0
+    """Nothing held, the float ambiguities of the full set determined to a small fraction of a cycle (bootstrapped
+    success rate ≥ stuck_float_success_rate) yet near no integer set (ratio < stuck_float_ratio) for this long
+    (s): the float carries an error its covariance does not know (slips it absorbed, e.g. undetected ones in a
+    cold start), and it will not fix right; its ambiguities restart from the code (0 disables). Not while
+    the ionosphere states are in use: their prior leaves a right float near no integer set for minutes, and a
+    restart only loses that progress (hil_sim 5 km seed 29: 58.2 → 37.6 % with it). hil_sim M8T, undetected
+    slips 2/h, seeds 1-8 at other hours of the orbits' day (bench/rtk_sim.py --start-hour): 19:00 (6
+    satellites) seed 1 had fixed a set 1.59 m off after 180 s of such a float and held it (217 wrong epochs)
+    → 0 wrong, mean airborne fixed 58.9 → 62.9 %; 10:00 69.4 → 78.0 % (seeds 1/4: 0.8/0.2 → 63.1/6.2 %);
+    nominal 07:00 92.4 → 92.8 %; the 13:00 matrix (seeds 1-16, nominal, slips, gaps, 5 km) and every real
+    set unchanged."""
+    stuck_float_success_rate: float = 0.9999
+    stuck_float_ratio: float = 2.0
     min_hold_epochs: int = 5
     min_amb_dd: int = 4
     """Fewest double-difference ambiguities a (partial) fix may rest on."""
@@ -215,10 +229,11 @@ class RtkOptions:
     seeds 1-16 / 17-32, wrong epochs without any limit: 8 km 433 / 929, 10 km 85 / 1114, 20 km 1200 / 1126
     (sets 0.3-1.6 m off, held to the end). With partial_agrees_with_full a limit of 7.5 km still let seed 14
     fix at 7.4 km 10-11 cm off (5 epochs: right integers, a partial set's position, σ 4.5 cm), 7 km seed 1 at
-    6.9 km 16 cm off; 6 km: 0 wrong on seeds 1-32 at 5, 6, 6.5, 7, 10 and 20 km. A fix held from a shorter
-    baseline or seeded from a surveyed take-off point is kept as the rover flies out (hil_sim with the known
-    take-off point: 10 km 100 % fixed, 0.7 cm 3D RMS; 20 km 100 %, 1.1 cm). The real sets (≤ 5.3 km) are
-    unchanged. The pre-flight page names this cause when the rover floats beyond it."""
+    6.9 km 16 cm off; 6 km: 0 wrong on seeds 1-32 at 5, 6, 6.5, 7, 10 and 20 km. With stuck_float_s too, no
+    limit still fixes wrong sets at 8 km (seeds 3, 8, 10, 14, 15 of 1-16) and 20 km (3, 7, 12). A fix held
+    from a shorter baseline or seeded from a surveyed take-off point is kept as the rover flies out (hil_sim
+    with the known take-off point: 10 km 100 % fixed, 0.7 cm 3D RMS; 20 km 100 %, 1.1 cm). The real sets
+    (≤ 5.3 km) are unchanged. The pre-flight page names this cause when the rover floats beyond it."""
     accel_h_sigma_m_s2: float = 3.0
     accel_v_sigma_m_s2: float = 1.0
     initial_pos_sigma_m: float = 30.0

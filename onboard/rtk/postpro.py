@@ -58,6 +58,8 @@ class RunStats:
     float_: int = 0
     single: int = 0
     slips: int = 0
+    float_restarts: int = 0
+    """Float ambiguities restarted for fitting no integer set while determined (RtkOptions.stuck_float_s)."""
 
 
 def reverse_slip_flags(epochs: Sequence[ObsEpoch]) -> list[ObsEpoch]:
@@ -121,6 +123,7 @@ def run_filter(rover: Sequence[ObsEpoch], paired_base: Sequence[ObsEpoch | None]
         if progress is not None:
             progress(1)
     stats.slips = st.slips
+    stats.float_restarts = st.float_restarts
     return [s for s in sols if s is not None], stats
 
 

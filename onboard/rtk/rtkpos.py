@@ -132,6 +132,11 @@ class RtkState:
     last_ratio: float = 0.0
     clock_bias_m: float = 0.0
     pending_fix: tuple[tuple, GpsTime, int, GpsTime, float] | None = None
+    stuck_since: GpsTime | None = None
+    """Start of the current run of epochs whose float ambiguities were determined yet near no integer set
+    (see the option stuck_float_s), None outside one."""
+    float_restarts: int = 0
+    """Times the float ambiguities were restarted for that (stuck_float_s)."""
     """Integer set (ref, slots, DD integers) winning the ratio test without a held set to lean on, since when,
     at how many consecutive epochs, its last win, and how far it has settled (1 = settled_fix_span_s static)."""
     moving: bool = False
@@ -1038,6 +1043,14 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         best_ratio = max(best_ratio, ratio)
         if _drop == 0:
             full_best = _slot_integers(ref, others, res.fixed[:, 0])
+            # determined to a small fraction of a cycle (success rate ≈ 1), yet near no integer set (low ratio):
+            # the float holds something its covariance does not know, e.g. a slip it absorbed (stuck_float_s)
+            if o.stuck_float_s > 0.0 and not st.held_prns.any() and not st.iono_on \
+                    and res.success_rate >= o.stuck_float_success_rate and ratio < o.stuck_float_ratio:
+                if st.stuck_since is None:
+                    st.stuck_since = t
+            else:
+                st.stuck_since = None
         # a fix resting on the bare minimum of double differences (no held set to lean on) must be
         # nearly certain: a stricter success rate and twice the ratio
         strict = (idx.size - 1 <= o.min_amb_dd or _drop >= o.strict_partial_drop_sats) and not np.count_nonzero(st.held_prns)
@@ -1380,6 +1393,13 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
                 st.pending_fix = None
                 fix = _resamb_lambda(st, st.x, st.p, retry, el, o.min_amb_dd, rover.time)
                 st.pending_fix = pending
+    if fix is None and st.stuck_since is not None and abs(rover.time.diff_s(st.stuck_since)) >= o.stuck_float_s:
+        log.info("%s: float ambiguities determined yet fitting no integer set for %.0f s: restarted", rover.time,
+                 abs(rover.time.diff_s(st.stuck_since)))
+        _reset_amb(st, _in_use(st).nonzero()[0])
+        st.stuck_since = None
+        st.pending_fix = None
+        st.float_restarts += 1
     if fix is None:
         st.fix_count = 0
         st.fail_count += 1
