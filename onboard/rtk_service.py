@@ -51,9 +51,9 @@ from onboard.receiver.framing import Frame, Protocol, StreamFramer
 from onboard.receiver.rtcm import BasePosition, RtcmDecoder
 from onboard.rtk.ephemeris import EphemerisStore
 from onboard.rtk.options import RtkOptions
-from onboard.rtk.rtkpos import Nav, rtk_init, rtk_pos
+from onboard.rtk.rtkpos import Nav, RtkState, rtk_init, rtk_pos
 from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, Ephemeris, ObsEpoch, Solution
-from onboard.settings import Settings
+from onboard.settings import Settings, takeoff_position_ecef_m
 from onboard.status import RTK_STATUS_NAME
 
 log = logging.getLogger(__name__)
@@ -84,6 +84,10 @@ class RtkServiceOptions:
     """Restart the filter when corrections return after an outage. Off: on the hil_sim flight the engine kept
     its ambiguities across 15-20 s gaps and fixed again at once, correctly, while a cold restart 170 s into the
     flight fixed 5 m off (reported to the engine's owner)."""
+    takeoff_position_ecef_m: tuple[float, float, float] | None = None
+    """Surveyed take-off antenna position (ECEF m, settings key `rtk.takeoff_position`): the engine starts
+    static there with its ambiguities computed from it (Daakir 2015 eq. 2) and fixes at the first epoch,
+    whatever the baseline. None: a cold start."""
     lock_rules: Any = None
     """`onboard.receiver.decode.LockTrackerOptions` for the rover's RXM-RAWX phase validity and slips (None:
     RTKLIB's Gen8 thresholds, the same rules `onboard rtk` applies to a journal)."""
@@ -338,11 +342,18 @@ class RtkService:
         st.radio_open = False
 
     # -- engine thread --------------------------------------------------------------------------------------
+    def _new_state(self) -> RtkState:
+        """The engine state at the start: from the surveyed take-off point (static) when one is set."""
+        takeoff = self.options.takeoff_position_ecef_m
+        if takeoff is None:
+            return rtk_init(self.engine_options)
+        return rtk_init(replace(self.engine_options, static_start=True), np.array(takeoff, float))
+
     def _engine_thread(self) -> None:
         from onboard.receiver.decode import LockTracker, LockTrackerOptions, SubframeWords
         from onboard.rtk.lnav import LnavAssembler
 
-        state = rtk_init(self.engine_options)
+        state = self._new_state()
         store = EphemerisStore()
         nav = Nav(store)
         tracker = LockTracker(self.options.lock_rules or LockTrackerOptions())
@@ -384,7 +395,7 @@ class RtkService:
                 # Optional: the filter's ambiguities were not checked across the outage.
                 log.info("%s: corrections back after %d epochs without: filter restarted", rover.time,
                          outage_epochs)
-                state = rtk_init(self.engine_options)
+                state = rtk_init(self.engine_options)  # mid-flight: the take-off point no longer applies
                 self._status.restarts += 1
                 outage_epochs = 0
             t0 = self.clock.monotonic_ns()
@@ -510,5 +521,6 @@ def recorder_for(settings: Settings, deps: RecorderDeps, base_stream: str | None
         return Recorder(settings, deps)
     from onboard.hw.net_stream import open_base_stream
 
-    return RtkRecorder(settings, deps, options or RtkServiceOptions(max_base_age_s=settings.rtk_max_base_age_s),
-                       open_base_stream(base_stream))
+    options = options or RtkServiceOptions(max_base_age_s=settings.rtk_max_base_age_s,
+                                           takeoff_position_ecef_m=takeoff_position_ecef_m(settings))
+    return RtkRecorder(settings, deps, options, open_base_stream(base_stream))

@@ -10,6 +10,7 @@ every field of `onboard.receiver.profiles.ReceiverOptions` by its name. Unknown 
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import tomllib
 from collections.abc import Mapping
@@ -51,6 +52,7 @@ class Settings:
     gpio_pin_factory: str = "lgpio"
     rtk_base_stream: str = ""
     rtk_max_base_age_s: float = 30.0
+    rtk_takeoff_position: str = ""
 
 
 # TOML key -> Settings field. `receiver.<ReceiverOptions field>` keys are handled separately.
@@ -78,6 +80,7 @@ KEYS: Mapping[str, str] = MappingProxyType(
         "gpio.pin_factory": "gpio_pin_factory",
         "rtk.base_stream": "rtk_base_stream",
         "rtk.max_base_age_s": "rtk_max_base_age_s",
+        "rtk.takeoff_position": "rtk_takeoff_position",
     }
 )
 MODELS = ("auto", "lea6t", "m8t")
@@ -235,10 +238,31 @@ def validate(s: Settings) -> None:
     if s.rtk_base_stream and not s.rtk_base_stream.startswith(("serial:", "tcp://", "ntrip://")):
         raise ConfigFileError(f"rtk.base_stream: expected serial:DEV[@BAUD], tcp://HOST:PORT or "
                               f"ntrip://[USER:PASS@]HOST[:PORT]/MOUNT, got {s.rtk_base_stream!r}")
+    try:
+        takeoff_position_ecef_m(s)
+    except ValueError as exc:
+        raise ConfigFileError(f"rtk.takeoff_position: {exc}") from exc
     used = [p for p in (s.gpio_trigger_pin if opts.trigger == "gpio" else -1, s.gpio_pps_pin, s.gpio_flash_pin)
             if p >= 0]
     if len(used) != len(set(used)):
         raise ConfigFileError(f"gpio: trigger_pin, pps_pin and flash_pin must be different pins, got {used}")
+
+
+def takeoff_position_ecef_m(s: Settings) -> tuple[float, float, float] | None:
+    """The surveyed take-off antenna position of `rtk.takeoff_position` ("X,Y,Z", ECEF m), None when empty;
+    ValueError if it is not three finite numbers or lies off the Earth's surface by more than 100 km."""
+    text = s.rtk_takeoff_position.strip()
+    if not text:
+        return None
+    try:
+        xyz = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"expected X,Y,Z in ECEF metres, got {text!r}") from None
+    if len(xyz) != 3 or not all(math.isfinite(v) for v in xyz):
+        raise ValueError(f"expected X,Y,Z in ECEF metres, got {text!r}")
+    if not 6.25e6 < math.sqrt(sum(v * v for v in xyz)) < 6.48e6:
+        raise ValueError(f"{text!r} is not near the Earth's surface (ECEF metres expected, not degrees)")
+    return (xyz[0], xyz[1], xyz[2])
 
 
 def receiver_options(s: Settings) -> Any:

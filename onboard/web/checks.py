@@ -140,8 +140,8 @@ def rtk_check(rtk: dict[str, Any], status: dict[str, Any], options: PreflightOpt
     limit_km = options.rtk_max_first_fix_baseline_km
     if baseline is not None and limit_km > 0.0 and float(baseline) > 1000.0 * limit_km:
         return Check("RTK", WARN, f"float, base {float(baseline) / 1000:.1f} km away: beyond {limit_km:g} km L1 RTK "
-                                  "does not fix from a cold start. Set the base closer, or process the flight on the "
-                                  "ground from a surveyed take-off point (onboard rtk --init-pos)")
+                                  "does not fix from a cold start. Set the base closer, or give the surveyed take-off "
+                                  "point (rtk.takeoff_position; on the ground: onboard rtk --init-pos)")
     # a cold start waits out the u-blox code multipath (correlated over ~30 s while static): hil_sim's
     # calibrated flights first fix after 9-125 s on the ground; airborne epochs before it are float
     return Check("RTK", WARN, f"not fixed yet (ratio {ratio:.1f}, {ns} satellites{where}): wait for the fix "

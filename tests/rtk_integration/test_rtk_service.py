@@ -19,7 +19,7 @@ from onboard.formats.pos import read_pos
 from onboard.hw.fake import FakeByteStream
 from onboard.hw.serial_port import SerialByteStream
 from onboard.logger.journal import iter_journal_bytes
-from onboard.rtk.types import Q_FIX, Q_FLOAT
+from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE
 from onboard.rtk_inputs import read_base_observations
 from onboard.rtk_service import RADIO_DIR, SOLUTION_NAME, BaseStream, RtkService, RtkServiceOptions
 from tests.conftest import shared_file
@@ -66,12 +66,13 @@ def test_base_stream_decodes_rtcm_and_needs_a_rover_time_for_the_week(world) -> 
     assert bs.latest_at(t0, 0.025) is None
 
 
-def _run_service(world, tmp_path: Path, gaps) -> tuple[RtkService, list, Path]:
-    frames = _base_frames(world, DURATION_S)
+def _run_service(world, tmp_path: Path, gaps, options: RtkServiceOptions | None = None,
+                 seconds: int = DURATION_S) -> tuple[RtkService, list, Path]:
+    frames = _base_frames(world, seconds)
     master, slave = os.openpty()
     tty.setraw(slave)
     radio_path = os.ttyname(slave)
-    options = RtkServiceOptions(base_wait_s=0.3)
+    options = options or RtkServiceOptions(base_wait_s=0.3)
     svc = RtkService(options, lambda: SerialByteStream(radio_path, 57600, 0.02))
     flight = tmp_path / "flight"
     flight.mkdir()
@@ -83,7 +84,7 @@ def _run_service(world, tmp_path: Path, gaps) -> tuple[RtkService, list, Path]:
     ages: dict[int, float | None] = {}
     try:
         wait_until(lambda: svc.snapshot()["radio_open"], 5, "radio open")
-        for k in range(DURATION_S):
+        for k in range(seconds):
             if not any(a <= k < b for a, b in gaps):
                 os.write(master, frames[k])
                 sent += frames[k]
@@ -92,7 +93,7 @@ def _run_service(world, tmp_path: Path, gaps) -> tuple[RtkService, list, Path]:
             if any(a <= k < b for a, b in gaps):
                 wait_until(lambda: svc.snapshot()["epochs"] == k + 1, 10, "gap epoch solved")  # noqa: B023
                 ages[k] = svc.snapshot()["age_s"]
-        wait_until(lambda: svc.snapshot()["epochs"] == DURATION_S, 30, "all epochs solved")
+        wait_until(lambda: svc.snapshot()["epochs"] == seconds, 30, "all epochs solved")
     finally:
         svc.stop()
         os.close(master)
@@ -127,6 +128,24 @@ def test_radio_gaps_degrade_without_wrong_fixes_and_fix_again_after(world, tmp_p
     again = read_base_observations(flight / RADIO_DIR, t0)
     assert again.kind == "rtcm3" and len(again.epochs) == DURATION_S - sum(b - a for a, b in GAPS_S)
     np.testing.assert_allclose(again.antenna_pos_ecef_m, world.base_ecef_m, atol=1e-3)
+
+
+def test_a_surveyed_take_off_point_fixes_the_first_epoch(world, tmp_path) -> None:
+    """rtk.takeoff_position: the real-time engine starts static on the surveyed antenna position and fixes at
+    the first epoch with corrections (a cold start on this flight fixes after 9 s); the solutions are the truth
+    to the centimetre. The first epoch or two have none (single): the base stream's first 1004 comes before any
+    rover time gives it its GPS week (see the test above), and the next may race the rover epoch."""
+    t0 = world.scenario.start
+    takeoff = tuple(float(v) for v in world.truth(t0)["antenna_ecef_m"])
+    svc, _, flight, _ = _run_service(world, tmp_path, [], RtkServiceOptions(base_wait_s=0.3,
+                                                                            takeoff_position_ecef_m=takeoff), 20)
+    track = read_pos(flight / SOLUTION_NAME)
+    first = int(np.flatnonzero(track.q != Q_SINGLE)[0])  # the first epoch with corrections
+    assert len(track.q) == 20 and first <= 3 and np.all(track.q[first:] == Q_FIX)
+    err = [np.linalg.norm(p - world.truth(t)["antenna_ecef_m"])
+           for t, p in zip(track.time[first:], track.pos_ecef_m[first:])]
+    assert max(err) < 0.02
+    assert svc.snapshot()["ttff_s"] <= 3.0
 
 
 def test_submit_never_blocks_and_counts_drops(world, tmp_path) -> None:
@@ -212,3 +231,21 @@ def test_max_base_age_comes_from_the_settings_and_defaults_to_30_s(tmp_path) -> 
     rec = recorder_for(settings, deps, settings.rtk_base_stream)
     assert isinstance(rec, RtkRecorder)
     assert rec.rtk.options.max_base_age_s == 12.5 and rec.rtk.engine_options.max_age_s == 12.5
+    assert rec.rtk.options.takeoff_position_ecef_m is None  # shipped: a cold start
+
+
+def test_the_take_off_position_comes_from_the_settings_and_bad_values_are_refused(tmp_path) -> None:
+    from onboard.daemon import RecorderDeps
+    from onboard.rtk_service import RtkRecorder, recorder_for
+    from onboard.settings import ConfigFileError, default_config_path, load_settings
+
+    base = {"rtk.base_stream": "tcp://127.0.0.1:9", "journal.data_dir": str(tmp_path)}
+    settings = load_settings(default_config_path(), environ={}, overrides={
+        **base, "rtk.takeoff_position": "4027893.9, 307045.6, 4919475.2"})
+    rec = recorder_for(settings, RecorderDeps(open_port=lambda: FakeByteStream(0.02)), settings.rtk_base_stream)
+    assert isinstance(rec, RtkRecorder)
+    assert rec.rtk.options.takeoff_position_ecef_m == (4027893.9, 307045.6, 4919475.2)
+    for bad, why in (("4027893.9,307045.6", "expected X,Y,Z"), ("a,b,c", "expected X,Y,Z"),
+                     ("48.85,2.35,35.0", "not near the Earth's surface"), ("nan,0,0", "expected X,Y,Z")):
+        with pytest.raises(ConfigFileError, match=why):
+            load_settings(default_config_path(), environ={}, overrides={**base, "rtk.takeoff_position": bad})
