@@ -30,7 +30,7 @@ from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
 from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states_batch
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.linsolve import LinAlgError, solve
-from onboard.rtk.mlambda import LambdaError, mlambda
+from onboard.rtk.mlambda import LambdaError, LambdaResult, mlambda
 from onboard.rtk.models import CodeScatter, iono_mapping, median_of_few, phase_variance_m2, saastamoinen_m
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.pntpos import SppSolution, _norm, pntpos, pntpos_batch, sat_az_el
@@ -1028,7 +1028,9 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
     best_ratio = 0.0
     seen_candidate = False
     settled = False
-    full_best: Arr | None = None
+    full_set: tuple[int, npt.NDArray[np.int64], LambdaResult] | None = None
+    """The full candidate set's (reference, others, search result): its integers are read only when a partial
+    survivor must be compared with them (LambdaResult.fixed is computed on first use)."""
     for _drop in range(o.max_partial_drop + 1 if o.partial_ar else 1):
         if idx.size < min_dd + 1:
             break
@@ -1042,7 +1044,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         ratio = res.ratio
         best_ratio = max(best_ratio, ratio)
         if _drop == 0:
-            full_best = _slot_integers(ref, others, res.fixed[:, 0])
+            full_set = (ref, others, res)
             # determined to a small fraction of a cycle (success rate ≈ 1), yet near no integer set (low ratio):
             # the float holds something its covariance does not know, e.g. a slip it absorbed (stuck_float_s)
             if o.stuck_float_s > 0.0 and not st.held_prns.any() and not st.iono_on \
@@ -1093,8 +1095,11 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
                 or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_amb_dd + 1)
             # a survivor contradicting the full set's best integers on the satellites they share: two rival
             # integer hypotheses, the partial one winning only without the satellites that contradict it
-            rival = not full and o.partial_agrees_with_full and full_best is not None \
-                and not _same_integers(_slot_integers(ref, others, res.fixed[:, 0]), full_best, 2)
+            rival = False
+            if not full and o.partial_agrees_with_full and full_set is not None:
+                full_ref, full_others, full_res = full_set
+                rival = not _same_integers(_slot_integers(ref, others, res.fixed[:, 0]),
+                                           _slot_integers(full_ref, full_others, full_res.fixed[:, 0]), 2)
             far = o.max_first_fix_baseline_km > 0.0 and st.baseline_m > 1000.0 * o.max_first_fix_baseline_km
             if rival or far:
                 # no first fix on such data (see the options): only a set already trusted
