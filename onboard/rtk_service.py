@@ -53,7 +53,7 @@ from onboard.rtk.ephemeris import EphemerisStore
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.rtkpos import Nav, RtkState, rtk_init, rtk_pos
 from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, Ephemeris, ObsEpoch, Solution
-from onboard.settings import Settings, takeoff_position_ecef_m
+from onboard.settings import Settings, rtk_engine_options, takeoff_position_ecef_m
 from onboard.status import RTK_STATUS_NAME
 
 log = logging.getLogger(__name__)
@@ -521,6 +521,7 @@ def recorder_for(settings: Settings, deps: RecorderDeps, base_stream: str | None
         return Recorder(settings, deps)
     from onboard.hw.net_stream import open_base_stream
 
-    options = options or RtkServiceOptions(max_base_age_s=settings.rtk_max_base_age_s,
+    options = options or RtkServiceOptions(engine=rtk_engine_options(settings),
+                                           max_base_age_s=settings.rtk_max_base_age_s,
                                            takeoff_position_ecef_m=takeoff_position_ecef_m(settings))
     return RtkRecorder(settings, deps, options, open_base_stream(base_stream))

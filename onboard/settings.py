@@ -3,8 +3,9 @@
 Keys are `section.key` names in the TOML file (documented, every key commented, in
 `onboard/default_config.toml`); the environment spells them `ONBOARD_SECTION_KEY`
 (e.g. `ONBOARD_PORT_DEVICE=/dev/ttyACM0`). The `[receiver]` section takes, besides `model` and `configure`,
-every field of `onboard.receiver.profiles.ReceiverOptions` by its name. Unknown keys and bad values raise
-`ConfigFileError` naming the key.
+every field of `onboard.receiver.profiles.ReceiverOptions` by its name; `[rtk.engine]` the RTK engine's options
+by their TOML names (`onboard.rtk.options.TOML_KEYS`; environment `ONBOARD_RTK_ENGINE_<KEY>`). Unknown keys and
+bad values raise `ConfigFileError` naming the key.
 """
 
 from __future__ import annotations
@@ -53,7 +54,12 @@ class Settings:
     rtk_base_stream: str = ""
     rtk_max_base_age_s: float = 30.0
     rtk_takeoff_position: str = ""
+    rtk_engine: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    """`[rtk.engine]`: RTK engine options by their TOML names (onboard.rtk.options.TOML_KEYS)."""
 
+
+RTK_ENGINE = "rtk.engine."
+"""Prefix of the RTK engine's option keys: `rtk.engine.<onboard.rtk.options.TOML_KEYS key>`."""
 
 # TOML key -> Settings field. `receiver.<ReceiverOptions field>` keys are handled separately.
 KEYS: Mapping[str, str] = MappingProxyType(
@@ -95,6 +101,14 @@ def _receiver_option_fields() -> dict[str, Any]:
     from onboard.receiver.profiles import ReceiverOptions
 
     return {f.name: f.default for f in dataclasses.fields(ReceiverOptions)}
+
+
+def _rtk_engine_kinds() -> dict[str, str]:
+    """Value type of each `rtk.engine.<key>` (the TOML value, before the option's own conversion)."""
+    from onboard.rtk.options import TOML_KEYS
+
+    named = {bool: "bool", int: "int", str: "str"}
+    return {key: named.get(conv, "float") for key, (_, conv) in TOML_KEYS.items()}
 
 
 def _convert(key: str, value: Any, kind: Any, from_text: bool) -> Any:
@@ -140,9 +154,10 @@ def _flatten(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
 
 
 def _apply(values: dict[str, Any], receiver: dict[str, Any], flat: Mapping[str, Any], source: str,
-           from_text: bool) -> None:
+           from_text: bool, rtk_engine: dict[str, Any]) -> None:
     types = _field_types()
     options = _receiver_option_fields()
+    engine = _rtk_engine_kinds()
     for key, raw in flat.items():
         if key in KEYS:
             name = KEYS[key]
@@ -150,6 +165,9 @@ def _apply(values: dict[str, Any], receiver: dict[str, Any], flat: Mapping[str, 
         elif key.startswith("receiver.") and key.split(".", 1)[1] in options:
             opt = key.split(".", 1)[1]
             receiver[opt] = _convert(key, raw, type(options[opt]).__name__, from_text)
+        elif key.startswith(RTK_ENGINE) and key[len(RTK_ENGINE):] in engine:
+            opt = key[len(RTK_ENGINE):]
+            rtk_engine[opt] = _convert(key, raw, engine[opt], from_text)
         else:
             raise ConfigFileError(f"{source}: unknown key {key!r}")
 
@@ -172,6 +190,7 @@ def env_values(environ: Mapping[str, str]) -> dict[str, str]:
     known.update(
         {ENV_PREFIX + "RECEIVER_" + opt.upper(): f"receiver.{opt}" for opt in _receiver_option_fields()}
     )
+    known.update({ENV_PREFIX + "RTK_ENGINE_" + opt.upper(): RTK_ENGINE + opt for opt in _rtk_engine_kinds()})
     out: dict[str, str] = {}
     for name, value in environ.items():
         if not name.startswith(ENV_PREFIX) or name.startswith(ENV_PREFIX + "TEST_"):
@@ -198,14 +217,14 @@ def load_settings(
     """
     values: dict[str, Any] = {}
     receiver: dict[str, Any] = {}
+    engine: dict[str, Any] = {}
     if config_file is not None:
-        _apply(values, receiver, load_toml(Path(config_file)), str(config_file), from_text=False)
-    _apply(values, receiver, env_values(os.environ if environ is None else environ), "environment",
-           from_text=True)
+        _apply(values, receiver, load_toml(Path(config_file)), str(config_file), False, engine)
+    _apply(values, receiver, env_values(os.environ if environ is None else environ), "environment", True, engine)
     if overrides:
-        _apply(values, receiver, {k: v for k, v in overrides.items() if v is not None}, "command line",
-               from_text=False)
-    settings = Settings(**values, receiver_options=MappingProxyType(receiver))
+        _apply(values, receiver, {k: v for k, v in overrides.items() if v is not None}, "command line", False,
+               engine)
+    settings = Settings(**values, receiver_options=MappingProxyType(receiver), rtk_engine=MappingProxyType(engine))
     validate(settings)
     return settings
 
@@ -242,6 +261,10 @@ def validate(s: Settings) -> None:
         takeoff_position_ecef_m(s)
     except ValueError as exc:
         raise ConfigFileError(f"rtk.takeoff_position: {exc}") from exc
+    try:
+        rtk_engine_options(s)
+    except ValueError as exc:
+        raise ConfigFileError(f"rtk.engine: {exc}") from exc
     used = [p for p in (s.gpio_trigger_pin if opts.trigger == "gpio" else -1, s.gpio_pps_pin, s.gpio_flash_pin)
             if p >= 0]
     if len(used) != len(set(used)):
@@ -263,6 +286,15 @@ def takeoff_position_ecef_m(s: Settings) -> tuple[float, float, float] | None:
     if not 6.25e6 < math.sqrt(sum(v * v for v in xyz)) < 6.48e6:
         raise ValueError(f"{text!r} is not near the Earth's surface (ECEF metres expected, not degrees)")
     return (xyz[0], xyz[1], xyz[2])
+
+
+def rtk_engine_options(s: Settings) -> Any:
+    """The RTK engine's `RtkOptions` from the `[rtk.engine]` table (defaults for keys not given)."""
+    from onboard.rtk.options import options_from_mapping
+
+    if "max_age_s" in s.rtk_engine:  # the service sets it from rtk.max_base_age_s: one place for one value
+        raise ValueError("max_age_s: set rtk.max_base_age_s instead")
+    return options_from_mapping(s.rtk_engine)  # RtkOptions checks its values (e.g. ar_mode) itself
 
 
 def receiver_options(s: Settings) -> Any:

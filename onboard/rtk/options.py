@@ -351,6 +351,7 @@ TOML_KEYS: dict[str, tuple[str, Any]] = {
     "standstill_min_s": ("standstill_min_s", float),
     "static_code_correlation_s": ("static_code_correlation_s", float),
     "use_doppler": ("use_doppler", bool),
+    "max_first_fix_baseline_km": ("max_first_fix_baseline_km", float),
 }
 
 

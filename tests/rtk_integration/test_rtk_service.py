@@ -234,6 +234,42 @@ def test_max_base_age_comes_from_the_settings_and_defaults_to_30_s(tmp_path) -> 
     assert rec.rtk.options.takeoff_position_ecef_m is None  # shipped: a cold start
 
 
+def test_engine_options_come_from_the_rtk_engine_table_and_bad_ones_are_refused(tmp_path) -> None:
+    from onboard.daemon import RecorderDeps
+    from onboard.rtk_service import RtkRecorder, recorder_for
+    from onboard.settings import ConfigFileError, default_config_path, load_settings
+
+    base = {"rtk.base_stream": "tcp://127.0.0.1:9", "journal.data_dir": str(tmp_path)}
+    settings = load_settings(default_config_path(), environ={"ONBOARD_RTK_ENGINE_PARTIAL_AR": "false"}, overrides={
+        **base, "rtk.engine.elevation_mask_deg": 20, "rtk.engine.max_first_fix_baseline_km": 4.5})
+    rec = recorder_for(settings, RecorderDeps(open_port=lambda: FakeByteStream(0.02)), settings.rtk_base_stream)
+    assert isinstance(rec, RtkRecorder)
+    engine = rec.rtk.engine_options
+    assert (engine.elmask_deg, engine.partial_ar, engine.max_first_fix_baseline_km) == (20.0, False, 4.5)
+    assert engine.max_age_s == 30.0  # from rtk.max_base_age_s
+    for bad, why in ((("rtk.engine.elevation_mask", 20), "unknown key 'rtk.engine.elevation_mask'"),
+                     (("rtk.engine.ratio_threshold", "three"), "rtk.engine.ratio_threshold: bad value"),
+                     (("rtk.engine.ar_mode", "sometimes"), "rtk.engine: ar_mode must be one of"),
+                     (("rtk.engine.max_age_s", 10.0), "set rtk.max_base_age_s instead")):
+        with pytest.raises(ConfigFileError, match=why):
+            load_settings(default_config_path(), environ={}, overrides={**base, bad[0]: bad[1]})
+
+
+def test_the_shipped_configuration_documents_the_engine_defaults() -> None:
+    """The commented `[rtk.engine]` lines of default_config.toml, uncommented, are RtkOptions' defaults and
+    name every key but max_age_s (set by rtk.max_base_age_s)."""
+    import tomllib
+
+    from onboard.rtk.options import TOML_KEYS, RtkOptions, options_from_mapping
+    from onboard.settings import default_config_path
+
+    text = default_config_path().read_text().split("[rtk.engine]", 1)[1]
+    lines = [line[2:] for line in text.splitlines() if line.startswith("# ") and " = " in line]
+    documented = tomllib.loads("\n".join(lines))
+    assert set(documented) == set(TOML_KEYS) - {"max_age_s"}
+    assert options_from_mapping(documented) == RtkOptions()
+
+
 def test_the_take_off_position_comes_from_the_settings_and_bad_values_are_refused(tmp_path) -> None:
     from onboard.daemon import RecorderDeps
     from onboard.rtk_service import RtkRecorder, recorder_for
