@@ -114,6 +114,8 @@ class RtkStatus:
     ns: int = 0
     age_s: float | None = None
     baseline_m: float | None = None
+    max_first_fix_baseline_km: float | None = None
+    """The engine's limit for a first fix from a cold start (RtkOptions.max_first_fix_baseline_km; 0: none)."""
     last_gpst: str | None = None
     ttff_s: float | None = None
     engine_ms_last: float = 0.0
@@ -229,7 +231,7 @@ class RtkService:
         self._cond = threading.Condition()
         self._base = BaseStream(options.base_buffer_epochs)
         self._reference: GpsTime | None = None
-        self._status = RtkStatus()
+        self._status = RtkStatus(max_first_fix_baseline_km=self.engine_options.max_first_fix_baseline_km)
         self._threads: list[threading.Thread] = []
         self._journal: Journal | None = None
         self._pos_file: Any = None

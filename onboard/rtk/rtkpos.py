@@ -132,13 +132,13 @@ class RtkState:
     last_ratio: float = 0.0
     clock_bias_m: float = 0.0
     pending_fix: tuple[tuple, GpsTime, int, GpsTime, float] | None = None
+    """Integer set (ref, slots, DD integers) winning the ratio test without a held set to lean on, since when,
+    at how many consecutive epochs, its last win, and how far it has settled (1 = settled_fix_span_s static)."""
     stuck_since: GpsTime | None = None
     """Start of the current run of epochs whose float ambiguities were determined yet near no integer set
     (see the option stuck_float_s), None outside one."""
     float_restarts: int = 0
     """Times the float ambiguities were restarted for that (stuck_float_s)."""
-    """Integer set (ref, slots, DD integers) winning the ratio test without a held set to lean on, since when,
-    at how many consecutive epochs, its last win, and how far it has settled (1 = settled_fix_span_s static)."""
     moving: bool = False
     """The rover's Doppler speed exceeds takeoff_speed_m_s at this epoch (its code multipath decorrelates)."""
     pending_slip: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
@@ -1321,7 +1321,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False, trop_r, jacobian=False)
         ok_post = _valid_residuals(dd_post, o.validation_sigma_factor)
         bad_phase = dd_post.slot[(dd_post.kind == 0) & ~ok_post]
-    if bad_phase.size and st.held_prns.any():
+    if bad_phase.size:  # only ever found under a hold (above)
         # one satellite slipping under a hold spreads its error over every row through the position: find
         # whether leaving out a single satellite makes the rest fit (fault exclusion) before releasing all
         culprit, fitted = _exclude_one_phase(st, x_prior, p_prior, rov, bas, rng_b, use_phase, code_ok, el, trop_r,
@@ -1333,7 +1333,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             _reset_amb(st, np.array([culprit]))
             use_phase[culprit] = False
             bad_phase = bad_phase[:0]
-    if bad_phase.size and st.held_prns.any():
+    if bad_phase.size:
         # the held integer set no longer fits: release it (wrong-fix protection)
         log.info("%s: held fix released (%d phase residuals out of bounds)", rover.time, bad_phase.size)
         st.held_prns[:] = False

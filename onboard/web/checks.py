@@ -5,8 +5,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from onboard.rtk.options import RtkOptions
-
 OK, WARN, FAIL = "ok", "warn", "fail"
 
 
@@ -23,8 +21,6 @@ class PreflightOptions:
     """Base corrections older than this (s) cannot be fixed (the RTK engine's max_age_s): the radio link is down."""
     rtk_lag_s: float = 5.0
     """Real-time RTK solutions this far (s) behind the receiver's newest epoch: the engine is stalled or overloaded."""
-    rtk_max_first_fix_baseline_km: float = RtkOptions.max_first_fix_baseline_km
-    """The RTK engine's limit: no first fix from a cold start beyond this baseline (km)."""
 
 
 @dataclass(frozen=True)
@@ -137,7 +133,8 @@ def rtk_check(rtk: dict[str, Any], status: dict[str, Any], options: PreflightOpt
         ttff = rtk.get("ttff_s")
         first = f", first fix after {float(ttff):.0f} s" if ttff is not None else ""
         return Check("RTK", OK, f"fixed: ratio {ratio:.1f}, {ns} satellites{where}{first}")
-    limit_km = options.rtk_max_first_fix_baseline_km
+    # the engine's own limit, from its snapshot (the daemon's [rtk.engine] may have changed it)
+    limit_km = float(rtk.get("max_first_fix_baseline_km") or 0.0)
     if baseline is not None and limit_km > 0.0 and float(baseline) > 1000.0 * limit_km:
         return Check("RTK", WARN, f"float, base {float(baseline) / 1000:.1f} km away: beyond {limit_km:g} km L1 RTK "
                                   "does not fix from a cold start. Set the base closer, or give the surveyed take-off "

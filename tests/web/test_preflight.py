@@ -93,8 +93,9 @@ def test_rtk_problems_are_warnings_with_their_cause() -> None:
     now = time.time_ns()
     cases = {
         "not fixed yet": {"q": 2, "ratio": 1.8},
-        "float, base 9.8 km away": {"q": 2, "baseline_m": 9800.0},
-        "L1 RTK does not fix from a cold start": {"q": 2, "baseline_m": 9800.0},
+        "float, base 9.8 km away: beyond 6 km": {"q": 2, "baseline_m": 9800.0, "max_first_fix_baseline_km": 6.0},
+        "L1 RTK does not fix from a cold start": {"q": 2, "baseline_m": 9800.0, "max_first_fix_baseline_km": 6.0},
+        "beyond 8.5 km": {"q": 2, "baseline_m": 9800.0, "max_first_fix_baseline_km": 8.5},  # as configured
         "no base corrections yet": {"base_epochs": 0, "q": 5},
         "base radio closed: device disappeared": {"radio_open": False, "radio_error": "device disappeared"},
         "base corrections 45 s old": {"age_s": 45.0, "q": 2},
@@ -108,8 +109,12 @@ def test_rtk_problems_are_warnings_with_their_cause() -> None:
             setattr(rtk, k, v)
         level, detail = _rtk_level(rtk, now)
         assert level == WARN and expect in detail, (change, detail)
-    level, detail = _rtk_level({**_rtk_fixed().to_json(), "baseline_m": 9800.0}, now)
+    level, detail = _rtk_level({**_rtk_fixed().to_json(), "baseline_m": 9800.0, "max_first_fix_baseline_km": 6.0},
+                               now)
     assert level == OK  # a fix held from a shorter baseline (or a surveyed take-off point) stays ok
+    level, detail = _rtk_level({**_rtk_fixed().to_json(), "q": 2, "baseline_m": 9800.0,
+                                "max_first_fix_baseline_km": 12.0}, now)
+    assert level == WARN and "not fixed yet" in detail  # within the configured limit: the usual wait
     level, detail = _rtk_level({**_rtk_fixed().to_json(), "ratio": "abc"}, now)
     assert level == WARN and "malformed" in detail
 
