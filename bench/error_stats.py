@@ -33,6 +33,7 @@ Run: `.venv/bin/python bench/error_stats.py [--no-sim] [--seed N]` (about 1 min)
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -258,7 +259,7 @@ def binned(vals: list[np.ndarray], key: list[np.ndarray], edges: tuple[float, ..
     v = np.concatenate(vals) if vals else np.zeros(0)
     k = np.concatenate(key) if key else np.zeros(0)
     parts = []
-    for lo, hi in zip(edges[:-1], edges[1:]):
+    for lo, hi in itertools.pairwise(edges):
         m = (k >= lo) & (k < hi)
         if m.sum() <= 30:
             parts.append(f"{lo}-{hi}:  - " if stat == "rms" else f"{lo}-{hi}: - ")

@@ -14,11 +14,11 @@ NS_PER_S = 1_000_000_000
 SECONDS_PER_WEEK = 604_800
 NS_PER_WEEK = SECONDS_PER_WEEK * NS_PER_S
 
-GPS_EPOCH = _dt.datetime(1980, 1, 6, tzinfo=_dt.timezone.utc)
+GPS_EPOCH = _dt.datetime(1980, 1, 6, tzinfo=_dt.UTC)
 
 # GPS − UTC leap seconds: (first UTC instant at which the offset applies, offset_s). IERS Bulletin C.
 _LEAP_SECONDS: tuple[tuple[_dt.datetime, int], ...] = tuple(
-    (_dt.datetime(y, m, 1, tzinfo=_dt.timezone.utc), n)
+    (_dt.datetime(y, m, 1, tzinfo=_dt.UTC), n)
     for (y, m, n) in (
         (1981, 7, 1), (1982, 7, 2), (1983, 7, 3), (1985, 7, 4), (1988, 1, 5), (1990, 1, 6),
         (1991, 1, 7), (1992, 7, 8), (1993, 7, 9), (1994, 7, 10), (1996, 1, 11), (1997, 7, 12),
@@ -123,7 +123,7 @@ def leap_seconds_at_utc(utc: _dt.datetime) -> int:
 
 def gpst_from_calendar(year: int, month: int, day: int, hour: int, minute: int, second_ns: int) -> GpsTime:
     """GPS time from a calendar date on the GPS time scale (as in RINEX epochs), seconds given in ns."""
-    d = _dt.datetime(year, month, day, hour, minute, tzinfo=_dt.timezone.utc) - GPS_EPOCH
+    d = _dt.datetime(year, month, day, hour, minute, tzinfo=_dt.UTC) - GPS_EPOCH
     return GpsTime.from_total_ns((d.days * 86_400 + d.seconds) * NS_PER_S + int(second_ns))
 
 

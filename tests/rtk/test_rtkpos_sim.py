@@ -213,12 +213,12 @@ def test_first_fix_waits_until_the_integer_set_has_won_the_ratio_test_for_confir
     Q=1 (the real-time chain's 1.5 s wrong fix of a float 4 m off); a full set (no satellite dropped) needs
     full_set_confirm_epochs consecutive wins instead, never its first; a known take-off point needs no wait."""
     opts = RtkOptions(confirm_fix_span_s=30.0, confirm_fix_span_min_s=30.0, full_set_confirm_epochs=10**6)
-    sols, truths, _ = _run(nav, 60, opts, noise=True)
+    sols, _truths, _ = _run(nav, 60, opts, noise=True)
     q = np.array([s.q for s in sols])
     ratio_ok = np.flatnonzero(np.array([s.ratio for s in sols]) >= opts.ratio_threshold)
     assert ratio_ok.size and np.any(q == Q_FIX)
     assert np.flatnonzero(q == Q_FIX)[0] >= ratio_ok[0] + 30
-    sols, truths, _ = _run(nav, 60, replace(opts, full_set_confirm_epochs=2), noise=True)
+    sols, _truths, _ = _run(nav, 60, replace(opts, full_set_confirm_epochs=2), noise=True)
     q = np.array([s.q for s in sols])
     assert ratio_ok[0] + 1 <= np.flatnonzero(q == Q_FIX)[0] < ratio_ok[0] + 30
     sols, _truths, _ = _run(nav, 3, replace(opts, static_start=True), noise=True, init_pos=True)
