@@ -110,34 +110,37 @@ def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list
                 if -0.5 <= x <= 0.5:
                     continue
                 mu = round(x)
-                for kk in range(i, n):
+                lmat[i][j] = x - mu  # L[i][i] = 1 exactly: mu·1 = mu
+                for kk in range(i + 1, n):
                     row = lmat[kk]
                     row[j] -= mu * row[i]
                 zc[j] -= mu * zc[i]
-        lj, lj1 = lmat[j], lmat[j + 1]
+        j1 = j + 1
+        lj1 = lmat[j1]
         l10 = lj1[j]
-        dj1 = d[j + 1]
+        dj1 = d[j1]
         delta = d[j] + l10 ** 2 * dj1
         if delta + 1e-6 < dj1:
             # permute ambiguities j and j + 1 (RTKLIB perm()); Z by columns: a swap of two list items
+            lj = lmat[j]
             eta = d[j] / delta
             lam = dj1 * l10 / delta
             d[j] = eta * dj1
-            d[j + 1] = delta
+            d[j1] = delta
             for c in range(j):
                 a0, a1 = lj[c], lj1[c]
                 lj[c] = -l10 * a0 + a1
                 lj1[c] = eta * a0 + lam * a1
             lj1[j] = lam
-            for c in range(j + 2, n):
+            for c in range(j1 + 1, n):
                 row = lmat[c]
-                row[j], row[j + 1] = row[j + 1], row[j]
-            zc[j], zc[j + 1] = zc[j + 1], zc[j]
+                row[j], row[j1] = row[j1], row[j]
+            zc[j], zc[j1] = zc[j1], zc[j]
             # RTKLIB restarts at j = n − 2; the tests above j + 1 would repeat exactly (their d and L entries are
             # untouched by the permutation and by the transforms since, which only change columns ≤ j + 1):
             # all passed, so they pass again, without a transform (j > k) or any other effect
             k = j
-            j = j + 1 if j < n - 2 else n - 2
+            j = j1 if j1 < n - 1 else n - 2
         else:
             j -= 1
     return lmat, d, _unpack_columns(zc, n)
@@ -184,16 +187,19 @@ def _search_lists(lmat: list[list[float]], d: list[float], zs: list[float], m: i
         newdist = dist[k] + y * y / d[k]
         if newdist < maxdist:
             if k != 0:
+                k1 = k
                 k -= 1
                 dist[k] = newdist
-                dz = z[k + 1] - zb[k + 1]
-                lrow = lmat[k + 1]
-                srow, sprev = s_mat[k], s_mat[k + 1]
-                for i in range(k + 1):
+                dz = z[k1] - zb[k1]
+                lrow = lmat[k1]
+                srow, sprev = s_mat[k], s_mat[k1]
+                for i in range(k1):
                     srow[i] = sprev[i] + dz * lrow[i]
-                zb[k] = zs[k] + srow[k]
-                z[k] = float(round(zb[k]))
-                y = zb[k] - z[k]
+                zbk = zs[k] + srow[k]
+                zb[k] = zbk
+                zk = float(round(zbk))
+                z[k] = zk
+                y = zbk - zk
                 step[k] = 1.0 if y > 0 else -1.0
             else:
                 if first:
@@ -212,16 +218,20 @@ def _search_lists(lmat: list[list[float]], d: list[float], zs: list[float], m: i
                         sdist[imax] = newdist
                         imax = max(range(m), key=sdist.__getitem__)
                     maxdist = sdist[imax]
-                z[0] += step[0]
-                y = zb[0] - z[0]
-                step[0] = -step[0] - (1.0 if step[0] > 0 else -1.0)
+                st = step[0]
+                z0 = z[0] + st
+                z[0] = z0
+                y = zb[0] - z0
+                step[0] = -st - (1.0 if st > 0 else -1.0)
         else:
             if k == n - 1:
                 break
             k += 1
-            z[k] += step[k]
-            y = zb[k] - z[k]
-            step[k] = -step[k] - (1.0 if step[k] > 0 else -1.0)
+            st = step[k]
+            zk = z[k] + st
+            z[k] = zk
+            y = zb[k] - zk
+            step[k] = -st - (1.0 if st > 0 else -1.0)
     else:
         raise LambdaError("MLAMBDA search did not terminate")
     order = sorted(range(nn), key=sdist.__getitem__)
