@@ -54,6 +54,9 @@ _PRNS = np.arange(1, NSAT + 1, dtype=np.int16)
 _PRNS.flags.writeable = False  # shared by every epoch's SatState
 _ROWS = np.arange(3 * NSAT)  # row indices of the DD system (phase + code + Doppler rows at most)
 _ROWS.flags.writeable = False
+_NO_SLOTS = np.zeros(NSAT, bool)
+"""No slot selected (read-only): _ddres's code mask for the phase-only residual checks."""
+_NO_SLOTS.flags.writeable = False
 
 
 class NavData(Protocol):
@@ -1318,9 +1321,9 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     # below act only on one), so without one it is not computed (a _ddres call per epoch of an unfixed rover)
     bad_phase = np.zeros(0, np.int64)
     if st.held_prns.any():
-        dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False, trop_r, jacobian=False)
-        ok_post = _valid_residuals(dd_post, o.validation_sigma_factor)
-        bad_phase = dd_post.slot[(dd_post.kind == 0) & ~ok_post]
+        # phase rows alone: only they are judged, each against its own σ (the code rows changed none of them)
+        dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, _NO_SLOTS, el, False, trop_r, jacobian=False)
+        bad_phase = dd_post.slot[~_valid_residuals(dd_post, o.validation_sigma_factor)]
     if bad_phase.size:  # only ever found under a hold (above)
         # one satellite slipping under a hold spreads its error over every row through the position: find
         # whether leaving out a single satellite makes the rest fit (fault exclusion) before releasing all
@@ -1374,8 +1377,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             use_fix = np.zeros(NSAT, bool)
             use_fix[fix.slots] = True
             use_fix[fix.ref] = True
-            dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False, trop_r,
-                                 jacobian=False)
+            dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, _NO_SLOTS, el, False, trop_r, jacobian=False)
             valid = _valid_residuals(dd_fix, o.validation_sigma_factor)
             if (maha <= _CHI2_3DOF_999 or fix.settled) and np.count_nonzero(valid) == valid.size:
                 break
