@@ -801,6 +801,16 @@ def _dd_ambiguities(x: Arr, p: Arr, idx: npt.NDArray[np.int64], ref: int) -> tup
     return a, qa, qba, qia
 
 
+def _dd_ambiguities_without(dd: tuple[Arr, Arr, Arr, Arr | None], k: int) -> tuple[Arr, Arr, Arr, Arr | None]:
+    """_dd_ambiguities' result for the same reference with the `k`-th other slot left out: its entries are
+    each one difference of the state's, so a principal subset of the larger set's, to the bit."""
+    a, qa, qba, qia = dd
+    keep = np.ones(a.size, bool)
+    keep[k] = False
+    return (a[keep], qa.compress(keep, 0).compress(keep, 1), qba.compress(keep, 1),
+            None if qia is None else qia.compress(keep, 1))
+
+
 @dataclass
 class _DD:
     """Double-difference system of one epoch: innovations v, design H (on the full state), covariance R."""
@@ -1034,12 +1044,18 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
     full_set: tuple[int, npt.NDArray[np.int64], LambdaResult] | None = None
     """The full candidate set's (reference, others, search result): its integers are read only when a partial
     survivor must be compared with them (LambdaResult.fixed is computed on first use)."""
+    dropped: tuple[int, int] | None = None
+    """The last try's reference and the position among its others of the slot dropped since."""
     for _drop in range(o.max_partial_drop + 1 if o.partial_ar else 1):
         if idx.size < min_dd + 1:
             break
         ref = int(idx[el[idx].argmax()])
         others = idx[idx != ref]
-        a, qa, qba, qia = _dd_ambiguities(x, p, idx, ref)
+        if dropped is not None and dropped[0] == ref:
+            # a retry keeps the reference (the highest satellite, never the one dropped): a subset of the last
+            a, qa, qba, qia = _dd_ambiguities_without((a, qa, qba, qia), dropped[1])
+        else:
+            a, qa, qba, qia = _dd_ambiguities(x, p, idx, ref)
         try:
             res = mlambda(a, qa, ratio_cap=RATIO_CAP)
         except LambdaError:
@@ -1131,7 +1147,9 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
         # whose ambiguity is still code-level, else mostly the lowest one), not blindly the lowest satellite:
         # one fresh ambiguity would otherwise sink the ratio of a set determined long ago
-        idx = idx[idx != others[qa.diagonal().argmax()]]
+        k_drop = int(qa.diagonal().argmax())
+        dropped = (ref, k_drop)
+        idx = idx[idx != others[k_drop]]
     st.last_ratio = best_ratio
     if not seen_candidate:
         st.pending_fix = None

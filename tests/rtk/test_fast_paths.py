@@ -21,7 +21,7 @@ from onboard.rtk.geodesy import enu_rotation
 from onboard.rtk.mlambda import ld_factor, mlambda
 from onboard.rtk.models import median_of_few
 from onboard.rtk.pntpos import _norm
-from onboard.rtk.rtkpos import NSAT, NX, NX0, NXI, _dd_ambiguities
+from onboard.rtk.rtkpos import NSAT, NX, NX0, NXI, _dd_ambiguities, _dd_ambiguities_without
 from tests.conftest import shared_file
 
 M8P = "gnss/ublox-m8p-galway-2018/rinex/"
@@ -144,6 +144,25 @@ def test_dd_ambiguities_equal_the_dense_dd_matrix_products_to_the_bit() -> None:
                 assert qia is not None and qia.tobytes() == (p[NXI:NX, ja] @ d.T).tobytes()
             else:
                 assert qia is None
+
+
+def test_dd_ambiguities_without_one_slot_equal_their_direct_computation_to_the_bit() -> None:
+    """A partial-fixing retry subsets the larger set's DD ambiguities instead of recomputing them."""
+    rng = np.random.default_rng(8)
+    for nx in (NXI, NX):
+        for _ in range(50):
+            g = rng.normal(size=(nx, nx))
+            p = g @ g.T * 10.0 ** rng.integers(-4, 3)
+            x = rng.normal(size=nx) * 100.0
+            idx = np.sort(rng.choice(NSAT, size=int(rng.integers(3, 12)), replace=False))
+            ref = int(rng.choice(idx))
+            others = idx[idx != ref]
+            k = int(rng.integers(others.size))
+            sub = _dd_ambiguities_without(_dd_ambiguities(x, p, idx, ref), k)
+            direct = _dd_ambiguities(x, p, idx[idx != others[k]], ref)
+            for s, d in zip(sub, direct):
+                assert (s is None and d is None) or (s is not None and d is not None and s.shape == d.shape
+                                                     and s.tobytes() == d.tobytes() and s.flags.c_contiguous)
 
 
 def test_gps_only_epoch_is_itself_and_mixed_epochs_are_filtered() -> None:
