@@ -1044,8 +1044,9 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
     full_set: tuple[int, npt.NDArray[np.int64], LambdaResult] | None = None
     """The full candidate set's (reference, others, search result): its integers are read only when a partial
     survivor must be compared with them (LambdaResult.fixed is computed on first use)."""
-    dropped: tuple[int, int] | None = None
-    """The last try's reference and the position among its others of the slot dropped since."""
+    dropped: tuple[int, tuple[Arr, Arr, Arr, Arr | None], int] | None = None
+    """The last try's reference, DD ambiguities (a, Qa, Qba, Qia) and position among its others of the slot
+    dropped since."""
     for _drop in range(o.max_partial_drop + 1 if o.partial_ar else 1):
         if idx.size < min_dd + 1:
             break
@@ -1053,7 +1054,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         others = idx[idx != ref]
         if dropped is not None and dropped[0] == ref:
             # a retry keeps the reference (the highest satellite, never the one dropped): a subset of the last
-            a, qa, qba, qia = _dd_ambiguities_without((a, qa, qba, qia), dropped[1])
+            a, qa, qba, qia = _dd_ambiguities_without(dropped[1], dropped[2])
         else:
             a, qa, qba, qia = _dd_ambiguities(x, p, idx, ref)
         try:
@@ -1148,7 +1149,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         # whose ambiguity is still code-level, else mostly the lowest one), not blindly the lowest satellite:
         # one fresh ambiguity would otherwise sink the ratio of a set determined long ago
         k_drop = int(qa.diagonal().argmax())
-        dropped = (ref, k_drop)
+        dropped = (ref, (a, qa, qba, qia), k_drop)
         idx = idx[idx != others[k_drop]]
     st.last_ratio = best_ratio
     if not seen_candidate:

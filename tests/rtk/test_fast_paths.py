@@ -8,6 +8,7 @@ edit that changes the numbers (not only the speed) shows up here rather than as 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -122,47 +123,46 @@ def test_ld_factor_and_lambda_on_list_code_match_the_numpy_formulation() -> None
         assert best @ qi @ best <= rounded @ qi @ rounded + 1e-9
 
 
-def test_dd_ambiguities_equal_the_dense_dd_matrix_products_to_the_bit() -> None:
-    rng = np.random.default_rng(5)
+def _random_dd_states(seed: int, min_sats: int) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray, int]]:
+    """(state size, P, x, candidate slots, reference slot) of random filter states, 50 per state size."""
+    rng = np.random.default_rng(seed)
     for nx in (NXI, NX):
         for _ in range(50):
             g = rng.normal(size=(nx, nx))
             p = g @ g.T * 10.0 ** rng.integers(-4, 3)
             x = rng.normal(size=nx) * 100.0
-            idx = np.sort(rng.choice(NSAT, size=int(rng.integers(2, 12)), replace=False))
-            ref = int(rng.choice(idx))
-            d = np.zeros((idx.size - 1, idx.size))  # RTKLIB's DD matrix: rows e_i − e_ref
-            others = (idx != ref).nonzero()[0]
-            d[np.arange(others.size), others] = 1.0
-            d[:, int((idx == ref).nonzero()[0][0])] = -1.0
-            ja = NX0 + idx
-            a, qa, qba, qia = _dd_ambiguities(x, p, idx, ref)
-            assert a.tobytes() == (d @ x[ja]).tobytes()
-            assert qa.tobytes() == (d @ p[np.ix_(ja, ja)] @ d.T).tobytes()
-            assert qba.tobytes() == (p[:3, ja] @ d.T).tobytes()
-            if nx == NX:
-                assert qia is not None and qia.tobytes() == (p[NXI:NX, ja] @ d.T).tobytes()
-            else:
-                assert qia is None
+            idx = np.sort(rng.choice(NSAT, size=int(rng.integers(min_sats, 12)), replace=False))
+            yield nx, p, x, idx, int(rng.choice(idx))
+
+
+def test_dd_ambiguities_equal_the_dense_dd_matrix_products_to_the_bit() -> None:
+    for nx, p, x, idx, ref in _random_dd_states(5, 2):
+        d = np.zeros((idx.size - 1, idx.size))  # RTKLIB's DD matrix: rows e_i − e_ref
+        others = (idx != ref).nonzero()[0]
+        d[np.arange(others.size), others] = 1.0
+        d[:, int((idx == ref).nonzero()[0][0])] = -1.0
+        ja = NX0 + idx
+        a, qa, qba, qia = _dd_ambiguities(x, p, idx, ref)
+        assert a.tobytes() == (d @ x[ja]).tobytes()
+        assert qa.tobytes() == (d @ p[np.ix_(ja, ja)] @ d.T).tobytes()
+        assert qba.tobytes() == (p[:3, ja] @ d.T).tobytes()
+        if nx == NX:
+            assert qia is not None and qia.tobytes() == (p[NXI:NX, ja] @ d.T).tobytes()
+        else:
+            assert qia is None
 
 
 def test_dd_ambiguities_without_one_slot_equal_their_direct_computation_to_the_bit() -> None:
     """A partial-fixing retry subsets the larger set's DD ambiguities instead of recomputing them."""
-    rng = np.random.default_rng(8)
-    for nx in (NXI, NX):
-        for _ in range(50):
-            g = rng.normal(size=(nx, nx))
-            p = g @ g.T * 10.0 ** rng.integers(-4, 3)
-            x = rng.normal(size=nx) * 100.0
-            idx = np.sort(rng.choice(NSAT, size=int(rng.integers(3, 12)), replace=False))
-            ref = int(rng.choice(idx))
-            others = idx[idx != ref]
-            k = int(rng.integers(others.size))
-            sub = _dd_ambiguities_without(_dd_ambiguities(x, p, idx, ref), k)
-            direct = _dd_ambiguities(x, p, idx[idx != others[k]], ref)
-            for s, d in zip(sub, direct):
-                assert (s is None and d is None) or (s is not None and d is not None and s.shape == d.shape
-                                                     and s.tobytes() == d.tobytes() and s.flags.c_contiguous)
+    rng = np.random.default_rng(9)
+    for _nx, p, x, idx, ref in _random_dd_states(8, 3):
+        others = idx[idx != ref]
+        k = int(rng.integers(others.size))
+        sub = _dd_ambiguities_without(_dd_ambiguities(x, p, idx, ref), k)
+        direct = _dd_ambiguities(x, p, idx[idx != others[k]], ref)
+        for s, d in zip(sub, direct):
+            assert (s is None and d is None) or (s is not None and d is not None and s.shape == d.shape
+                                                 and s.tobytes() == d.tobytes() and s.flags.c_contiguous)
 
 
 def test_gps_only_epoch_is_itself_and_mixed_epochs_are_filtered() -> None:
