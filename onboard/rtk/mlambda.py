@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from onboard.rtk.linsolve import solve
+from onboard.rtk.linsolve import LinAlgError, solve
 
 Arr = npt.NDArray[np.float64]
 
@@ -275,6 +275,40 @@ _BOUND_MARGIN = 1.0 + 1e-9
 """Relative margin on the second-best bound against the rounding of the distance sums (~1e-16 relative)."""
 
 
+_CERTAIN_MAX_VAR = 1.0 / 300.0
+"""Largest conditional variance (cycles²) at which every factor erf(1/(2·√(2·D))) of the bootstrapped success
+rate is exactly 1.0 in double precision (its argument ≥ 6.1; erf rounds to 1 from 5.9 on)."""
+_CERTAIN_MARGIN = 10.0
+"""Factor by which the certificate's lower bound of the second-best distance must exceed ratio_cap times the
+best distance: room for the different roundings of the search's own distances (relative ~1e-12)."""
+
+
+def _certain_nearest(a: Arr, q: Arr, d: list[float], ratio_cap: float) -> LambdaResult | None:
+    """mlambda's result for a float ambiguity vector `a` provably next to its rounding (held fixes), without
+    the decorrelation and search, or None when the certificate fails. `d` = the LtDL D of `q`.
+
+    For any integer vector y other than x = round(a): ‖a − y‖ ≥ ‖x − y‖ − ‖a − x‖ in the Q⁻¹ norm, and a
+    non-zero integer u has ‖u‖² ≥ 1/λmax(Q) ≥ 1/(largest absolute row sum of Q, Gershgorin). So when
+    (1/√rowsum − √s₁)² ≥ _CERTAIN_MARGIN·ratio_cap·s₁ (s₁ = ‖a − x‖²), x is the best vector and the ratio is at
+    least ratio_cap, as the search would report. The decorrelation keeps every conditional variance at most
+    max(D) (a Gauss transform leaves D alone; a permutation replaces dⱼ, dⱼ₊₁ by values ≤ dⱼ₊₁), so with
+    max(D) ≤ _CERTAIN_MAX_VAR the bootstrapped success rate is exactly 1.0 with or without it: the result holds
+    Z = I, these D, x, and [s₁, the bound] as sq_dist (M8P static sets under a hold: 80-95 % of the calls)."""
+    if max(d) > _CERTAIN_MAX_VAR:
+        return None
+    x = np.rint(a)
+    r = a - x
+    try:
+        s1 = float(r @ solve(q, r))
+    except LinAlgError:
+        return None
+    gap = 1.0 / math.sqrt(float(np.abs(q).sum(axis=1).max())) - math.sqrt(max(s1, 0.0))
+    if gap <= 0.0 or gap * gap < _CERTAIN_MARGIN * ratio_cap * max(s1, 1e-12):
+        return None
+    n = a.shape[0]
+    return LambdaResult(np.array([s1, gap * gap]), np.array(d), np.eye(n), x.reshape(n, 1))
+
+
 def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None) -> LambdaResult:
     """Integer least-squares estimates of float ambiguities `a_float` (n,) with covariance `q` (n,n).
 
@@ -283,13 +317,19 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None) ->
     `ratio_cap`: when the search's first leaf provably has a ratio of at least `ratio_cap` (a float next to
     an integer set held for minutes: most fixed epochs), the search is skipped: `fixed` holds that best vector
     alone (n, 1) and `sq_dist[1]` is the lower bound of the second-best distance, so `ratio` ≥ `ratio_cap`
-    instead of the exact value. For callers that report the ratio capped there (a .pos file's 999.9).
+    instead of the exact value. For callers that report the ratio capped there (a .pos file's 999.9). A float
+    provably next to its rounding skips the decorrelation too (see _certain_nearest: Z = I, D of Q itself).
     """
     a = np.asarray(a_float, float)
     n = a.shape[0]
     if n == 0 or q.shape != (n, n):
         raise LambdaError(f"bad shapes: a {a.shape}, Q {q.shape}")
-    lmat0, d0 = _ld_lists(np.asarray(q, dtype=float))
+    q = np.asarray(q, dtype=float)
+    lmat0, d0 = _ld_lists(q)  # also the positive-definiteness check, whatever follows
+    if ratio_cap is not None:
+        certain = _certain_nearest(a, q, d0, ratio_cap)
+        if certain is not None:
+            return certain
     lmat, d, z = _reduction_lists(lmat0, d0)  # Z row-major as RTKLIB's: the products below the same
     zs = z.T @ a
     zs_list = zs.tolist()

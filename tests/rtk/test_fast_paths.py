@@ -175,11 +175,12 @@ def test_gps_only_epoch_is_itself_and_mixed_epochs_are_filtered() -> None:
 
 
 def test_lambda_skips_the_search_only_when_the_ratio_provably_reaches_the_cap() -> None:
-    """mlambda(..., ratio_cap) returns the full search's best integers and distance (to the bit) and a ratio of
-    at least the cap whenever it skips the search; otherwise it is the full search, unchanged."""
+    """mlambda(..., ratio_cap) returns the full search's best integers and success rate and a ratio of at least
+    the cap whenever it skips the search, with the full search's best distance and D to the bit, or, when a
+    certificate skips the decorrelation too (Z = I), to rounding; otherwise it is the full search, unchanged."""
     rng = np.random.default_rng(11)
     cap = 999.9
-    skipped = searched = 0
+    skipped = searched = certified = 0
     for trial in range(300):
         n = int(rng.integers(2, 12))
         g = rng.normal(size=(n, n))
@@ -191,8 +192,11 @@ def test_lambda_skips_the_search_only_when_the_ratio_provably_reaches_the_cap() 
         full = mlambda(a, q)
         fast = mlambda(a, q, ratio_cap=cap)
         assert np.array_equal(fast.fixed[:, 0], full.fixed[:, 0]), trial
-        assert fast.sq_dist[0] == full.sq_dist[0], trial
-        assert np.array_equal(fast.cond_var, full.cond_var)
+        assert fast.success_rate == full.success_rate, trial
+        if fast.sq_dist[0] != full.sq_dist[0] or not np.array_equal(fast.cond_var, full.cond_var):
+            certified += 1  # the certificate: its own rounding of the best distance, D of Q undecorrelated
+            assert np.array_equal(fast.z_mat, np.eye(n)) and fast.success_rate == 1.0, trial
+            assert fast.sq_dist[0] == pytest.approx(full.sq_dist[0], rel=1e-9, abs=1e-12), trial
         if fast.fixed.shape[1] == 1:
             skipped += 1
             assert full.ratio >= cap and fast.ratio >= cap, trial
@@ -200,7 +204,7 @@ def test_lambda_skips_the_search_only_when_the_ratio_provably_reaches_the_cap() 
         else:
             searched += 1
             assert np.array_equal(fast.fixed, full.fixed) and np.array_equal(fast.sq_dist, full.sq_dist)
-    assert skipped > 30 and searched > 30  # both branches exercised
+    assert skipped > 30 and searched > 30 and certified > 10  # every branch exercised
 
 
 def test_satellite_states_of_all_epochs_in_one_batch_equal_the_per_epoch_calls() -> None:

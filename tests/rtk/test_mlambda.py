@@ -113,3 +113,23 @@ def test_reduction_matches_rtklib_formulation_to_the_bit_with_large_and_negative
         assert z.tobytes() == ref_z.tobytes() and z.flags.c_contiguous
         big += int(np.abs(z).max() > 100 and (z < 0).any())
     assert big > 5
+
+
+def test_certificate_replaces_the_search_only_next_to_an_integer_vector_with_certain_success():
+    """A held-like float (σ 1 mm-cycle) is certified: the search's integers, ratio past the cap, success rate
+    exactly 1.0 as the decorrelated one. Refused: variances too large for a success rate of exactly 1 (the
+    full search runs: its D), or a float half-way between integers (no ratio bound)."""
+    g = np.array([[1.0, 0.3, 0.2], [0.3, 1.0, 0.4], [0.2, 0.4, 1.0]])
+    ints = np.array([12.0, -3.0, 40.0])
+    held = g * 1e-6
+    a = ints + np.array([0.001, -0.002, 0.0015])
+    full, capped = mlambda(a, held), mlambda(a, held, ratio_cap=999.9)
+    assert np.array_equal(capped.z_mat, np.eye(3))  # certified: no decorrelation
+    assert np.array_equal(capped.fixed[:, 0], full.fixed[:, 0]) and list(capped.fixed[:, 0]) == list(ints)
+    assert capped.success_rate == full.success_rate == 1.0 and capped.ratio >= 999.9 and full.ratio >= 999.9
+    assert capped.sq_dist[0] == pytest.approx(full.sq_dist[0], rel=1e-9)
+    loose = g * 0.01  # D up to 0.01 cycles² > 1/300: the success rate is below 1
+    res = mlambda(ints + 0.01, loose, ratio_cap=999.9)
+    assert np.array_equal(res.cond_var, mlambda(ints + 0.01, loose).cond_var) and res.success_rate < 1.0
+    halfway = mlambda(ints + np.array([0.5, 0.0, 0.0]), held, ratio_cap=999.9)
+    assert not np.array_equal(halfway.z_mat, np.eye(3)) or halfway.ratio < 999.9
