@@ -328,3 +328,35 @@ def test_enu_rotation_on_math_sines_equals_the_numpy_formulation() -> None:
         sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
         dense = np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
         assert np.abs(enu_rotation(lat, lon) - dense).max() <= 2 * ulp
+
+
+def test_phase_fit_equals_the_phase_rows_of_the_dd_system_to_the_bit(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every post-fit and fix-validation check of a GEONET run (_phase_fit) gives the rows, test and reference
+    of _ddres(..., jacobian=False) with _valid_residuals, to the bit."""
+    from dataclasses import replace
+
+    from onboard.rtk import rtkpos
+    from onboard.rtk.options import RtkOptions
+    from onboard.rtk.postpro import postprocess
+
+    calls = [0]
+    lean = rtkpos._phase_fit
+
+    def both(st, x, rov, base, rng_b, use, el, trop_r):  # type: ignore[no-untyped-def]
+        rows, ok, ref = lean(st, x, rov, base, rng_b, use, el, trop_r)
+        dd, _ = rtkpos._ddres(st, x, rov, base, rng_b, use, np.zeros(NSAT, bool), el, False, trop_r,
+                              jacobian=False)
+        assert rows.tobytes() == dd.slot.tobytes() and (dd.kind == 0).all() and ref == dd.ref_phase
+        assert ok.tobytes() == rtkpos._valid_residuals(dd, st.options.validation_sigma_factor).tobytes()
+        calls[0] += 1
+        return rows, ok, ref
+
+    monkeypatch.setattr(rtkpos, "_phase_fit", both)
+    geo = "gnss/geonet-0759-3040-20050402/"
+    nav_f = read_rinex_nav(shared_file(geo + "07590920.05n.gz"))
+    rover = read_rinex_obs(shared_file(geo + "07590920.05o.gz"))
+    base = read_rinex_obs(shared_file(geo + "30400920.05o.gz"))
+    nav = rtkpos.Nav(EphemerisStore(nav_f.ephemerides), (nav_f.iono_alpha, nav_f.iono_beta))
+    base_pos = np.array([-3978241.958, 3382840.234, 3649900.853])
+    postprocess(rover.epochs, base.epochs, nav, base_pos, replace(RtkOptions(), elmask_deg=15.0), "forward")
+    assert calls[0] >= 200  # a check of the float and one of the fix at each held epoch
