@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from onboard.rtk.linsolve import LinAlgError, solve
+from onboard.rtk.linsolve import solve
 
 Arr = npt.NDArray[np.float64]
 
@@ -283,30 +283,40 @@ _CERTAIN_MARGIN = 10.0
 best distance: room for the different roundings of the search's own distances (relative ~1e-12)."""
 
 
-def _certain_nearest(a: Arr, q: Arr, d: list[float], ratio_cap: float) -> LambdaResult | None:
+def _certain_nearest(a: Arr, q: Arr, lmat: list[list[float]], d: list[float], ratio_cap: float
+                     ) -> LambdaResult | None:
     """mlambda's result for a float ambiguity vector `a` provably next to its rounding (held fixes), without
-    the decorrelation and search, or None when the certificate fails. `d` = the LtDL D of `q`.
+    the decorrelation and search, or None when the certificate fails. (`lmat`, `d`) = the LtDL factors of `q`.
 
     For any integer vector y other than x = round(a): ‖a − y‖ ≥ ‖x − y‖ − ‖a − x‖ in the Q⁻¹ norm, and a
-    non-zero integer u has ‖u‖² ≥ 1/λmax(Q) ≥ 1/(largest absolute row sum of Q, Gershgorin). So when
-    (1/√rowsum − √s₁)² ≥ _CERTAIN_MARGIN·ratio_cap·s₁ (s₁ = ‖a − x‖²), x is the best vector and the ratio is at
-    least ratio_cap, as the search would report. The decorrelation keeps every conditional variance at most
-    max(D) (a Gauss transform leaves D alone; a permutation replaces dⱼ, dⱼ₊₁ by values ≤ dⱼ₊₁), so with
-    max(D) ≤ _CERTAIN_MAX_VAR the bootstrapped success rate is exactly 1.0 with or without it: the result holds
-    Z = I, these D, x, and [s₁, the bound] as sq_dist (M8P static sets under a hold: 80-95 % of the calls)."""
+    non-zero integer u has ‖u‖² ≥ 1/λmax(Q) ≥ 1/trace(Q) (Q = LᵀDL with every D > 0: positive definite). So
+    when (1/√trace − √s₁)² ≥ _CERTAIN_MARGIN·ratio_cap·s₁ (s₁ = ‖a − x‖², from the factors), x is the best
+    vector and the ratio is at least ratio_cap, as the search would report. The decorrelation keeps every
+    conditional variance at most max(D) (a Gauss transform leaves D alone; a permutation replaces dⱼ, dⱼ₊₁ by
+    values ≤ dⱼ₊₁), so with max(D) ≤ _CERTAIN_MAX_VAR the bootstrapped success rate is exactly 1.0 with or
+    without it: the result holds Z = I, these D, x (also as `fixed`, no Z⁻ᵀ solve) and [s₁, the bound] as
+    sq_dist (M8P static sets under a hold: 80-95 % of the calls)."""
     if max(d) > _CERTAIN_MAX_VAR:
         return None
-    x = np.rint(a)
-    r = a - x
-    try:
-        s1 = float(r @ solve(q, r))
-    except LinAlgError:
-        return None
-    gap = 1.0 / math.sqrt(float(np.abs(q).sum(axis=1).max())) - math.sqrt(max(s1, 0.0))
+    n = len(d)
+    af = a.tolist()
+    x = [float(round(v)) for v in af]
+    # s₁ = rᵀQ⁻¹r = Σ yᵢ²/dᵢ with Lᵀy = r (Lᵀ unit upper triangular): back substitution from the last
+    y = [0.0] * n
+    s1 = 0.0
+    for i in range(n - 1, -1, -1):
+        yi = af[i] - x[i]
+        for k in range(i + 1, n):
+            yi -= lmat[k][i] * y[k]
+        y[i] = yi
+        s1 += yi * yi / d[i]
+    gap = 1.0 / math.sqrt(float(q.trace())) - math.sqrt(s1)
     if gap <= 0.0 or gap * gap < _CERTAIN_MARGIN * ratio_cap * max(s1, 1e-12):
         return None
-    n = a.shape[0]
-    return LambdaResult(np.array([s1, gap * gap]), np.array(d), np.eye(n), x.reshape(n, 1))
+    best = np.array(x).reshape(n, 1)
+    res = LambdaResult(np.array([s1, gap * gap]), np.array(d), np.eye(n), best)
+    res.fixed = best  # Z = I: the candidates are the decorrelated ones (the cached property, set)
+    return res
 
 
 def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None) -> LambdaResult:
@@ -327,7 +337,7 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None) ->
     q = np.asarray(q, dtype=float)
     lmat0, d0 = _ld_lists(q)  # also the positive-definiteness check, whatever follows
     if ratio_cap is not None:
-        certain = _certain_nearest(a, q, d0, ratio_cap)
+        certain = _certain_nearest(a, q, lmat0, d0, ratio_cap)
         if certain is not None:
             return certain
     lmat, d, z = _reduction_lists(lmat0, d0)  # Z row-major as RTKLIB's: the products below the same
