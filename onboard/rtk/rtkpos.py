@@ -798,6 +798,16 @@ def _dd_ambiguities(x: Arr, p: Arr, idx: npt.NDArray[np.int64], ref: int) -> tup
     return a, qa, qba, qia
 
 
+def _dd_ambiguities_without(dd: tuple[Arr, Arr, Arr, Arr | None], k: int) -> tuple[Arr, Arr, Arr, Arr | None]:
+    """_dd_ambiguities' result for the same reference with the `k`-th other slot left out: its entries are
+    each one difference of the state's, so a principal subset of the larger set's, to the bit."""
+    a, qa, qba, qia = dd
+    keep = np.ones(a.size, bool)
+    keep[k] = False
+    return (a[keep], qa.compress(keep, 0).compress(keep, 1), qba.compress(keep, 1),
+            None if qia is None else qia.compress(keep, 1))
+
+
 @dataclass
 class _DD:
     """Double-difference system of one epoch: innovations v, design H (on the full state), covariance R."""
@@ -823,6 +833,40 @@ def _var_sd_m2(o: RtkOptions, rov: _Receiver, el: Arr) -> Arr:
     return hit[0]
 
 
+def _sd_terms(st: RtkState, x: Arr, rov: _Receiver, rng_b: Arr, el: Arr, trop_r: Arr
+              ) -> tuple[Arr, Arr, Arr, tuple[Arr, Arr] | None]:
+    """Per slot at state `x`: modelled range difference rover − base (m), rover LOS, SD phase variance (m²,
+    with this epoch's base-age variance) and the slant ionosphere with its mapping (_slant_iono_m, or None)."""
+    rng_r, e = _range_with_trop_m(rov, x[:3], trop_r)
+    var_sd = _var_sd_m2(st.options, rov, el)
+    if st.base_age_var_m2 > 0.0:
+        var_sd = var_sd + st.base_age_var_m2
+    return rng_r - rng_b, e, var_sd, _slant_iono_m(st, x, el) if st.iono_on else None
+
+
+def _phase_z(x: Arr, sd_phase: Arr, drng: Arr, ion: tuple[Arr, Arr] | None) -> Arr:
+    """Zero-difference-like phase residual per slot (m): SD phase − modelled range difference − λ·ambiguity."""
+    z = sd_phase - drng - LAMBDA_L1_M * x[NX0:NXI]
+    return z if ion is None else z + ion[0]  # the ionosphere advances the phase
+
+
+def _phase_fit(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, use: npt.NDArray[np.bool_],
+               el: Arr, trop_r: Arr) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.bool_], int]:
+    """The phase rows of _ddres(x, use, no code, jacobian=False) and their _valid_residuals test, without the
+    DD system around them (R, H): (the rows' non-reference slots, each row's |v| ≤ validation_sigma_factor·σ,
+    the reference slot; −1 with fewer than two phases). σ² = the reference's + the slot's SD variance, R's
+    diagonal summed alike."""
+    idx = use.nonzero()[0]
+    if idx.size < 2:
+        return idx[:0], np.zeros(0, bool), -1
+    drng, _, var, ion = _sd_terms(st, x, rov, rng_b, el, trop_r)
+    z = _phase_z(x, _sd_obs_m(rov, base)[0], drng, ion)
+    ref = int(idx[el[idx].argmax()])
+    others = idx[idx != ref]
+    v = z[others] - z[ref]
+    return others, np.abs(v) <= st.options.validation_sigma_factor * np.sqrt(var[ref] + var[others]), ref
+
+
 def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, phase_ok: npt.NDArray[np.bool_],
            code_ok: npt.NDArray[np.bool_], el: Arr, with_doppler: bool, trop_r: Arr,
            jacobian: bool = True) -> tuple[_DD, Arr]:
@@ -830,15 +874,10 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     `jacobian=False` for a residual test alone (_valid_residuals): the design matrix H is left empty,
     shape (nrow, 0)."""
     o = st.options
-    rng_r, e = _range_with_trop_m(rov, x[:3], trop_r)
-    var_sd = _var_sd_m2(o, rov, el)
-    if st.base_age_var_m2 > 0.0:
-        var_sd = var_sd + st.base_age_var_m2
+    drng, e, var_sd, ion = _sd_terms(st, x, rov, rng_b, el, trop_r)
     # groups (kind, reference slot, other slots, zero-difference residual z, per-slot variance), rows i − ref
     groups: list[tuple[int, int, npt.NDArray[np.int64], Arr, Arr]] = []
     ref_phase = -1
-    drng = rng_r - rng_b
-    ion = _slant_iono_m(st, x, el) if st.iono_on else None
     sd_phase, sd_code = _sd_obs_m(rov, base)
     for kind, ok in ((0, phase_ok), (1, code_ok)):
         idx = ok.nonzero()[0]
@@ -847,10 +886,8 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         ref = int(idx[el[idx].argmax()])
         if kind == 0:
             ref_phase = ref
-            z = sd_phase - drng - LAMBDA_L1_M * x[NX0:NXI]
+            z = _phase_z(x, sd_phase, drng, ion)
             var = var_sd
-            if ion is not None:
-                z = z + ion[0]  # the ionosphere advances the phase
         else:
             z = sd_code - drng
             if ion is not None:
@@ -1031,12 +1068,19 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
     full_set: tuple[int, npt.NDArray[np.int64], LambdaResult] | None = None
     """The full candidate set's (reference, others, search result): its integers are read only when a partial
     survivor must be compared with them (LambdaResult.fixed is computed on first use)."""
+    dropped: tuple[int, tuple[Arr, Arr, Arr, Arr | None], int] | None = None
+    """The last try's reference, DD ambiguities (a, Qa, Qba, Qia) and position among its others of the slot
+    dropped since."""
     for _drop in range(o.max_partial_drop + 1 if o.partial_ar else 1):
         if idx.size < min_dd + 1:
             break
         ref = int(idx[el[idx].argmax()])
         others = idx[idx != ref]
-        a, qa, qba, qia = _dd_ambiguities(x, p, idx, ref)
+        if dropped is not None and dropped[0] == ref:
+            # a retry keeps the reference (the highest satellite, never the one dropped): a subset of the last
+            a, qa, qba, qia = _dd_ambiguities_without(dropped[1], dropped[2])
+        else:
+            a, qa, qba, qia = _dd_ambiguities(x, p, idx, ref)
         try:
             res = mlambda(a, qa, ratio_cap=RATIO_CAP)
         except LambdaError:
@@ -1128,7 +1172,9 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
         # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
         # whose ambiguity is still code-level, else mostly the lowest one), not blindly the lowest satellite:
         # one fresh ambiguity would otherwise sink the ratio of a set determined long ago
-        idx = idx[idx != others[qa.diagonal().argmax()]]
+        k_drop = int(qa.diagonal().argmax())
+        dropped = (ref, (a, qa, qba, qia), k_drop)
+        idx = idx[idx != others[k_drop]]
     st.last_ratio = best_ratio
     if not seen_candidate:
         st.pending_fix = None
@@ -1316,11 +1362,12 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
 
     # post-fit residual check of the float solution: it guards a held set (the fault exclusion and the release
     # below act only on one), so without one it is not computed (a _ddres call per epoch of an unfixed rover)
-    bad_phase = np.zeros(0, np.int64)
+    bad_phase = rows_post = np.zeros(0, np.int64)
+    ref_post = -1
     if st.held_prns.any():
-        dd_post, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, False, trop_r, jacobian=False)
-        ok_post = _valid_residuals(dd_post, o.validation_sigma_factor)
-        bad_phase = dd_post.slot[(dd_post.kind == 0) & ~ok_post]
+        # phase rows alone: only they are judged, each against its own σ (the code rows changed none of them)
+        rows_post, ok_post, ref_post = _phase_fit(st, st.x, rov, bas, rng_b, use_phase, el, trop_r)
+        bad_phase = rows_post[~ok_post]
     if bad_phase.size:  # only ever found under a hold (above)
         # one satellite slipping under a hold spreads its error over every row through the position: find
         # whether leaving out a single satellite makes the rest fit (fault exclusion) before releasing all
@@ -1343,11 +1390,10 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             st.validated_int[:] = np.nan
         amb = NX0 + _in_use(st).nonzero()[0]
         st.p[amb, amb] += 0.5**2
-        rows = dd_post.kind == 0
-        if bad_phase.size >= 3 and bad_phase.size == int(rows.sum()) and dd_post.ref_phase >= 0:
+        if bad_phase.size >= 3 and bad_phase.size == rows_post.size and ref_post >= 0:
             # every DD off at once is one satellite, the reference, slipping without LLI: reset it alone
             # (hil_sim, undetected slips 2/h: 91.1 % airborne fixed, 71.6 % resetting all); the others stay
-            bad_phase = np.array([dd_post.ref_phase])
+            bad_phase = np.array([ref_post])
         if bad_phase.size >= 1:
             st.slips += int(bad_phase.size)
             _reset_amb(st, bad_phase)
@@ -1374,9 +1420,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             use_fix = np.zeros(NSAT, bool)
             use_fix[fix.slots] = True
             use_fix[fix.ref] = True
-            dd_fix, _ = _ddres(st, xf, rov, bas, rng_b, use_fix, np.zeros(NSAT, bool), el, False, trop_r,
-                                 jacobian=False)
-            valid = _valid_residuals(dd_fix, o.validation_sigma_factor)
+            fix_rows, valid, _ = _phase_fit(st, xf, rov, bas, rng_b, use_fix, el, trop_r)
             if (maha <= _CHI2_3DOF_999 or fix.settled) and np.count_nonzero(valid) == valid.size:
                 break
             log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", rover.time, maha, bool(valid.all()))
@@ -1390,7 +1434,7 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             retry = None
             if _retry == 0 and maha <= _CHI2_3DOF_999 and int((~valid).sum()) == 1 and valid.sum() >= o.min_amb_dd:
                 retry = cand.copy()
-                retry[dd_fix.slot[~valid]] = False
+                retry[fix_rows[~valid]] = False
             elif _retry == 0 and st.held_prns.any() and np.any(cand & ~st.held_prns):
                 retry = cand & st.held_prns
             if retry is not None:

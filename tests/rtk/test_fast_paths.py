@@ -8,6 +8,7 @@ edit that changes the numbers (not only the speed) shows up here rather than as 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -21,7 +22,7 @@ from onboard.rtk.geodesy import enu_rotation
 from onboard.rtk.mlambda import ld_factor, mlambda
 from onboard.rtk.models import median_of_few
 from onboard.rtk.pntpos import _norm
-from onboard.rtk.rtkpos import NSAT, NX, NX0, NXI, _dd_ambiguities
+from onboard.rtk.rtkpos import NSAT, NX, NX0, NXI, _dd_ambiguities, _dd_ambiguities_without
 from tests.conftest import shared_file
 
 M8P = "gnss/ublox-m8p-galway-2018/rinex/"
@@ -122,28 +123,46 @@ def test_ld_factor_and_lambda_on_list_code_match_the_numpy_formulation() -> None
         assert best @ qi @ best <= rounded @ qi @ rounded + 1e-9
 
 
-def test_dd_ambiguities_equal_the_dense_dd_matrix_products_to_the_bit() -> None:
-    rng = np.random.default_rng(5)
+def _random_dd_states(seed: int, min_sats: int) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray, int]]:
+    """(state size, P, x, candidate slots, reference slot) of random filter states, 50 per state size."""
+    rng = np.random.default_rng(seed)
     for nx in (NXI, NX):
         for _ in range(50):
             g = rng.normal(size=(nx, nx))
             p = g @ g.T * 10.0 ** rng.integers(-4, 3)
             x = rng.normal(size=nx) * 100.0
-            idx = np.sort(rng.choice(NSAT, size=int(rng.integers(2, 12)), replace=False))
-            ref = int(rng.choice(idx))
-            d = np.zeros((idx.size - 1, idx.size))  # RTKLIB's DD matrix: rows e_i − e_ref
-            others = (idx != ref).nonzero()[0]
-            d[np.arange(others.size), others] = 1.0
-            d[:, int((idx == ref).nonzero()[0][0])] = -1.0
-            ja = NX0 + idx
-            a, qa, qba, qia = _dd_ambiguities(x, p, idx, ref)
-            assert a.tobytes() == (d @ x[ja]).tobytes()
-            assert qa.tobytes() == (d @ p[np.ix_(ja, ja)] @ d.T).tobytes()
-            assert qba.tobytes() == (p[:3, ja] @ d.T).tobytes()
-            if nx == NX:
-                assert qia is not None and qia.tobytes() == (p[NXI:NX, ja] @ d.T).tobytes()
-            else:
-                assert qia is None
+            idx = np.sort(rng.choice(NSAT, size=int(rng.integers(min_sats, 12)), replace=False))
+            yield nx, p, x, idx, int(rng.choice(idx))
+
+
+def test_dd_ambiguities_equal_the_dense_dd_matrix_products_to_the_bit() -> None:
+    for nx, p, x, idx, ref in _random_dd_states(5, 2):
+        d = np.zeros((idx.size - 1, idx.size))  # RTKLIB's DD matrix: rows e_i − e_ref
+        others = (idx != ref).nonzero()[0]
+        d[np.arange(others.size), others] = 1.0
+        d[:, int((idx == ref).nonzero()[0][0])] = -1.0
+        ja = NX0 + idx
+        a, qa, qba, qia = _dd_ambiguities(x, p, idx, ref)
+        assert a.tobytes() == (d @ x[ja]).tobytes()
+        assert qa.tobytes() == (d @ p[np.ix_(ja, ja)] @ d.T).tobytes()
+        assert qba.tobytes() == (p[:3, ja] @ d.T).tobytes()
+        if nx == NX:
+            assert qia is not None and qia.tobytes() == (p[NXI:NX, ja] @ d.T).tobytes()
+        else:
+            assert qia is None
+
+
+def test_dd_ambiguities_without_one_slot_equal_their_direct_computation_to_the_bit() -> None:
+    """A partial-fixing retry subsets the larger set's DD ambiguities instead of recomputing them."""
+    rng = np.random.default_rng(9)
+    for _nx, p, x, idx, ref in _random_dd_states(8, 3):
+        others = idx[idx != ref]
+        k = int(rng.integers(others.size))
+        sub = _dd_ambiguities_without(_dd_ambiguities(x, p, idx, ref), k)
+        direct = _dd_ambiguities(x, p, idx[idx != others[k]], ref)
+        for s, d in zip(sub, direct):
+            assert (s is None and d is None) or (s is not None and d is not None and s.shape == d.shape
+                                                 and s.tobytes() == d.tobytes() and s.flags.c_contiguous)
 
 
 def test_gps_only_epoch_is_itself_and_mixed_epochs_are_filtered() -> None:
@@ -156,11 +175,12 @@ def test_gps_only_epoch_is_itself_and_mixed_epochs_are_filtered() -> None:
 
 
 def test_lambda_skips_the_search_only_when_the_ratio_provably_reaches_the_cap() -> None:
-    """mlambda(..., ratio_cap) returns the full search's best integers and distance (to the bit) and a ratio of
-    at least the cap whenever it skips the search; otherwise it is the full search, unchanged."""
+    """mlambda(..., ratio_cap) returns the full search's best integers and success rate and a ratio of at least
+    the cap whenever it skips the search, with the full search's best distance and D to the bit, or, when a
+    certificate skips the decorrelation too (Z = I), to rounding; otherwise it is the full search, unchanged."""
     rng = np.random.default_rng(11)
     cap = 999.9
-    skipped = searched = 0
+    skipped = searched = certified = 0
     for trial in range(300):
         n = int(rng.integers(2, 12))
         g = rng.normal(size=(n, n))
@@ -172,8 +192,11 @@ def test_lambda_skips_the_search_only_when_the_ratio_provably_reaches_the_cap() 
         full = mlambda(a, q)
         fast = mlambda(a, q, ratio_cap=cap)
         assert np.array_equal(fast.fixed[:, 0], full.fixed[:, 0]), trial
-        assert fast.sq_dist[0] == full.sq_dist[0], trial
-        assert np.array_equal(fast.cond_var, full.cond_var)
+        assert fast.success_rate == full.success_rate, trial
+        if fast.sq_dist[0] != full.sq_dist[0] or not np.array_equal(fast.cond_var, full.cond_var):
+            certified += 1  # the certificate: its own rounding of the best distance, D of Q undecorrelated
+            assert np.array_equal(fast.z_mat, np.eye(n)) and fast.success_rate == 1.0, trial
+            assert fast.sq_dist[0] == pytest.approx(full.sq_dist[0], rel=1e-9, abs=1e-12), trial
         if fast.fixed.shape[1] == 1:
             skipped += 1
             assert full.ratio >= cap and fast.ratio >= cap, trial
@@ -181,7 +204,7 @@ def test_lambda_skips_the_search_only_when_the_ratio_provably_reaches_the_cap() 
         else:
             searched += 1
             assert np.array_equal(fast.fixed, full.fixed) and np.array_equal(fast.sq_dist, full.sq_dist)
-    assert skipped > 30 and searched > 30  # both branches exercised
+    assert skipped > 30 and searched > 30 and certified > 10  # every branch exercised
 
 
 def test_satellite_states_of_all_epochs_in_one_batch_equal_the_per_epoch_calls() -> None:
@@ -305,3 +328,35 @@ def test_enu_rotation_on_math_sines_equals_the_numpy_formulation() -> None:
         sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
         dense = np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
         assert np.abs(enu_rotation(lat, lon) - dense).max() <= 2 * ulp
+
+
+def test_phase_fit_equals_the_phase_rows_of_the_dd_system_to_the_bit(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every post-fit and fix-validation check of a GEONET run (_phase_fit) gives the rows, test and reference
+    of _ddres(..., jacobian=False) with _valid_residuals, to the bit."""
+    from dataclasses import replace
+
+    from onboard.rtk import rtkpos
+    from onboard.rtk.options import RtkOptions
+    from onboard.rtk.postpro import postprocess
+
+    calls = [0]
+    lean = rtkpos._phase_fit
+
+    def both(st, x, rov, base, rng_b, use, el, trop_r):  # type: ignore[no-untyped-def]
+        rows, ok, ref = lean(st, x, rov, base, rng_b, use, el, trop_r)
+        dd, _ = rtkpos._ddres(st, x, rov, base, rng_b, use, np.zeros(NSAT, bool), el, False, trop_r,
+                              jacobian=False)
+        assert rows.tobytes() == dd.slot.tobytes() and (dd.kind == 0).all() and ref == dd.ref_phase
+        assert ok.tobytes() == rtkpos._valid_residuals(dd, st.options.validation_sigma_factor).tobytes()
+        calls[0] += 1
+        return rows, ok, ref
+
+    monkeypatch.setattr(rtkpos, "_phase_fit", both)
+    geo = "gnss/geonet-0759-3040-20050402/"
+    nav_f = read_rinex_nav(shared_file(geo + "07590920.05n.gz"))
+    rover = read_rinex_obs(shared_file(geo + "07590920.05o.gz"))
+    base = read_rinex_obs(shared_file(geo + "30400920.05o.gz"))
+    nav = rtkpos.Nav(EphemerisStore(nav_f.ephemerides), (nav_f.iono_alpha, nav_f.iono_beta))
+    base_pos = np.array([-3978241.958, 3382840.234, 3649900.853])
+    postprocess(rover.epochs, base.epochs, nav, base_pos, replace(RtkOptions(), elmask_deg=15.0), "forward")
+    assert calls[0] >= 200  # a check of the float and one of the fix at each held epoch

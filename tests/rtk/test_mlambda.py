@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-from onboard.rtk.mlambda import LambdaError, ld_factor, mlambda
+from onboard.rtk.mlambda import LambdaError, ld_factor, mlambda, reduction
 
 
 def test_ld_factor_reconstructs_q():
@@ -64,3 +64,72 @@ def test_poorly_determined_ambiguities_have_low_success_rate():
 def test_not_positive_definite_is_refused():
     with pytest.raises(LambdaError):
         mlambda(np.array([1.0, 2.0]), np.array([[1.0, 2.0], [2.0, 1.0]]))
+
+
+def _reduction_reference(lmat: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """RTKLIB reduction() as written there (gauss() and perm() on dense arrays, restart at n − 2, Z as floats)."""
+    lmat, d = lmat.copy(), d.copy()
+    n = d.size
+    z = np.eye(n)
+    j, k = n - 2, n - 2
+    while j >= 0:
+        if j <= k:
+            for i in range(j + 1, n):
+                mu = round(lmat[i, j])
+                if mu != 0:
+                    lmat[i:, j] -= mu * lmat[i:, i]
+                    z[:, j] -= mu * z[:, i]
+        delta = d[j] + lmat[j + 1, j] ** 2 * d[j + 1]
+        if delta + 1e-6 < d[j + 1]:
+            eta, lam = d[j] / delta, d[j + 1] * lmat[j + 1, j] / delta
+            d[j], d[j + 1] = eta * d[j + 1], delta
+            a0, a1 = lmat[j, :j].copy(), lmat[j + 1, :j].copy()
+            lmat[j, :j] = -lmat[j + 1, j] * a0 + a1
+            lmat[j + 1, :j] = eta * a0 + lam * a1
+            lmat[j + 1, j] = lam
+            lmat[j + 2:, [j, j + 1]] = lmat[j + 2:, [j + 1, j]]
+            z[:, [j, j + 1]] = z[:, [j + 1, j]]
+            k, j = j, n - 2
+        else:
+            j -= 1
+    return lmat, d, z
+
+
+def test_reduction_matches_rtklib_formulation_to_the_bit_with_large_and_negative_z():
+    """The list code (Z packed as integers, the early restart) gives RTKLIB's L, D and Z exactly, also for
+    strongly correlated ambiguities whose Z has large entries of both signs (the packed digits borrow)."""
+    rng = np.random.default_rng(11)
+    big = 0
+    for _ in range(60):
+        n = int(rng.integers(2, 13))
+        g = rng.normal(size=(n, n))
+        # nearly collinear rows: long decorrelations, |Z| up to thousands
+        g += rng.normal(size=n) * float(10.0 ** rng.integers(0, 4))
+        q = g @ g.T * 0.01 + np.eye(n) * 1e-4
+        lmat0, d0 = ld_factor(q)
+        lmat, d, z = reduction(lmat0, d0)
+        ref_l, ref_d, ref_z = _reduction_reference(lmat0, d0)
+        assert lmat.tobytes() == ref_l.tobytes() and d.tobytes() == ref_d.tobytes()
+        assert z.tobytes() == ref_z.tobytes() and z.flags.c_contiguous
+        big += int(np.abs(z).max() > 100 and (z < 0).any())
+    assert big > 5
+
+
+def test_certificate_replaces_the_search_only_next_to_an_integer_vector_with_certain_success():
+    """A held-like float (σ 1 mm-cycle) is certified: the search's integers, ratio past the cap, success rate
+    exactly 1.0 as the decorrelated one. Refused: variances too large for a success rate of exactly 1 (the
+    full search runs: its D), or a float half-way between integers (no ratio bound)."""
+    g = np.array([[1.0, 0.3, 0.2], [0.3, 1.0, 0.4], [0.2, 0.4, 1.0]])
+    ints = np.array([12.0, -3.0, 40.0])
+    held = g * 1e-6
+    a = ints + np.array([0.001, -0.002, 0.0015])
+    full, capped = mlambda(a, held), mlambda(a, held, ratio_cap=999.9)
+    assert np.array_equal(capped.z_mat, np.eye(3))  # certified: no decorrelation
+    assert np.array_equal(capped.fixed[:, 0], full.fixed[:, 0]) and list(capped.fixed[:, 0]) == list(ints)
+    assert capped.success_rate == full.success_rate == 1.0 and capped.ratio >= 999.9 and full.ratio >= 999.9
+    assert capped.sq_dist[0] == pytest.approx(full.sq_dist[0], rel=1e-9)
+    loose = g * 0.01  # D up to 0.01 cycles² > 1/300: the success rate is below 1
+    res = mlambda(ints + 0.01, loose, ratio_cap=999.9)
+    assert np.array_equal(res.cond_var, mlambda(ints + 0.01, loose).cond_var) and res.success_rate < 1.0
+    halfway = mlambda(ints + np.array([0.5, 0.0, 0.0]), held, ratio_cap=999.9)
+    assert not np.array_equal(halfway.z_mat, np.eye(3)) or halfway.ratio < 999.9
