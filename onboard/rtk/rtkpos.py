@@ -833,6 +833,12 @@ def _var_sd_m2(o: RtkOptions, rov: _Receiver, el: Arr) -> Arr:
     return hit[0]
 
 
+def _reference_slot(idx: npt.NDArray[np.int64], el: Arr) -> int:
+    """The reference satellite of a double-difference set among slots `idx`: the highest (elevation `el`,
+    rad), as RTKLIB's. One place: the filter's rows, the residual checks and partial fixing must agree on it."""
+    return int(idx[el[idx].argmax()])
+
+
 def _sd_terms(st: RtkState, x: Arr, rov: _Receiver, rng_b: Arr, el: Arr, trop_r: Arr
               ) -> tuple[Arr, Arr, Arr, tuple[Arr, Arr] | None]:
     """Per slot at state `x`: modelled range difference rover − base (m), rover LOS, SD phase variance (m²,
@@ -861,7 +867,7 @@ def _phase_fit(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr
         return idx[:0], np.zeros(0, bool), -1
     drng, _, var, ion = _sd_terms(st, x, rov, rng_b, el, trop_r)
     z = _phase_z(x, _sd_obs_m(rov, base)[0], drng, ion)
-    ref = int(idx[el[idx].argmax()])
+    ref = _reference_slot(idx, el)
     others = idx[idx != ref]
     v = z[others] - z[ref]
     return others, np.abs(v) <= st.options.validation_sigma_factor * np.sqrt(var[ref] + var[others]), ref
@@ -883,7 +889,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
         idx = ok.nonzero()[0]
         if idx.size < 2:
             continue
-        ref = int(idx[el[idx].argmax()])
+        ref = _reference_slot(idx, el)
         if kind == 0:
             ref_phase = ref
             z = _phase_z(x, sd_phase, drng, ion)
@@ -897,7 +903,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
     if with_doppler:
         idx = (code_ok & np.isfinite(rov.dop_hz)).nonzero()[0]
         if idx.size >= 2:
-            ref = int(idx[el[idx].argmax()])
+            ref = _reference_slot(idx, el)
             vs = rov.sats.vel_m_s
             sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, 1] * x[0] - vs[:, 0] * x[1])
             rate_model = np.einsum("ij,ij->i", e, vs - x[3:6]) + sag - CLIGHT_M_S * rov.sats.drift_s_s
@@ -1074,7 +1080,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
     for _drop in range(o.max_partial_drop + 1 if o.partial_ar else 1):
         if idx.size < min_dd + 1:
             break
-        ref = int(idx[el[idx].argmax()])
+        ref = _reference_slot(idx, el)
         others = idx[idx != ref]
         if dropped is not None and dropped[0] == ref:
             # a retry keeps the reference (the highest satellite, never the one dropped): a subset of the last
