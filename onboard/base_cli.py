@@ -8,14 +8,15 @@ from __future__ import annotations
 import argparse
 import sys
 
+from onboard.rtk.geodesy import parse_xyz_m
 from onboard.settings import add_recorder_arguments
 
 
 def _xyz(text: str) -> tuple[float, float, float]:
-    vals = [float(v) for v in text.replace(" ", ",").split(",") if v]
-    if len(vals) != 3:
-        raise argparse.ArgumentTypeError(f"expected X,Y,Z (ECEF m), got {text!r}")
-    return (vals[0], vals[1], vals[2])
+    try:  # spaces separate as well as commas here ("X Y Z" pasted from a survey report)
+        return parse_xyz_m(",".join(v for v in text.replace(" ", ",").split(",") if v))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y,Z in ECEF metres, got {text!r}") from None
 
 
 def add_base_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:  # type: ignore[type-arg]

@@ -18,6 +18,7 @@ import numpy as np
 
 from onboard.errors import InputError
 from onboard.rtk.ephemeris import EphemerisStore
+from onboard.rtk.geodesy import parse_xyz_m
 from onboard.rtk.options import AR_MODES, RtkOptions
 from onboard.rtk.postpro import DIRECTIONS, postprocess
 from onboard.rtk.rtkpos import Nav
@@ -83,12 +84,9 @@ def read_navigation(paths: Sequence[str | Path], extra: Sequence[Ephemeris] = ()
 
 def _xyz(text: str) -> np.ndarray:
     try:
-        vals = [float(v) for v in text.split(",")]
+        return np.array(parse_xyz_m(text))
     except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected X,Y,Z in metres, got {text!r}") from exc
-    if len(vals) != 3:
-        raise argparse.ArgumentTypeError(f"expected three comma-separated values X,Y,Z, got {text!r}")
-    return np.array(vals)
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def add_rtk_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:

@@ -277,15 +277,14 @@ def takeoff_position_ecef_m(s: Settings) -> tuple[float, float, float] | None:
     text = s.rtk_takeoff_position.strip()
     if not text:
         return None
-    try:
-        xyz = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise ValueError(f"expected X,Y,Z in ECEF metres, got {text!r}") from None
-    if len(xyz) != 3 or not all(math.isfinite(v) for v in xyz):
+    from onboard.rtk.geodesy import parse_xyz_m
+
+    xyz = parse_xyz_m(text)
+    if not all(math.isfinite(v) for v in xyz):
         raise ValueError(f"expected X,Y,Z in ECEF metres, got {text!r}")
     if not 6.25e6 < math.sqrt(sum(v * v for v in xyz)) < 6.48e6:
         raise ValueError(f"{text!r} is not near the Earth's surface (ECEF metres expected, not degrees)")
-    return (xyz[0], xyz[1], xyz[2])
+    return xyz
 
 
 def rtk_engine_options(s: Settings) -> Any:

@@ -77,3 +77,15 @@ def azimuth_elevation(receiver_ecef_m: npt.ArrayLike, sat_ecef_m: npt.ArrayLike)
     enu = los @ enu_rotation(lat, lon).T
     horiz = np.hypot(enu[:, 0], enu[:, 1])
     return np.arctan2(enu[:, 0], enu[:, 1]) % (2 * np.pi), np.arctan2(enu[:, 2], horiz)
+
+
+def parse_xyz_m(text: str) -> tuple[float, float, float]:
+    """Three comma-separated numbers "X,Y,Z" (ECEF m: a take-off point, a base position); ValueError naming
+    `text` otherwise. The one parser behind the settings key and the command lines' positions (text in, no I/O)."""
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise ValueError(f"expected X,Y,Z in ECEF metres, got {text!r}") from None
+    if len(vals) != 3:
+        raise ValueError(f"expected X,Y,Z in ECEF metres, got {text!r}")
+    return (vals[0], vals[1], vals[2])

@@ -121,6 +121,21 @@ def test_unreadable_rover_and_bad_coordinates(tmp_path, capsys):
     assert "no such file" in err
 
 
+def test_one_xyz_parser_behind_the_positions_of_the_command_lines_and_settings():
+    """`onboard rtk --base-pos/--init-pos`, `onboard base --position` and `rtk.takeoff_position` read X,Y,Z
+    through onboard.rtk.geodesy.parse_xyz_m; the base command also takes spaces; a bad triple is a clear error."""
+    from onboard.base_cli import _xyz as base_xyz
+    from onboard.rtk.geodesy import parse_xyz_m
+
+    assert parse_xyz_m("3774085.6456,-601662.5769,5089316.3970") == (3774085.6456, -601662.5769, 5089316.397)
+    for bad in ("1,2", "1,2,3,4", "a,b,c", "", "1;2;3"):
+        with pytest.raises(ValueError, match="expected X,Y,Z"):
+            parse_xyz_m(bad)
+    assert base_xyz("3774085.6 -601662.5  5089316.3") == (3774085.6, -601662.5, 5089316.3)
+    with pytest.raises(argparse.ArgumentTypeError, match="got '1 2'"):
+        base_xyz("1 2")
+
+
 def test_ubx_rover_log_with_its_own_ephemerides(tmp_path, capsys):
     """The raw M8P rover log (RXM-RAWX + RXM-SFRBX, gzip) needs no --nav: ephemerides come from the log."""
     d = "gnss/ublox-m8p-galway-2018/"
