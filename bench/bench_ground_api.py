@@ -1,7 +1,7 @@
 """Upload throughput of the ground API over loopback, next to peers measured in the same process.
 
 Peers: SHA-256 hashing of the same bytes (the work the uploader and server must both do) and a plain local
-file copy (the disk floor). Our figure: `onboard.uploader.Uploader` against a live uvicorn server on
+file copy (the disk floor). Our figure: `onboard.upload.client.Uploader` against a live uvicorn server on
 127.0.0.1 with a real SQLite file, for several chunk sizes, plus one interrupted-and-resumed upload.
 
 Run: `.venv/bin/python bench/bench_ground_api.py [--mib 64]`
@@ -26,7 +26,7 @@ import uvicorn
 from ground.api.app import create_app
 from ground.api.settings import ApiSettings
 from onboard.logger.journal import Manifest, SegmentInfo
-from onboard.uploader import Uploader, UploaderOptions, UploadError
+from onboard.upload.client import Uploader, UploaderOptions, UploadError
 
 TOKEN = "bench-token-0123456789abcdef"
 

@@ -231,10 +231,9 @@ def rtcm_stream_run(ds: Dataset) -> dict[str, float]:
     """Ours with the base read from the raw RTCM3 stream (the path `onboard rtk` gets with the rtk_inputs hook)."""
     from dataclasses import replace
 
+    from onboard.postpro.inputs import read_base_observations, read_navigation, read_observations
     from onboard.rtk.options import RtkOptions
     from onboard.rtk.postpro import postprocess
-    from onboard.rtk_cli import read_navigation, read_observations
-    from onboard.rtk_inputs import read_base_observations
 
     assert ds.rtcm_stream is not None
     rover = read_observations(ds.rover)
@@ -251,9 +250,9 @@ def engine_alone_ms(ds: Dataset) -> tuple[float, int]:
     """Our filter's CPU ms per epoch in this process (inputs read first, not timed)."""
     from dataclasses import replace
 
+    from onboard.postpro.inputs import read_navigation, read_observations
     from onboard.rtk.options import RtkOptions
     from onboard.rtk.postpro import postprocess
-    from onboard.rtk_cli import read_navigation, read_observations
 
     rover, base = read_observations(ds.rover), read_observations(ds.base)
     nav = read_navigation([str(n) for n in ds.navs])
@@ -313,7 +312,7 @@ def main() -> int:
             print("   ours/RTKLIB  " + "; ".join(parts))
             if ds.rtcm_stream is not None:
                 r = rtcm_stream_run(ds)
-                print(f"   ours on the raw RTCM3 stream ({ds.rtcm_stream.name}, decoded by onboard.rtk_inputs, "
+                print(f"   ours on the raw RTCM3 stream ({ds.rtcm_stream.name}, decoded by onboard.postpro.inputs, "
                       f"in process): {r['epochs']} epochs, fix {r['fix']:.1f} %, 1st fix {r['ttff']:.0f} s, "
                       f"h {r['h']:.1f} cm, v {r['v']:.1f} cm, >10 cm {r['wrong']}")
         ms, n = engine_alone_ms(ds)

@@ -47,9 +47,9 @@ def child_cpu_s(cmd: list[str]) -> float:
 def in_process(ds, out: Path) -> tuple[float, float, float, int]:  # type: ignore[no-untyped-def]
     """(read s, engine s, write s, epochs) of ours on one dataset, CPU time of this process."""
     from onboard.formats.pos import write_pos
+    from onboard.postpro.inputs import read_navigation, read_observations
     from onboard.rtk.options import RtkOptions
     from onboard.rtk.postpro import postprocess
-    from onboard.rtk_cli import read_navigation, read_observations
 
     t0 = time.process_time()
     rover, base = read_observations(ds.rover), read_observations(ds.base)

@@ -249,7 +249,7 @@ def rtk_job(settings: Any, params: dict[str, Any], files: dict[str, str | None],
     import contextlib
     import io
 
-    from onboard.rtk_cli import add_rtk_parser, rtk_main
+    from onboard.postpro.rtk_cli import add_rtk_parser, rtk_main
 
     chosen = {role: _pick(files, params, role) for role in ("rover_obs", "base_obs", "nav")}
     missing = [r for r in ("rover_obs", "base_obs") if chosen[r] is None]

@@ -2,10 +2,10 @@
 
 The pipeline of `bench/rtk_sim.py` (the issue-3 scenario matrix) and of its tests:
 - rover: `World.observe("rover")` each second → `hil_sim.ubx_encode` RXM-RAW (LEA-6T) / RXM-RAWX (M8T) bytes →
-  our UBX decoder with RTKLIB's lock rules (`onboard.convert.collect`, as `onboard rtk` reads a rover journal);
+  our UBX decoder with RTKLIB's lock rules (`onboard.postpro.convert.collect`, as `onboard rtk` reads a rover journal);
 - base: `World.observe("base")` → RXM-RAW(X) bytes → the same decoder → `BaseCore` (what `onboard base` sends:
   RTCM3 1004 + 1006 + 1019 within its radio budget) → the radio (bytes of dropout windows lost) →
-  `onboard.rtk_inputs.collect_rtcm` (as `onboard rtk --base` reads a radio journal);
+  `onboard.postpro.inputs.collect_rtcm` (as `onboard rtk --base` reads a radio journal);
 - the engine forward (`postprocess`), ephemerides from the 1019 messages, Klobuchar from the World (the rover's
   own subframes carry them).
 """
@@ -87,9 +87,9 @@ def simulate(case: SimCase, model: str) -> SimData:
     """Run the World and the byte paths of `case` for rover/base receivers of `model` ("lea6t" or "m8t")."""
     from hil_sim import ubx_encode as enc
     from hil_sim.world import World
-    from onboard.base_station import BaseCore, BaseOptions
-    from onboard.convert import collect
-    from onboard.rtk_inputs import collect_rtcm
+    from onboard.base.station import BaseCore, BaseOptions
+    from onboard.postpro.convert import collect
+    from onboard.receiver.base_epochs import collect_rtcm
 
     world = World(scenario_for(case, model))
     encode = enc.rxm_raw if model == "lea6t" else enc.rxm_rawx

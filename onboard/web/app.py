@@ -12,7 +12,7 @@ from typing import Any
 from fastapi import FastAPI
 from fastapi.responses import HTMLResponse
 
-from onboard.status import read_rtk_status, read_status
+from onboard.recorder.status import DEFAULT_STATUS_PATH, read_rtk_status, read_status
 from onboard.web.checks import PreflightOptions, checks_json, overall, preflight_checks
 
 log = logging.getLogger(__name__)
@@ -27,7 +27,6 @@ def _load(status_path: Path) -> tuple[dict[str, Any] | None, str | None]:
         return None, str(exc)
 
 
-from onboard.web.cli import DEFAULT_STATUS_PATH
 
 
 def create_app(status_path: Path | None = None, options: PreflightOptions | None = None) -> FastAPI:

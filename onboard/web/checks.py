@@ -38,7 +38,7 @@ def preflight_checks(
 ) -> list[Check]:
     """Evaluate a status snapshot (as read from JSON) at wall time `now_wall_ns`; None = no snapshot at all.
 
-    `rtk` is the real-time RTK snapshot (`rtk.json`, `onboard.rtk_service.RtkStatus.to_json`) when the daemon
+    `rtk` is the real-time RTK snapshot (`rtk.json`, `onboard.realtime.service.RtkStatus.to_json`) when the daemon
     runs RTK against a base stream, None otherwise (no RTK line: the trajectory is computed on the ground)."""
     options = options or PreflightOptions()
     if status is None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-DEFAULT_STATUS_PATH = Path("/run/directgeo/status.json")
+from onboard.recorder.status import DEFAULT_STATUS_PATH
 
 
 def add_web_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]

@@ -11,9 +11,9 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from onboard.daemon import Recorder, RecorderDeps
 from onboard.receiver.framing import ubx_frame
-from onboard.settings import Settings
+from onboard.recorder.daemon import Recorder, RecorderDeps
+from onboard.recorder.settings import Settings
 
 SEQ_CLASS_ID = (0x02, 0x10)  # RXM-RAW class/id; a payload of the wrong length just fails to decode (counted)
 
@@ -104,7 +104,7 @@ def wait_until(cond: Callable[[], Any], timeout_s: float = 10.0, what: str = "co
 
 def status(path: Path) -> dict[str, Any]:
     """The status snapshot, or {} before the recorder wrote its first one."""
-    from onboard.status import read_status
+    from onboard.recorder.status import read_status
 
     try:
         return read_status(path)

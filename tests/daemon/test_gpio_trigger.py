@@ -9,11 +9,11 @@ from types import MappingProxyType
 import numpy as np
 import pytest
 
-from onboard.daemon import GpioTiming, RecorderDeps
 from onboard.gnsstime import GpsTime
 from onboard.hw.fake import FakeByteStream
 from onboard.hw.ports import Edge
 from onboard.logger.events import read_events
+from onboard.recorder.daemon import GpioTiming, RecorderDeps
 from onboard.rtk.types import ObsEpoch
 from tests.daemon.helpers import RunningRecorder, make_settings, status, wait_until
 
@@ -173,7 +173,7 @@ def test_gpio_flash_edge_paired_with_gpio_trigger_and_fsynced_at_once(tmp_path: 
 def test_production_edge_sources_follow_the_settings(tmp_path: Path) -> None:
     """The composition root opens PPS + flash (pulled up: the hot shoe pulls the line low) for gpio.flash_pin,
     PPS + trigger for receiver.trigger = "gpio", and no GPIO at all otherwise."""
-    from onboard.daemon import gpio_edge_sources
+    from onboard.recorder.app import gpio_edge_sources
 
     assert gpio_edge_sources(make_settings(tmp_path)) is None
     flash_only = make_settings(tmp_path, gpio_pps_pin=24, gpio_flash_pin=25, gpio_pin_factory="mock")

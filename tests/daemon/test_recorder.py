@@ -9,12 +9,12 @@ from types import MappingProxyType
 
 import pytest
 
-from onboard.daemon import EXIT_DISK_FULL, RecorderDeps
 from onboard.errors import LinkLost
 from onboard.hw.fake import FakeByteStream
 from onboard.logger.journal import iter_journal_bytes, read_manifest
 from onboard.receiver.ubx_tables import poll_frame
-from onboard.status import read_status
+from onboard.recorder.daemon import EXIT_DISK_FULL, RecorderDeps
+from onboard.recorder.status import read_status
 from tests.daemon.helpers import RunningRecorder, make_settings, numbered_frame, status, tim_tm2, wait_until
 
 pytestmark = pytest.mark.timeout(60)
@@ -183,8 +183,8 @@ def test_status_snapshot_complete(tmp_path: Path) -> None:
 
 def test_unwritable_data_dir_is_a_clear_error(tmp_path: Path) -> None:
     """The data directory cannot be written (read-only mount, wrong owner): exit 1, status says why."""
-    from onboard.daemon import EXIT_IO_ERROR
     from onboard.logger.files import OsFileLayer
+    from onboard.recorder.daemon import EXIT_IO_ERROR
 
     class ReadOnlyLayer(OsFileLayer):
         def create(self, path: Path):  # type: ignore[no-untyped-def]

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from onboard.errors import ConfigFileError
-from onboard.settings import (
+from onboard.recorder.settings import (
     KEYS,
     Settings,
     default_config_path,
@@ -111,8 +111,9 @@ def test_rtk_base_stream_selects_the_real_time_rtk_recorder(tmp_path: Path) -> N
     """`rtk.base_stream` (file or ONBOARD_RTK_BASE_STREAM) is what makes the composition root add the RTK service."""
     import socket
 
-    from onboard.daemon import Recorder, RecorderDeps
-    from onboard.rtk_service import RtkRecorder, recorder_for
+    from onboard.realtime.service import RtkRecorder
+    from onboard.recorder.app import recorder_for
+    from onboard.recorder.daemon import Recorder, RecorderDeps
 
     cfg = tmp_path / "r.toml"
     cfg.write_text("[rtk]\nbase_stream = 'serial:/dev/ttyUSB0@57600'\n")

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from onboard.sdnotify import SdNotifier, WatchdogGate
-from onboard.status import STATUS_SCHEMA, SatelliteStatus, StatusSnapshot, read_status, write_status
+from onboard.recorder.sdnotify import SdNotifier, WatchdogGate
+from onboard.recorder.status import STATUS_SCHEMA, SatelliteStatus, StatusSnapshot, read_status, write_status
 
 
 def test_status_roundtrip_and_schema(tmp_path: Path) -> None:

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from onboard.daemon import RecorderDeps
 from onboard.errors import LinkLost
 from onboard.hw.fake import FakeByteStream
 from onboard.logger.files import AppendFile, OsFileLayer
-from onboard.sdnotify import SdNotifier
+from onboard.recorder.daemon import RecorderDeps
+from onboard.recorder.sdnotify import SdNotifier
 from tests.daemon.helpers import RunningRecorder, make_settings, numbered_frame, wait_until
 
 pytestmark = pytest.mark.timeout(60)

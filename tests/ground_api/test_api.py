@@ -17,7 +17,7 @@ import pytest
 
 from ground.api.settings import ApiSettings
 from onboard.logger.journal import Manifest, SegmentInfo
-from onboard.uploader import Uploader, UploaderOptions, UploadError, build_upload_manifest
+from onboard.upload.client import Uploader, UploaderOptions, UploadError, build_upload_manifest
 from tests.ground_api.conftest import TOKEN, LiveServer, start_server
 
 pytestmark = pytest.mark.timeout(120)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from onboard.uploader import Uploader, UploaderOptions
+from onboard.upload.client import Uploader, UploaderOptions
 from tests.ground_api.conftest import TOKEN, LiveServer
 
 CHROMIUM = Path("/usr/bin/chromium")

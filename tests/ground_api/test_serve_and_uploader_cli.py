@@ -1,5 +1,5 @@
 """The real entry points: `python -m ground serve` (token from the environment or a file, refusal without one)
-and `python -m onboard.uploader` against it; plus concurrent chunk writers and an empty file."""
+and `python -m onboard.upload` against it; plus concurrent chunk writers and an empty file."""
 
 from __future__ import annotations
 
@@ -48,7 +48,7 @@ def test_serve_refuses_to_start_without_a_token(tmp_path: Path) -> None:
 
 
 def test_serve_and_uploader_command_lines(tmp_path: Path) -> None:
-    """Server from `python -m ground serve --token-file`, flight sent by `python -m onboard.uploader` (token from
+    """Server from `python -m ground serve --token-file`, flight sent by `python -m onboard.upload` (token from
     the environment), SQLite file in the data dir; a second uploader run sends nothing."""
     token_file = tmp_path / "token"
     token_file.write_text(TOKEN + "\n")
@@ -75,7 +75,7 @@ def test_serve_and_uploader_command_lines(tmp_path: Path) -> None:
         (flight / "000000.ubx").write_bytes(seg)
         m = Manifest(flight.name, 1, [SegmentInfo("000000.ubx", len(seg), hashlib.sha256(seg).hexdigest())])
         (flight / "manifest.json").write_text(json.dumps(m.to_json()))
-        cmd = [sys.executable, "-m", "onboard.uploader", "--url", url, "--chunk-mib", "0.05", str(flight)]
+        cmd = [sys.executable, "-m", "onboard.upload.client", "--url", url, "--chunk-mib", "0.05", str(flight)]
         up = subprocess.run(cmd, cwd=ROOT, env=_env(DIRECTGEO_TOKEN=TOKEN), capture_output=True, text=True,
                             timeout=60, check=False)
         assert up.returncode == 0, up.stderr

@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from onboard.convert import convert_main, convert_one
 from onboard.formats.rinex_nav import read_rinex_nav
 from onboard.formats.rinex_obs import read_rinex_obs
 from onboard.gnsstime import GpsTime
+from onboard.postpro.convert import convert_main, convert_one
 from tests.conftest import PROJECT_ROOT, shared_file
 
 M8P = "gnss/ublox-m8p-galway-2018"
@@ -178,7 +178,7 @@ def test_one_bad_input_does_not_stop_the_others(tmp_path: Path, capsys: pytest.C
 
 def test_command_line_exit_code_without_traceback(tmp_path: Path) -> None:
     env = dict(os.environ, PYTHONPATH=str(PROJECT_ROOT))
-    proc = subprocess.run([sys.executable, "-m", "onboard.convert", str(tmp_path / "nope.ubx.gz"), "-o",
+    proc = subprocess.run([sys.executable, "-m", "onboard.postpro.convert", str(tmp_path / "nope.ubx.gz"), "-o",
                            str(tmp_path)], check=False, capture_output=True, text=True, env=env, timeout=60)
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr and "nope.ubx.gz: no such file" in proc.stderr
@@ -195,7 +195,7 @@ def test_progress_bar_on_a_terminal_only(tmp_path: Path) -> None:
     master, slave = os.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # a terminal has a size
     try:
-        proc = subprocess.run([sys.executable, "-m", "onboard.convert", src, "-o", str(tmp_path / "tty")],
+        proc = subprocess.run([sys.executable, "-m", "onboard.postpro.convert", src, "-o", str(tmp_path / "tty")],
                               check=False, stdout=subprocess.PIPE, stderr=slave, env=env, timeout=120)
         os.set_blocking(master, False)
         chunks = []
@@ -212,7 +212,7 @@ def test_progress_bar_on_a_terminal_only(tmp_path: Path) -> None:
         os.close(slave)
     on_tty = b"".join(chunks).decode(errors="replace")
     assert proc.returncode == 0 and "rtklib_ubx_20080526.ubx" in on_tty and "B/s" in on_tty
-    piped = subprocess.run([sys.executable, "-m", "onboard.convert", src, "-o", str(tmp_path / "pipe")],
+    piped = subprocess.run([sys.executable, "-m", "onboard.postpro.convert", src, "-o", str(tmp_path / "pipe")],
                            check=False, capture_output=True, text=True, env=env, timeout=120)
     assert piped.returncode == 0 and "B/s" not in piped.stderr
     assert (tmp_path / "tty" / "rtklib_ubx_20080526.obs").read_text().split("END OF HEADER")[1] == \
@@ -222,7 +222,7 @@ def test_progress_bar_on_a_terminal_only(tmp_path: Path) -> None:
 def test_header_names_the_receiver_from_mon_ver() -> None:
     import datetime as dt
 
-    from onboard.convert import Collected, header_info
+    from onboard.postpro.convert import Collected, header_info
     from onboard.receiver.decode import MonVer
 
     col = Collected(mon_ver=MonVer("ROM CORE 3.01 (107888)", "00080000", ("FWVER=TIM 1.10", "MOD=NEO-M8T")),

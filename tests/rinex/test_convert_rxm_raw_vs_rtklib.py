@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from onboard.convert import convert_one
 from onboard.formats.rinex_obs import read_rinex_obs
 from onboard.gnsstime import NS_PER_S
+from onboard.postpro.convert import convert_one
 from tests.conftest import shared_file
 
 GPS_EPOCH_POSIX_S = 315_964_800  # RTKLIB's gtime_t counts GPS time from 1970 without leap seconds

@@ -105,7 +105,7 @@ def test_m8p_static_on_the_lossy_rtcm_base_rinex_meets_the_fix_targets_and_refix
 def test_m8p_static_on_the_raw_lossy_rtcm3_stream_meets_the_fix_targets():
     """The same base as the raw RTCM3 stream decoded in process (`onboard rtk --base …rtcm3.gz`, bench_rtk's
     "lossy RTCM" row): 96.3 % fixed (was 93.0 %), first fix 41 s (21 s before the static code factor)."""
-    from onboard.rtk_inputs import read_base_observations
+    from onboard.postpro.inputs import read_base_observations
 
     rover0 = read_rinex_obs(shared_file(M8P + "rinex/rover-20181004-1237.obs.gz")).epochs[0]
     base = read_base_observations(shared_file(M8P + "rtcm3/base-20181004-1236.rtcm3.gz"), rover0.time)

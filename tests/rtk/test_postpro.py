@@ -130,7 +130,7 @@ def test_known_take_off_point_and_static_start_only_shape_the_forward_pass():
 def test_onboard_rtk_combined_end_to_end_on_geonet(tmp_path, capsys):
     """`python -m onboard rtk --direction combined` writes the combined track (both passes run)."""
     from onboard.formats.pos import read_pos
-    from onboard.rtk_cli import main
+    from onboard.postpro.rtk_cli import main
 
     d = "gnss/geonet-0759-3040-20050402/"
     out = tmp_path / "c.pos"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from onboard.formats.pos import read_pos
-from onboard.rtk_cli import add_rtk_parser, main
+from onboard.postpro.rtk_cli import add_rtk_parser, main
 from tests.conftest import shared_file
 
 GEONET = "gnss/geonet-0759-3040-20050402/"
@@ -124,7 +124,7 @@ def test_unreadable_rover_and_bad_coordinates(tmp_path, capsys):
 def test_one_xyz_parser_behind_the_positions_of_the_command_lines_and_settings():
     """`onboard rtk --base-pos/--init-pos`, `onboard base --position` and `rtk.takeoff_position` read X,Y,Z
     through onboard.rtk.geodesy.parse_xyz_m; the base command also takes spaces; a bad triple is a clear error."""
-    from onboard.base_cli import _xyz as base_xyz
+    from onboard.base.cli import _xyz as base_xyz
     from onboard.rtk.geodesy import parse_xyz_m
 
     assert parse_xyz_m("3774085.6456,-601662.5769,5089316.3970") == (3774085.6456, -601662.5769, 5089316.397)
@@ -171,6 +171,6 @@ def test_rinex_run_imports_only_what_rinex_needs(tmp_path):
     assert "120 epochs" in out.stdout
     loaded = set(next(ln for ln in out.stdout.splitlines() if ln.startswith("MODULES")).split()[1:])
     assert "onboard.rtk.rtkpos" in loaded and "onboard.formats.rinex_obs" in loaded
-    unneeded = {"pyubx2", "pyrtcm", "scipy", "pyproj", "tqdm", "fastapi", "serial", "tomllib", "onboard.settings",
-                "onboard.convert", "onboard.receiver.decode", "onboard.base_cli", "onboard.web", "onboard.daemon"}
+    unneeded = {"pyubx2", "pyrtcm", "scipy", "pyproj", "tqdm", "fastapi", "serial", "tomllib", "onboard.recorder.settings",
+                "onboard.postpro.convert", "onboard.receiver.decode", "onboard.base.cli", "onboard.web", "onboard.recorder.daemon"}
     assert not loaded & unneeded, sorted(loaded & unneeded)

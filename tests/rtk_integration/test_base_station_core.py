@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from pyrtcm import RTCMReader
 
-from onboard.base_station import BaseCore, BaseOptions, CorrectionScheduler, SurveyIn, spp_position
+from onboard.base.station import BaseCore, BaseOptions, CorrectionScheduler, SurveyIn, spp_position
 from onboard.formats.rinex_nav import read_rinex_nav
 from onboard.formats.rinex_obs import read_rinex_obs
 from onboard.gnsstime import GpsTime
@@ -191,7 +191,7 @@ def test_an_unresolved_half_cycle_at_the_base_is_withheld_and_its_resolution_sta
 def test_radio_sender_drops_when_the_radio_is_stuck_and_logs_only_what_it_queued(tmp_path) -> None:
     import threading
 
-    from onboard.base_station import RadioSender
+    from onboard.base.station import RadioSender
     from onboard.errors import LinkLost
     from tests.daemon.helpers import wait_until
 

@@ -20,13 +20,13 @@ import numpy as np
 import pytest
 from pyrtcm import RTCMReader
 
-from onboard.base_station import BaseOptions, BaseStation
-from onboard.daemon import RecorderDeps
+from onboard.base.station import BaseOptions, BaseStation
 from onboard.hw.fake import FakeByteStream
 from onboard.hw.serial_port import SerialByteStream
 from onboard.receiver.decode import iter_journal
 from onboard.receiver.framing import Protocol, StreamFramer
 from onboard.receiver.rtcm import PRUNIT_GPS_M
+from onboard.recorder.daemon import RecorderDeps
 from onboard.rtk.types import ObsEpoch
 from tests.conftest import shared_file
 from tests.daemon.helpers import make_settings, status, wait_until

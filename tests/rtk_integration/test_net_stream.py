@@ -92,9 +92,10 @@ def test_malformed_specs_are_refused() -> None:
 
 
 def test_recorder_for_adds_rtk_only_when_a_base_stream_is_named(tmp_path) -> None:
-    from onboard.daemon import Recorder, RecorderDeps
     from onboard.hw.fake import FakeByteStream
-    from onboard.rtk_service import RtkRecorder, recorder_for
+    from onboard.realtime.service import RtkRecorder
+    from onboard.recorder.app import recorder_for
+    from onboard.recorder.daemon import Recorder, RecorderDeps
     from tests.daemon.helpers import make_settings
 
     settings, deps = make_settings(tmp_path), RecorderDeps(open_port=FakeByteStream)

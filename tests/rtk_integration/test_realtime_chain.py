@@ -21,13 +21,13 @@ from types import MappingProxyType
 import numpy as np
 import pytest
 
-from onboard.base_station import BaseOptions, BaseStation
-from onboard.daemon import Recorder, RecorderDeps
+from onboard.base.station import BaseOptions, BaseStation
 from onboard.formats.pos import read_pos
 from onboard.hw.serial_port import SerialByteStream
 from onboard.logger.journal import iter_journal_bytes
+from onboard.realtime.service import RADIO_DIR, RTK_STATUS_NAME, SOLUTION_NAME, RtkRecorder, RtkServiceOptions
+from onboard.recorder.daemon import Recorder, RecorderDeps
 from onboard.rtk.types import Q_FIX, Q_FLOAT
-from onboard.rtk_service import RADIO_DIR, RTK_STATUS_NAME, SOLUTION_NAME, RtkRecorder, RtkServiceOptions
 from tests.conftest import shared_file
 from tests.daemon.helpers import make_settings, status, wait_until
 

@@ -11,12 +11,12 @@ import pytest
 from onboard.errors import InputError
 from onboard.formats.rinex_obs import read_rinex_obs
 from onboard.gnsstime import GpsTime
+from onboard.postpro.inputs import read_base_observations, read_navigation, read_observations
+from onboard.receiver.base_epochs import collect_rtcm
 from onboard.receiver.rtcm import BasePosition, encode_base_position, encode_gps_observations
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.postpro import postprocess
 from onboard.rtk.types import Q_FIX
-from onboard.rtk_cli import read_navigation, read_observations
-from onboard.rtk_inputs import collect_rtcm, read_base_observations
 from tests.conftest import shared_file
 
 M8P = "gnss/ublox-m8p-galway-2018/"

@@ -13,15 +13,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from onboard.base_station import BaseCore, BaseOptions
+from onboard.base.station import BaseCore, BaseOptions
 from onboard.errors import LinkLost
 from onboard.formats.pos import read_pos
 from onboard.hw.fake import FakeByteStream
 from onboard.hw.serial_port import SerialByteStream
 from onboard.logger.journal import iter_journal_bytes
+from onboard.postpro.inputs import read_base_observations
+from onboard.realtime.service import RADIO_DIR, SOLUTION_NAME, BaseStream, RtkService, RtkServiceOptions
 from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE
-from onboard.rtk_inputs import read_base_observations
-from onboard.rtk_service import RADIO_DIR, SOLUTION_NAME, BaseStream, RtkService, RtkServiceOptions
 from tests.conftest import shared_file
 from tests.daemon.helpers import wait_until
 
@@ -219,9 +219,10 @@ def test_ubx_relay_from_the_base_decodes_to_the_base_epochs(world) -> None:
 
 
 def test_max_base_age_comes_from_the_settings_and_defaults_to_30_s(tmp_path) -> None:
-    from onboard.daemon import RecorderDeps
-    from onboard.rtk_service import RtkRecorder, recorder_for
-    from onboard.settings import default_config_path, load_settings
+    from onboard.realtime.service import RtkRecorder
+    from onboard.recorder.app import recorder_for
+    from onboard.recorder.daemon import RecorderDeps
+    from onboard.recorder.settings import default_config_path, load_settings
 
     deps = RecorderDeps(open_port=lambda: FakeByteStream(0.02))
     shipped = load_settings(default_config_path(), environ={})
@@ -235,9 +236,10 @@ def test_max_base_age_comes_from_the_settings_and_defaults_to_30_s(tmp_path) -> 
 
 
 def test_engine_options_come_from_the_rtk_engine_table_and_bad_ones_are_refused(tmp_path) -> None:
-    from onboard.daemon import RecorderDeps
-    from onboard.rtk_service import RtkRecorder, recorder_for
-    from onboard.settings import ConfigFileError, default_config_path, load_settings
+    from onboard.realtime.service import RtkRecorder
+    from onboard.recorder.app import recorder_for
+    from onboard.recorder.daemon import RecorderDeps
+    from onboard.recorder.settings import ConfigFileError, default_config_path, load_settings
 
     base = {"rtk.base_stream": "tcp://127.0.0.1:9", "journal.data_dir": str(tmp_path)}
     settings = load_settings(default_config_path(), environ={"ONBOARD_RTK_ENGINE_PARTIAL_AR": "false"}, overrides={
@@ -261,8 +263,8 @@ def test_the_shipped_configuration_documents_the_engine_defaults() -> None:
     name every key but max_age_s (set by rtk.max_base_age_s)."""
     import tomllib
 
+    from onboard.recorder.settings import default_config_path
     from onboard.rtk.options import TOML_KEYS, RtkOptions, options_from_mapping
-    from onboard.settings import default_config_path
 
     text = default_config_path().read_text().split("[rtk.engine]", 1)[1]
     lines = [line[2:] for line in text.splitlines() if line.startswith("# ") and " = " in line]
@@ -272,9 +274,10 @@ def test_the_shipped_configuration_documents_the_engine_defaults() -> None:
 
 
 def test_the_take_off_position_comes_from_the_settings_and_bad_values_are_refused(tmp_path) -> None:
-    from onboard.daemon import RecorderDeps
-    from onboard.rtk_service import RtkRecorder, recorder_for
-    from onboard.settings import ConfigFileError, default_config_path, load_settings
+    from onboard.realtime.service import RtkRecorder
+    from onboard.recorder.app import recorder_for
+    from onboard.recorder.daemon import RecorderDeps
+    from onboard.recorder.settings import ConfigFileError, default_config_path, load_settings
 
     base = {"rtk.base_stream": "tcp://127.0.0.1:9", "journal.data_dir": str(tmp_path)}
     settings = load_settings(default_config_path(), environ={}, overrides={

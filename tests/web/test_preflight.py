@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 import uvicorn
 
-from onboard.rtk_service import RtkStatus, write_rtk_status
-from onboard.status import RTK_STATUS_NAME, SatelliteStatus, StatusSnapshot, write_status
+from onboard.realtime.service import RtkStatus, write_rtk_status
+from onboard.recorder.status import RTK_STATUS_NAME, SatelliteStatus, StatusSnapshot, write_status
 from onboard.web.app import create_app
 from onboard.web.checks import FAIL, OK, WARN, overall, preflight_checks
 

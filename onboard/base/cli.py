@@ -1,6 +1,6 @@
-"""`python -m onboard base`: command-line shell of base-station mode (see `onboard.base_station`).
+"""`python -m onboard base`: command-line shell of base-station mode (see `onboard.base.station`).
 
-Kept apart from `onboard.base_station` so that registering the command imports nothing heavy.
+Kept apart from `onboard.base.station` so that registering the command imports nothing heavy.
 """
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from onboard.recorder.settings import add_recorder_arguments
 from onboard.rtk.geodesy import parse_xyz_m
-from onboard.settings import add_recorder_arguments
 
 
 def _xyz(text: str) -> tuple[float, float, float]:
@@ -46,13 +46,14 @@ def base_main(args: argparse.Namespace) -> int:
     """Run the base station; returns the exit code."""
     import asyncio
 
-    from onboard.base_station import BaseOptions, BaseStation
-    from onboard.daemon import RecorderDeps, serial_port_opener
+    from onboard.base.station import BaseOptions, BaseStation
     from onboard.errors import ConfigFileError
     from onboard.hw.ports import ByteStream
     from onboard.hw.serial_port import SerialByteStream
-    from onboard.sdnotify import SdNotifier
-    from onboard.settings import load_settings, recorder_overrides
+    from onboard.recorder.app import serial_port_opener
+    from onboard.recorder.daemon import RecorderDeps
+    from onboard.recorder.sdnotify import SdNotifier
+    from onboard.recorder.settings import load_settings, recorder_overrides
 
     try:
         settings = load_settings(args.config, overrides=recorder_overrides(args))

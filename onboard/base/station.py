@@ -33,7 +33,6 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from onboard.daemon import Recorder, RecorderDeps
 from onboard.errors import LinkLost
 from onboard.gnsstime import GpsTime
 from onboard.hw.ports import ByteStream
@@ -44,10 +43,11 @@ from onboard.receiver.rtcm import (
     encode_ephemeris,
     encode_gps_observations,
 )
+from onboard.recorder.daemon import Recorder, RecorderDeps
+from onboard.recorder.settings import Settings
 from onboard.rtk.ephemeris import EphemerisStore, satellite_states
 from onboard.rtk.pntpos import pntpos
 from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP, Ephemeris, ObsEpoch
-from onboard.settings import Settings
 
 log = logging.getLogger(__name__)
 
@@ -476,7 +476,7 @@ class BaseStation(Recorder):
 
     def _write_status(self) -> None:
         super()._write_status()
-        from onboard.rtk_service import write_rtk_status
+        from onboard.realtime.service import write_rtk_status
 
         try:
             write_rtk_status(self.settings.status_path.with_name(BASE_STATUS_NAME), self.base_snapshot())

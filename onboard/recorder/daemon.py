@@ -39,10 +39,10 @@ from onboard.logger.events import EventLog, read_events
 from onboard.logger.files import FileLayer, OsFileLayer
 from onboard.logger.journal import EVENTS_NAME, Journal, JournalOptions, flight_name, read_manifest
 from onboard.receiver.framing import Frame, StreamFramer
+from onboard.recorder.sdnotify import SdNotifier, WatchdogGate
+from onboard.recorder.settings import Settings, receiver_options
+from onboard.recorder.status import SatelliteStatus, StatusSnapshot, write_status
 from onboard.rtk.types import CameraMark
-from onboard.sdnotify import SdNotifier, WatchdogGate
-from onboard.settings import Settings, receiver_options
-from onboard.status import SatelliteStatus, StatusSnapshot, write_status
 from onboard.timepulse.marks import (
     EVENT_FORMAT_VERSION,
     FLASH_CHANNEL,
@@ -794,51 +794,3 @@ def _set_future(fut: asyncio.Future[None], exc: BaseException | None) -> None:
         fut.set_result(None)
     else:
         fut.set_exception(exc)
-
-
-def serial_port_opener(settings: Settings) -> Callable[[], ByteStream]:
-    """The production port factory: pyserial on `settings.port_device`."""
-
-    def open_port() -> ByteStream:
-        from onboard.hw.serial_port import SerialByteStream
-
-        return SerialByteStream(settings.port_device, settings.port_baud, settings.port_read_timeout_s)
-
-    return open_port
-
-
-def gpio_edge_sources(settings: Settings) -> Callable[[], Sequence[EdgeSource]] | None:
-    """The production GPIO edge sources: trigger (receiver.trigger = "gpio") and/or flash (gpio.flash_pin),
-    with the PPS line that times them; None when no GPIO input is configured."""
-    trigger = receiver_options(settings).trigger == "gpio"
-    flash = settings.gpio_flash_pin >= 0
-    if not (trigger or flash):
-        return None
-
-    def open_sources() -> Sequence[EdgeSource]:
-        from onboard.hw.gpio_edges import GpioEdgeSource, lgpio_factory
-
-        if settings.gpio_pin_factory == "mock":
-            from gpiozero.pins.mock import MockFactory
-
-            factory = MockFactory()
-        else:
-            factory = lgpio_factory()
-        sources = [GpioEdgeSource(settings.gpio_pps_pin, factory, line="pps")]
-        if trigger:
-            sources.append(GpioEdgeSource(settings.gpio_trigger_pin, factory, line="trigger"))
-        if flash:
-            # the hot-shoe pulls the line low: an internal pull-up holds it high between flashes
-            sources.append(GpioEdgeSource(settings.gpio_flash_pin, factory, line="flash", pull_up=True))
-        return sources
-
-    return open_sources
-
-
-def run_recorder(settings: Settings, deps: RecorderDeps | None = None) -> int:
-    """Run the recorder to completion in a fresh event loop; returns the exit code."""
-    if deps is None:
-        deps = RecorderDeps(open_port=serial_port_opener(settings), notifier=SdNotifier())
-    from onboard.rtk_service import recorder_for  # the RTK service extends Recorder: import it late
-
-    return asyncio.run(recorder_for(settings, deps, settings.rtk_base_stream or None).run())

@@ -11,75 +11,19 @@ import argparse
 import logging
 import sys
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from onboard.errors import InputError
-from onboard.rtk.ephemeris import EphemerisStore
+from onboard.postpro.inputs import is_rinex, read_base_observations, read_navigation, read_observations
 from onboard.rtk.geodesy import parse_xyz_m
 from onboard.rtk.options import AR_MODES, RtkOptions
 from onboard.rtk.postpro import DIRECTIONS, postprocess
-from onboard.rtk.rtkpos import Nav
-from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE, Ephemeris, ObsEpoch
+from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class ObsInput:
-    """Observations read from one file: epochs, ephemerides found in it, header antenna position."""
-
-    epochs: list[ObsEpoch]
-    ephemerides: list[Ephemeris]
-    antenna_pos_ecef_m: np.ndarray | None
-    kind: str
-
-
-def _is_rinex(path: Path) -> bool:
-    from onboard.formats.textfile import read_head_bytes
-
-    head = read_head_bytes(path, 4096)
-    return b"RINEX VERSION" in head[:200]
-
-
-def read_observations(path: str | Path) -> ObsInput:
-    """RINEX observation file (GPS satellites only) or UBX log (journal file) → ObsInput. Raises InputError
-    when unusable."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
-    if _is_rinex(path):
-        from onboard.formats.rinex_obs import read_rinex_obs
-
-        # GPS alone: the engine is GPS L1, and parsing the other systems' fields was a quarter of the reading
-        # (M8P rover + RAWX base 0.065 -> 0.049 s CPU, with the GLW1 CORS base 0.091 -> 0.070 s)
-        rnx = read_rinex_obs(path, systems="G")
-        return ObsInput(rnx.epochs, [], rnx.header.antenna_position_ecef_m(), "rinex")
-    from onboard.convert import collect
-    from onboard.receiver.decode import iter_file_bytes
-
-    col = collect(iter_file_bytes(path))
-    if not col.epochs:
-        raise InputError(f"{path}: neither a RINEX observation file nor a UBX log with RXM-RAW/RXM-RAWX epochs")
-    pos = np.median(np.array(col.fixes_ecef_m), axis=0) if col.fixes_ecef_m else None
-    return ObsInput(col.epochs, col.ephemerides, pos, "ubx")
-
-
-def read_navigation(paths: Sequence[str | Path], extra: Sequence[Ephemeris] = ()) -> Nav:
-    """Ephemerides (and Klobuchar coefficients) from RINEX nav files plus ephemerides decoded elsewhere."""
-    from onboard.formats.rinex_nav import read_rinex_nav
-
-    store = EphemerisStore(extra)
-    iono = None
-    for p in paths:
-        nav = read_rinex_nav(p)
-        for eph in nav.ephemerides:
-            store.add(eph)
-        if nav.iono_alpha is not None and nav.iono_beta is not None:
-            iono = (nav.iono_alpha, nav.iono_beta)
-    return Nav(store, iono)
 
 
 def _xyz(text: str) -> np.ndarray:
@@ -134,11 +78,9 @@ def rtk_main(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     rover = read_observations(args.rover)
     base_path = Path(args.base)
-    if base_path.is_file() and _is_rinex(base_path):
+    if base_path.is_file() and is_rinex(base_path):
         base = read_observations(base_path)  # without loading the RTCM3 decoders (start-up time)
     else:
-        from onboard.rtk_inputs import read_base_observations
-
         # the base may also be an RTCM3 stream or a journal folder (e.g. the rover's radio/ journal)
         base = read_base_observations(args.base, rover.epochs[0].time if rover.epochs else None)
     nav = read_navigation(args.nav, rover.ephemerides + base.ephemerides)
@@ -201,7 +143,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Stand-alone entry (`python -m onboard.rtk_cli ...`), same arguments as `onboard rtk`."""
+    """Stand-alone entry (`python -m onboard.postpro.rtk_cli ...`), same arguments as `onboard rtk`."""
     parser = argparse.ArgumentParser(prog="onboard")
     sub = parser.add_subparsers(dest="command", required=True)
     add_rtk_parser(sub)

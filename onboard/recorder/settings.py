@@ -1,7 +1,7 @@
 """Recorder settings: one frozen dataclass, layered package defaults → TOML file → `ONBOARD_*` env → CLI flags.
 
 Keys are `section.key` names in the TOML file (documented, every key commented, in
-`onboard/default_config.toml`); the environment spells them `ONBOARD_SECTION_KEY`
+`onboard/recorder/default_config.toml`); the environment spells them `ONBOARD_SECTION_KEY`
 (e.g. `ONBOARD_PORT_DEVICE=/dev/ttyACM0`). The `[receiver]` section takes, besides `model` and `configure`,
 every field of `onboard.receiver.profiles.ReceiverOptions` by its name; `[rtk.engine]` the RTK engine's options
 by their TOML names (`onboard.rtk.options.TOML_KEYS`; environment `ONBOARD_RTK_ENGINE_<KEY>`). Unknown keys and
@@ -22,6 +22,7 @@ from types import MappingProxyType
 from typing import Any
 
 from onboard.errors import ConfigFileError
+from onboard.recorder.status import DEFAULT_STATUS_PATH
 
 ENV_PREFIX = "ONBOARD_"
 
@@ -44,7 +45,7 @@ class Settings:
     journal_segment_max_s: float = 3600.0
     disk_floor_mb: float = 200.0
     disk_check_interval_s: float = 1.0
-    status_path: Path = Path("/run/directgeo/status.json")
+    status_path: Path = DEFAULT_STATUS_PATH
     status_interval_s: float = 1.0
     watchdog_writer_stall_s: float = 10.0
     gpio_trigger_pin: int = -1
@@ -203,7 +204,7 @@ def env_values(environ: Mapping[str, str]) -> dict[str, str]:
 
 def default_config_path() -> Path:
     """The packaged, documented default configuration file."""
-    return Path(str(resources.files("onboard").joinpath("default_config.toml")))
+    return Path(str(resources.files("onboard.recorder").joinpath("default_config.toml")))
 
 
 def load_settings(
@@ -308,7 +309,7 @@ def receiver_options(s: Settings) -> Any:
 def add_recorder_arguments(parser: Any) -> None:
     """The command-line overrides shared by every recorder command (`run`, `base`): config file, line rate,
     data folder, status path, and recording without configuring the receiver."""
-    parser.add_argument("--config", type=Path, help="TOML configuration file (see onboard/default_config.toml)")
+    parser.add_argument("--config", type=Path, help="TOML configuration file (see onboard/recorder/default_config.toml)")
     parser.add_argument("--baud", type=int, help="line rate to open the port at (overrides port.baud)")
     parser.add_argument("--data-dir", type=Path, help="where flights are recorded (overrides journal.data_dir)")
     parser.add_argument("--status", type=Path, help="status snapshot JSON path (overrides status.path)")

@@ -7,7 +7,7 @@ then for each file asks the server how many bytes it holds (HEAD → Upload-Offs
 chunks, each with its own SHA-256. Network errors and rejected chunks are retried with back-off; a 409 means
 the server's offset moved: ask again and continue from there. The server verifies the whole file at the end.
 
-Usage: `python -m onboard.uploader --url http://ground:8600 [--token-file F] FLIGHT_DIR` (token also from
+Usage: `python -m onboard.upload --url http://ground:8600 [--token-file F] FLIGHT_DIR` (token also from
 $DIRECTGEO_TOKEN).
 """
 
@@ -237,8 +237,8 @@ class Uploader:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """`python -m onboard.uploader`: upload one or more flight folders; exit 0 when all are complete."""
-    p = argparse.ArgumentParser(prog="python -m onboard.uploader", description=__doc__.splitlines()[0])
+    """`python -m onboard.upload`: upload one or more flight folders; exit 0 when all are complete."""
+    p = argparse.ArgumentParser(prog="python -m onboard.upload", description=__doc__.splitlines()[0])
     p.add_argument("--url", required=True, help="ground API base URL")
     p.add_argument("--token-file", type=Path, help="file holding the API token (else $DIRECTGEO_TOKEN)")
     p.add_argument("--chunk-mib", type=float, default=4.0)

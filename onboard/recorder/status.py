@@ -9,14 +9,17 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from onboard.formats.atomic import write_json_atomic
+
 STATUS_SCHEMA = "directgeo-status/1"
+DEFAULT_STATUS_PATH = Path("/run/directgeo/status.json")
+"""Where the recorder writes its snapshot and the pre-flight page reads it (systemd's RuntimeDirectory)."""
 RTK_STATUS_NAME = "rtk.json"
-"""The real-time RTK snapshot (`onboard.rtk_service.RtkStatus`), written beside the recorder's status snapshot."""
+"""The real-time RTK snapshot (`onboard.realtime.service.RtkStatus`), written beside the recorder's status snapshot."""
 STATES = ("starting", "recording", "port_lost", "disk_full", "stopped", "error")
 CONFIG_STATES = ("disabled", "pending", "detecting", "configuring", "verified", "failed")
 
@@ -83,14 +86,11 @@ class StatusSnapshot:
         return dataclasses.asdict(self)
 
 
-def write_status(path: Path, snapshot: StatusSnapshot) -> None:
-    """Write the snapshot atomically (temp file in the same directory + rename)."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    data = json.dumps(snapshot.to_json(), indent=1, sort_keys=True).encode() + b"\n"
-    with open(tmp, "wb") as f:
-        f.write(data)
-    os.replace(tmp, path)
+def write_status(path: Path, snapshot: StatusSnapshot | dict[str, Any]) -> None:
+    """Write a snapshot (the recorder's, or a feature's JSON dict such as `rtk.json`) atomically: temp file in the
+    same directory + rename. Not fsync'd: a snapshot lives in /run (tmpfs) and is rewritten every second."""
+    obj = snapshot.to_json() if isinstance(snapshot, StatusSnapshot) else snapshot
+    write_json_atomic(path, obj, fsync=False)
 
 
 def read_status(path: Path) -> dict[str, Any]:

@@ -42,19 +42,19 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from onboard.daemon import Recorder, RecorderDeps
 from onboard.errors import LinkLost
 from onboard.gnsstime import GpsTime
 from onboard.hw.ports import ByteStream, Clock, SystemClock
 from onboard.logger.journal import Journal, JournalOptions
 from onboard.receiver.framing import Frame, Protocol, StreamFramer
 from onboard.receiver.rtcm import BasePosition, RtcmDecoder
+from onboard.recorder.daemon import Recorder, RecorderDeps
+from onboard.recorder.settings import Settings
+from onboard.recorder.status import RTK_STATUS_NAME
 from onboard.rtk.ephemeris import EphemerisStore
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.rtkpos import Nav, RtkState, rtk_init, rtk_pos
 from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, Ephemeris, ObsEpoch, Solution
-from onboard.settings import Settings, rtk_engine_options, takeoff_position_ecef_m
-from onboard.status import RTK_STATUS_NAME
 
 log = logging.getLogger(__name__)
 
@@ -161,7 +161,7 @@ class BaseStream:
         return new
 
     def _add_epoch(self, ep: ObsEpoch) -> int:
-        from onboard.rtk_inputs import EPOCH_MERGE_TOLERANCE_NS, _merge
+        from onboard.receiver.base_epochs import EPOCH_MERGE_TOLERANCE_NS, _merge
 
         ep = ep.gps_only()
         if len(ep) == 0:
@@ -513,17 +513,3 @@ class RtkRecorder(Recorder):
             write_rtk_status(self.settings.status_path.with_name(RTK_STATUS_NAME), self.rtk.snapshot())
         except OSError as exc:
             log.warning("rtk status not written: %s", exc)
-
-
-def recorder_for(settings: Settings, deps: RecorderDeps, base_stream: str | None,
-                 options: RtkServiceOptions | None = None) -> Recorder:
-    """The composition root's one call: the plain recorder, or with real-time RTK when a base stream is named
-    (`serial:DEV[@BAUD]`, `tcp://HOST:PORT`, `ntrip://[USER:PASS@]HOST[:PORT]/MOUNT`; ValueError if malformed)."""
-    if not base_stream:
-        return Recorder(settings, deps)
-    from onboard.hw.net_stream import open_base_stream
-
-    options = options or RtkServiceOptions(engine=rtk_engine_options(settings),
-                                           max_base_age_s=settings.rtk_max_base_age_s,
-                                           takeoff_position_ecef_m=takeoff_position_ecef_m(settings))
-    return RtkRecorder(settings, deps, options, open_base_stream(base_stream))

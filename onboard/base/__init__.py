@@ -1,0 +1,1 @@
+"""Base-station mode (`python -m onboard base`): record the static receiver and send RTCM3 over the radio."""
