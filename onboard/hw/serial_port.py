@@ -8,12 +8,40 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 
 import serial
 
 from onboard.errors import LinkLost
 
 log = logging.getLogger(__name__)
+
+
+class _OpenFailures:
+    """The last open error logged per device, so that a port retried every few seconds fills the console (and
+    the journal) with one WARNING per distinct error, not one per attempt; a successful open forgets it.
+
+    Process-wide on purpose: the recorder builds a new SerialByteStream for every attempt. It only decides what
+    is logged, never what is done."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._last: dict[str, str] = {}
+
+    def failed(self, device: str, message: str) -> bool:
+        """Note a failure; True when it differs from the last one logged for `device` (log it)."""
+        with self._lock:
+            if self._last.get(device) == message:
+                return False
+            self._last[device] = message
+            return True
+
+    def opened(self, device: str) -> None:
+        with self._lock:
+            self._last.pop(device, None)
+
+
+_open_failures = _OpenFailures()
 
 
 class SerialByteStream:
@@ -40,7 +68,11 @@ class SerialByteStream:
             )
         except (serial.SerialException, OSError, ValueError) as exc:
             self._port = None
-            raise LinkLost(f"cannot open {self.device} at {self.baud} Bd: {exc}") from exc
+            message = f"cannot open {self.device} at {self.baud} Bd: {exc}"
+            if _open_failures.failed(self.device, message):
+                log.warning("%s (retrying; the same error is not logged again)", message)
+            raise LinkLost(message) from exc
+        _open_failures.opened(self.device)
         log.info("opened %s at %d Bd", self.device, self.baud)
 
     def read(self, max_bytes: int) -> bytes:

@@ -10,6 +10,7 @@ from pathlib import Path
 from onboard.errors import ConfigFileError
 
 EXIT_USAGE = 2
+PREFIX = "directgeo: run: error:"
 
 
 def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:  # type: ignore[type-arg]
@@ -30,12 +31,13 @@ def _run(args: argparse.Namespace) -> int:
     from onboard.recorder.app import gpio_edge_sources, run_recorder, serial_port_opener
     from onboard.recorder.daemon import EXIT_DISK_FULL, RecorderDeps
     from onboard.recorder.sdnotify import SdNotifier
-    from onboard.recorder.settings import load_settings, recorder_overrides
+    from onboard.recorder.settings import check_recording_paths, load_settings, recorder_overrides
 
     try:
         settings = load_settings(args.config, overrides=recorder_overrides(args))
+        check_recording_paths(settings)  # before the flight opens: a bad path is a configuration error (exit 2)
     except ConfigFileError as exc:
-        print(f"configuration error: {exc}", file=sys.stderr)
+        print(f"{PREFIX} {exc}", file=sys.stderr)
         return EXIT_USAGE
     # Test hook: a file layer that logs every fsync'd length, so a power-cut test can cut files back to it.
     sync_log = os.environ.get("ONBOARD_TEST_SYNC_LOG")
@@ -44,6 +46,6 @@ def _run(args: argparse.Namespace) -> int:
                         edge_sources=gpio_edge_sources(settings))
     code = run_recorder(settings, deps)
     if code == EXIT_DISK_FULL:
-        print("recorder stopped: free disk space below journal.disk_floor_mb (see the status snapshot)",
-              file=sys.stderr)
+        print(f"{PREFIX} free disk space is below journal.disk_floor_mb: recording stopped (see the status "
+              "snapshot); free space, then start the recorder again", file=sys.stderr)
     return code

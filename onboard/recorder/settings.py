@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import tempfile
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -21,8 +22,9 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+from onboard import validate as check
 from onboard.errors import ConfigFileError
-from onboard.recorder.status import DEFAULT_STATUS_PATH
+from onboard.recorder.status import DEFAULT_STATUS_PATH, STALE_AFTER_S
 
 ENV_PREFIX = "ONBOARD_"
 
@@ -112,6 +114,67 @@ def _rtk_engine_kinds() -> dict[str, str]:
     return {key: named.get(conv, "float") for key, (_, conv) in TOML_KEYS.items()}
 
 
+@dataclass(frozen=True, slots=True)
+class Bound:
+    """The range of one numeric key: [minimum, maximum] (`exclusive_minimum`: > minimum; no maximum when None) in
+    `unit`, and why."""
+
+    minimum: float
+    maximum: float | None
+    unit: str = ""
+    exclusive_minimum: bool = False
+    why: str = ""
+
+
+GPIO_PIN = Bound(-1, 27, why="a BCM GPIO number of the 40-pin header, -1 = none")
+# Every numeric key's range, with the unit its message shows (`onboard.validate` words the refusal).
+BOUNDS: Mapping[str, Bound] = MappingProxyType(
+    {
+        "port.baud": Bound(1200, 4_000_000, " bit/s"),
+        "port.read_timeout_s": Bound(0, 5, " s", True),
+        "port.reopen_min_s": Bound(0, 3600, " s", True),
+        "port.reopen_max_s": Bound(0, 3600, " s", True),
+        "journal.sync_interval_s": Bound(0, 1, " s", True, "received bytes are fsync'd at least once a second"),
+        "journal.segment_max_mb": Bound(0, 4000, " MB", why="0 = never by size; a FAT32 file holds less than 4 GiB"),
+        "journal.segment_max_s": Bound(0, 86400, " s", why="0 = never by time"),
+        # no maximum: a floor above the card's size refuses to record (exit 3), which is what it says
+        "journal.disk_floor_mb": Bound(0, None, " MB"),
+        "journal.disk_check_interval_s": Bound(0, 60, " s", True),
+        "status.interval_s": Bound(0, STALE_AFTER_S / 2, " s", True,
+                                   f"the pre-flight page calls a snapshot older than {STALE_AFTER_S:g} s stale"),
+        "watchdog.writer_stall_s": Bound(0, 3600, " s", True),
+        "gpio.trigger_pin": GPIO_PIN,
+        "gpio.pps_pin": GPIO_PIN,
+        "gpio.flash_pin": GPIO_PIN,
+        "rtk.max_base_age_s": Bound(0, 300, " s", True),
+        # receiver options the receiver profile does not bound itself
+        "receiver.ant_cable_delay_ns": Bound(-32768, 32767, " ns", why="CFG-TP5 holds it in 16 signed bits"),
+        "receiver.ack_timeout_s": Bound(0, 30, " s", True),
+        "receiver.retries": Bound(0, 10),
+        "receiver.aid_eph_poll_s": Bound(0, 86400, " s", why="0 = never"),
+    }
+)
+
+
+def _number(key: str, value: Any, integer: bool, from_text: bool) -> float | int:
+    """A numeric key's value, finite and within BOUNDS[key] when it has one (ValueError in validate's words)."""
+    if isinstance(value, str) and not from_text:
+        raise ValueError(f"{key} {value!r}: must be a number, not text (write it without quotes)")
+    if not isinstance(value, (int, float, str)):
+        raise ValueError(f"{key} {value!r}: must be a {'whole ' if integer else ''}number")  # noqa: TRY004
+    bound = BOUNDS.get(key)
+    kw: dict[str, Any] = {} if bound is None else {"unit": bound.unit, "minimum": bound.minimum,
+                                                   "maximum": bound.maximum}
+    try:
+        if integer:
+            return check.integer(value, name=key, **kw)
+        return check.number(value, name=key, exclusive_minimum=bound is not None and bound.exclusive_minimum, **kw)
+    except ValueError as exc:
+        if bound is not None and bound.why and "must be a" not in str(exc):
+            raise ValueError(f"{exc} ({bound.why})") from None
+        raise
+
+
 def _convert(key: str, value: Any, kind: Any, from_text: bool) -> Any:
     """Convert a TOML or environment value to the field's type; ConfigFileError naming `key` if it cannot."""
     kind_name = kind if isinstance(kind, str) else getattr(kind, "__name__", str(kind))
@@ -121,25 +184,18 @@ def _convert(key: str, value: Any, kind: Any, from_text: bool) -> Any:
                 return value
             if from_text and str(value).lower() in ("1", "true", "yes", "on", "0", "false", "no", "off"):
                 return str(value).lower() in ("1", "true", "yes", "on")
-            raise ValueError("expected true or false")
-        if kind_name == "int":
-            if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
-                raise ValueError("expected an integer")
-            return int(value)
-        if kind_name == "float":
-            if isinstance(value, bool):
-                raise ValueError("expected a number")
-            return float(value)
-        if kind_name == "Path":
-            if not isinstance(value, str) or not value:
-                raise ValueError("expected a path")
-            return Path(value)
-        if kind_name == "str":
-            if not isinstance(value, str):
-                raise ValueError("expected a string")
-            return value
-    except (TypeError, ValueError) as exc:
-        raise ConfigFileError(f"{key}: bad value {value!r}: {exc}") from exc
+            raise ValueError(f"{key} {value!r}: must be true or false")
+        if kind_name in ("int", "float"):
+            return _number(key, value, kind_name == "int", from_text)
+        if kind_name in ("Path", "str"):
+            if not isinstance(value, str) or (kind_name == "Path" and not value):
+                raise ValueError(f"{key} {value!r}: must be {'a path' if kind_name == 'Path' else 'text'}"
+                                 f"{' in quotes' if not from_text else ''}")
+            if "\x00" in value:
+                raise ValueError(f"{key} {value!r}: must not contain a NUL character")
+            return Path(value) if kind_name == "Path" else value
+    except ValueError as exc:
+        raise ConfigFileError(str(exc)) from exc
     raise ConfigFileError(f"{key}: unsupported type {kind_name}")
 
 
@@ -179,7 +235,10 @@ def load_toml(path: Path) -> dict[str, Any]:
         with open(path, "rb") as f:
             return _flatten(tomllib.load(f))
     except OSError as exc:
-        raise ConfigFileError(f"cannot read configuration file {path}: {exc}") from exc
+        raise ConfigFileError(f"cannot read configuration file {path}: {exc.strerror or exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigFileError(f"{path}: not UTF-8 text (byte {exc.start} is {exc.object[exc.start]:#04x}): "
+                              "a configuration file is UTF-8 TOML") from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigFileError(f"{path}: not valid TOML: {exc}") from exc
 
@@ -236,17 +295,12 @@ def validate(s: Settings) -> None:
         raise ConfigFileError(f"receiver.model: must be one of {MODELS}, got {s.receiver_model!r}")
     if s.gpio_pin_factory not in PIN_FACTORIES:
         raise ConfigFileError(f"gpio.pin_factory: must be one of {PIN_FACTORIES}, got {s.gpio_pin_factory!r}")
-    for key, name in KEYS.items():
-        value = getattr(s, name)
-        if name.endswith("_s") and value <= 0 and name != "journal_segment_max_s":
-            raise ConfigFileError(f"{key}: must be > 0, got {value}")
-    if s.journal_sync_interval_s > 1.0:
-        raise ConfigFileError(f"journal.sync_interval_s: must be ≤ 1 s (fsync at least once a second), "
-                              f"got {s.journal_sync_interval_s}")
     if s.port_reopen_max_s < s.port_reopen_min_s:
-        raise ConfigFileError("port.reopen_max_s: must be ≥ port.reopen_min_s")
-    if s.disk_floor_mb < 0 or s.journal_segment_max_mb < 0 or s.journal_segment_max_s < 0:
-        raise ConfigFileError("journal sizes and disk floor must be ≥ 0")
+        raise ConfigFileError(f"port.reopen_max_s {s.port_reopen_max_s:g}: must be ≥ port.reopen_min_s "
+                              f"({s.port_reopen_min_s:g} s)")
+    if s.watchdog_writer_stall_s <= s.port_read_timeout_s:
+        raise ConfigFileError(f"watchdog.writer_stall_s {s.watchdog_writer_stall_s:g}: must be > port.read_timeout_s "
+                              f"({s.port_read_timeout_s:g} s): one read may wait that long")
     try:
         opts = receiver_options(s)
     except (TypeError, ValueError) as exc:
@@ -262,14 +316,50 @@ def validate(s: Settings) -> None:
         takeoff_position_ecef_m(s)
     except ValueError as exc:
         raise ConfigFileError(f"rtk.takeoff_position: {exc}") from exc
+    from onboard.rtk.options import options_from_mapping
+
+    for key, value in s.rtk_engine.items():  # one at a time, so that an error names its key
+        try:
+            options_from_mapping({key: value})
+        except (TypeError, ValueError) as exc:
+            raise ConfigFileError(f"{RTK_ENGINE}{key} {value!r}: {exc}") from exc
     try:
         rtk_engine_options(s)
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         raise ConfigFileError(f"rtk.engine: {exc}") from exc
     used = [p for p in (s.gpio_trigger_pin if opts.trigger == "gpio" else -1, s.gpio_pps_pin, s.gpio_flash_pin)
             if p >= 0]
     if len(used) != len(set(used)):
         raise ConfigFileError(f"gpio: trigger_pin, pps_pin and flash_pin must be different pins, got {used}")
+
+
+def check_recording_paths(s: Settings) -> None:
+    """Before recording starts: `journal.data_dir` and the folder of `status.path` are folders this process can
+    write (created if missing, as the recorder would); ConfigFileError naming the key and the path otherwise.
+
+    Tried by creating (and removing) a file there: permissions, read-only file systems and /proc all answer."""
+    _writable_dir("journal.data_dir", s.data_dir)
+    if s.status_path.is_dir():
+        raise ConfigFileError(f"status.path {s.status_path}: must be a file name, not a folder")
+    _writable_dir("status.path", s.status_path.parent, what=f" (the folder of {s.status_path})")
+
+
+def _writable_dir(key: str, path: Path, what: str = "") -> None:
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise ConfigFileError(f"{key} {path}: must be a folder, but a file of that name exists{what}") from None
+    except OSError as exc:
+        raise ConfigFileError(f"{key} {path}: cannot create the folder{what}: {exc.strerror or exc}") from exc
+    if not path.is_dir():
+        raise ConfigFileError(f"{key} {path}: must be a folder, but it is not one{what}")
+    try:
+        fd, probe = tempfile.mkstemp(dir=path, prefix=".directgeo-write-check-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise ConfigFileError(f"{key} {path}: must be a folder this process can write{what}: "
+                              f"{exc.strerror or exc}") from exc
 
 
 def takeoff_position_ecef_m(s: Settings) -> tuple[float, float, float] | None:

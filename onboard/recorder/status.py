@@ -18,6 +18,9 @@ from onboard.formats.atomic import write_json_atomic
 STATUS_SCHEMA = "directgeo-status/1"
 DEFAULT_STATUS_PATH = Path("/run/directgeo/status.json")
 """Where the recorder writes its snapshot and the pre-flight page reads it (systemd's RuntimeDirectory)."""
+STALE_AFTER_S = 5.0
+"""A snapshot older than this (s) means the recorder stalled or stopped (the pre-flight page's verdict); the
+recorder's `status.interval_s` is therefore at most half of it."""
 RTK_STATUS_NAME = "rtk.json"
 """The real-time RTK snapshot (`onboard.realtime.service.RtkStatus`), written beside the recorder's status snapshot."""
 STATES = ("starting", "recording", "port_lost", "disk_full", "stopped", "error")
