@@ -10,6 +10,9 @@ from pathlib import Path
 
 import pytest
 
+from onboard.recorder.cli import EXIT_USAGE
+from onboard.recorder.daemon import EXIT_DISK_FULL
+
 SYSTEMD_DIR = Path(__file__).resolve().parents[2] / "systemd"
 RECORDER = SYSTEMD_DIR / "directgeo-recorder.service"
 WEB = SYSTEMD_DIR / "directgeo-web.service"
@@ -28,7 +31,9 @@ def test_recorder_unit_directives() -> None:
     assert svc["Type"] == "notify"
     assert svc["WatchdogSec"].endswith("s") and int(svc["WatchdogSec"][:-1]) >= 10
     assert svc["Restart"] == "on-failure"
-    assert "3" in svc["RestartPreventExitStatus"].split()  # disk full: a restart cannot help
+    # a bad configuration (2) fails the same way again; below the disk floor (3) a restart cannot record;
+    # a runtime failure (1) is restarted
+    assert set(svc["RestartPreventExitStatus"].split()) == {str(EXIT_USAGE), str(EXIT_DISK_FULL)} == {"2", "3"}
     assert svc["User"] == "directgeo" and svc["User"] != "root"
     assert set(svc["SupplementaryGroups"].split()) == {"dialout", "gpio"}
     for key, value in {"ProtectSystem": "strict", "NoNewPrivileges": "yes", "PrivateTmp": "yes",
@@ -45,6 +50,8 @@ def test_web_unit_after_not_requires_recorder() -> None:
         assert "directgeo-recorder" not in u["Unit"].get(key, ""), key
     assert u["Service"]["User"] not in ("root", "directgeo")  # the web user cannot touch the serial port
     assert "dialout" not in u["Service"].get("SupplementaryGroups", "")
+    assert u["Service"]["Restart"] == "on-failure"
+    assert u["Service"]["RestartPreventExitStatus"].split() == ["2"]  # usage/configuration: do not loop
 
 
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze is not installed here")
