@@ -9,6 +9,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
+import types
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -96,19 +99,106 @@ def write_status(path: Path, snapshot: StatusSnapshot | dict[str, Any]) -> None:
     write_json_atomic(path, obj, fsync=False)
 
 
-def read_status(path: Path) -> dict[str, Any]:
-    """The last snapshot as a dict (raises FileNotFoundError / ValueError)."""
-    obj = json.loads(Path(path).read_bytes())
-    if not isinstance(obj, dict) or obj.get("schema") != STATUS_SCHEMA:
-        raise ValueError(f"{path} is not a {STATUS_SCHEMA} snapshot")
+class SnapshotError(ValueError):
+    """A snapshot that cannot be used: not JSON, not ours, or `field` holding a value of the wrong kind (`why`)."""
+
+    def __init__(self, field: str, why: str) -> None:
+        self.field = field
+        self.why = why
+        super().__init__(f"{field}: {why}" if field else why)
+
+
+def _reject_constant(name: str) -> float:
+    raise ValueError(f"{name} is not a number JSON allows")
+
+
+def _loads(data: bytes) -> Any:
+    """JSON as strict as the web answer must be: NaN/Infinity and absurd nesting are refused (ValueError)."""
+    try:
+        return json.loads(data, parse_constant=_reject_constant)
+    except RecursionError:
+        raise ValueError("nested too deeply") from None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"not UTF-8 (byte {exc.start})") from None
+
+
+def _why_not(value: Any, hint: Any) -> str | None:
+    """Why `value` (from JSON) is not of type `hint` (a StatusSnapshot field's), None when it is."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        reasons = [_why_not(value, a) for a in args]
+        if None in reasons:
+            return None
+        named = [r for r in reasons if r is not None and not r.startswith("must be null")]
+        return named[0] if named else reasons[0]
+    if hint is type(None):
+        return None if value is None else f"must be null, got {value!r}"
+    if hint is bool:
+        return None if isinstance(value, bool) else f"must be true or false, got {value!r}"
+    if hint is int:
+        ok = isinstance(value, int) and not isinstance(value, bool)
+        return None if ok else f"must be a whole number, got {value!r}"
+    if hint is float:
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        return None if ok else f"must be a number, got {value!r}"
+    if hint is str:
+        return None if isinstance(value, str) else f"must be text, got {value!r}"
+    if origin is list:
+        if not isinstance(value, list):
+            return f"must be a list, got {value!r}"
+        for i, item in enumerate(value):
+            why = _why_not(item, args[0])
+            if why is not None:
+                return f"item {i}: {why}"
+        return None
+    if origin is dict or hint is dict:
+        return None if isinstance(value, dict) else f"must be an object, got {value!r}"
+    if dataclasses.is_dataclass(hint):
+        if not isinstance(value, dict):
+            return f"must be an object, got {value!r}"
+        hints = typing.get_type_hints(hint)
+        for f in dataclasses.fields(hint):
+            if f.name not in value:
+                return f"{f.name}: missing"
+            why = _why_not(value[f.name], hints[f.name])
+            if why is not None:
+                return f"{f.name}: {why}"
+        return None
+    return None  # Any
+
+
+def check_snapshot(obj: Any) -> dict[str, Any]:
+    """`obj` (parsed JSON) as a snapshot whose every known field has its StatusSnapshot type; fields may be
+    missing (the page then says "unknown") and unknown ones (a feature's) pass. Raises SnapshotError."""
+    if not isinstance(obj, dict):
+        raise SnapshotError("", f"not a {STATUS_SCHEMA} snapshot (a JSON {type(obj).__name__})")
+    if obj.get("schema") != STATUS_SCHEMA:
+        raise SnapshotError("schema", f"must be {STATUS_SCHEMA!r}, got {obj.get('schema')!r}")
+    hints = typing.get_type_hints(StatusSnapshot)
+    for f in dataclasses.fields(StatusSnapshot):
+        if f.name in obj:
+            why = _why_not(obj[f.name], hints[f.name])
+            if why is not None:
+                raise SnapshotError(f.name, why)
     return obj
+
+
+def read_status(path: Path) -> dict[str, Any]:
+    """The last snapshot as a dict, every known field of its type (FileNotFoundError when absent, OSError when
+    unreadable, SnapshotError (a ValueError) when not JSON, not ours or a field is of the wrong kind)."""
+    data = Path(path).read_bytes()
+    try:
+        obj = _loads(data)
+    except ValueError as exc:
+        raise SnapshotError("", f"not valid JSON: {exc}") from None
+    return check_snapshot(obj)
 
 
 def read_rtk_status(status_path: Path) -> dict[str, Any] | None:
     """The real-time RTK snapshot beside the status snapshot at `status_path`, None when the daemon runs no RTK
     (no file). Raises ValueError when it is not JSON (half-written, foreign), TypeError when not a JSON object."""
     try:
-        obj = json.loads(Path(status_path).with_name(RTK_STATUS_NAME).read_bytes())
+        obj = _loads(Path(status_path).with_name(RTK_STATUS_NAME).read_bytes())
     except FileNotFoundError:
         return None
     if not isinstance(obj, dict):

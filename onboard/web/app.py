@@ -13,20 +13,19 @@ from fastapi import FastAPI
 from fastapi.responses import HTMLResponse
 
 from onboard.recorder.status import DEFAULT_STATUS_PATH, read_rtk_status, read_status
-from onboard.web.checks import PreflightOptions, checks_json, overall, preflight_checks
+from onboard.web.checks import PreflightOptions, checks_json, overall, preflight_checks, unreadable_snapshot
 
 log = logging.getLogger(__name__)
 
 
-def _load(status_path: Path) -> tuple[dict[str, Any] | None, str | None]:
+def _load(status_path: Path) -> tuple[dict[str, Any] | None, str | None, bool]:
+    """(snapshot, error, unreadable): unreadable when the file exists but cannot be used."""
     try:
-        return read_status(status_path), None
+        return read_status(status_path), None, False
     except FileNotFoundError:
-        return None, f"{status_path} does not exist"
-    except (ValueError, OSError) as exc:  # half-written by a foreign tool, unreadable, wrong schema
-        return None, str(exc)
-
-
+        return None, f"{status_path} does not exist", False
+    except (ValueError, OSError) as exc:  # half-written by a foreign tool, unreadable, wrong schema or types
+        return None, f"status snapshot unreadable: {exc}", True
 
 
 def create_app(status_path: Path | None = None, options: PreflightOptions | None = None) -> FastAPI:
@@ -46,21 +45,24 @@ def create_app(status_path: Path | None = None, options: PreflightOptions | None
     @app.get("/api/preflight")
     def preflight() -> dict[str, Any]:
         """Checks derived from the current snapshot, their overall level, and the snapshot itself."""
-        status, error = _load(status_path)
+        status, error, unreadable = _load(status_path)
         rtk = None
         if status is not None:
             try:
                 rtk = read_rtk_status(status_path)
             except (ValueError, TypeError, OSError) as exc:  # torn or foreign rtk.json: say so, keep the rest
                 rtk = {"unreadable": str(exc)}
-        checks = preflight_checks(status, time.time_ns(), options, rtk)
+        if unreadable:
+            checks = unreadable_snapshot(str(error))
+        else:
+            checks = preflight_checks(status, time.time_ns(), options, rtk)
         return {"overall": overall(checks), "checks": checks_json(checks), "status": status, "rtk": rtk,
                 "error": error}
 
     @app.get("/api/status")
     def status() -> dict[str, Any]:
         """The raw status snapshot (404-like empty object with an error when absent)."""
-        snap, error = _load(status_path)
+        snap, error, _ = _load(status_path)
         return snap if snap is not None else {"error": error}
 
     return app

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from onboard.recorder.status import STALE_AFTER_S
+
 OK, WARN, FAIL = "ok", "warn", "fail"
 
 
@@ -12,7 +14,7 @@ OK, WARN, FAIL = "ok", "warn", "fail"
 class PreflightOptions:
     """Thresholds of the pre-flight checks (units in names)."""
 
-    stale_after_s: float = 5.0
+    stale_after_s: float = STALE_AFTER_S
     min_satellites: int = 6
     min_cn0_dbhz: float = 35.0
     epoch_stale_after_s: float = 5.0
@@ -94,6 +96,12 @@ def preflight_checks(
         except (TypeError, ValueError, AttributeError) as exc:  # a foreign or damaged rtk.json
             checks.append(Check("RTK", WARN, f"RTK status malformed: {exc}"))
     return checks
+
+
+def unreadable_snapshot(why: str) -> list[Check]:
+    """The no-go for a snapshot that exists but cannot be used (`why` names the field): the recorder's state
+    is unknown, so nothing else is claimed."""
+    return [Check("recorder", FAIL, why)]
 
 
 def _gpst_s(text: Any) -> float | None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import socket
 import threading
 import time
@@ -171,6 +172,10 @@ def test_page_in_a_real_browser_follows_the_snapshot(live_page: tuple[str, Path]
         write_rtk_status(status_path.with_name(RTK_STATUS_NAME), _rtk_fixed().to_json())
         page.wait_for_function("document.getElementById('overall').textContent === 'READY TO FLY'", timeout=10000)
         assert "fixed: ratio 12.5" in page.inner_text("#checks")
+        # a snapshot with a field of the wrong kind: a no-go that names it (the API answered 500 before)
+        status_path.write_text(json.dumps({**_healthy(time.time_ns()).to_json(), "epochs": "many"}))
+        page.wait_for_function("document.getElementById('overall').textContent === 'DO NOT FLY'", timeout=10000)
+        assert "status snapshot unreadable: epochs: must be a whole number, got 'many'" in page.inner_text("#checks")
         browser.close()
 
 
