@@ -22,7 +22,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 from urllib.parse import quote
 
 import httpx
@@ -236,32 +236,104 @@ class Uploader:
         log.info("%s uploaded (%d bytes)", entry.name, entry.size)
 
 
+EXIT_FAILURE = 1
+EXIT_USAGE = 2
+CHUNK_MIB_MIN = 0.01
+"""Smallest chunk (MiB, ~10 KiB): each chunk costs a request and a SHA-256 round trip."""
+CHUNK_MIB_MAX = 1024.0
+"""Largest chunk (MiB): held in memory twice (read + request body) on a Pi with 1–8 GiB."""
+
+
+def _error(message: str) -> str:
+    return f"directgeo: upload: error: {message}"
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage errors in the common format, exit 2. (When onboard.cmdline.CommandParser lands, it replaces this:
+    `CommandParser(prog=..., command="upload")`.)"""
+
+    def error(self, message: str) -> NoReturn:
+        if message.startswith("argument ") and ": must be" in message:  # "argument --x: v: must be" → "--x v: must be"
+            option, _, rest = message[len("argument "):].partition(": ")
+            message = f"{option.split('/')[-1]} {rest}"
+        self.exit(EXIT_USAGE, f"{_error(message)}\n(usage: {self.prog} --help)\n")
+
+
+def ground_url(text: str, *, name: str | None = None) -> str:
+    """The ground API's base URL: http:// or https:// with a host (ValueError in onboard.validate's words)."""
+    label = f"{name} {text}" if name else text
+    try:
+        url = httpx.URL(text)
+    except (httpx.InvalidURL, TypeError, ValueError):
+        raise ValueError(f"{label}: must be an http:// or https:// URL") from None
+    if url.scheme not in ("http", "https") or not url.host:
+        raise ValueError(f"{label}: must be an http:// or https:// URL with a host, e.g. http://ground:8600")
+    return text
+
+
+def file_role(text: str, *, name: str | None = None) -> tuple[str, str]:
+    """NAME=ROLE of `--role` (both non-empty)."""
+    file_name, sep, role = text.partition("=")
+    if not sep or not file_name.strip() or not role.strip():
+        raise ValueError(f"{f'{name} ' if name else ''}{text}: must be NAME=ROLE, e.g. poses.csv=orientations")
+    return file_name.strip(), role.strip()
+
+
+def _read_token(token_file: Path | None) -> str:
+    """The API token from `token_file`, else $DIRECTGEO_TOKEN; ValueError when unreadable or empty."""
+    if token_file is None:
+        token = os.environ.get("DIRECTGEO_TOKEN", "")
+        if not token.strip():
+            raise ValueError("no token: give --token-file or set $DIRECTGEO_TOKEN")
+        return token.strip()
+    try:
+        token = token_file.read_text(encoding="utf-8").strip()
+    except (OSError, UnicodeDecodeError) as exc:
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise ValueError(f"--token-file {token_file}: cannot read it: {why}") from None
+    if not token:
+        raise ValueError(f"--token-file {token_file}: is empty")
+    return token
+
+
 def main(argv: list[str] | None = None) -> int:
-    """`python -m onboard.upload`: upload one or more flight folders; exit 0 when all are complete."""
-    p = argparse.ArgumentParser(prog="python -m onboard.upload", description=__doc__.splitlines()[0])
-    p.add_argument("--url", required=True, help="ground API base URL")
+    """`python -m onboard.upload`: upload one or more flight folders; exit 0 when all are complete, 1 when one
+    could not be, 2 on a usage error."""
+    from onboard.validate import arg_type, number
+
+    p = _Parser(
+        prog="python -m onboard.upload",
+        description="Upload recorded flight folders to the ground app: resumable (a second run sends only what "
+                    "the server lacks), every chunk and every file checked by SHA-256.",
+        epilog="example: python -m onboard.upload --url http://ground:8600 --token-file /etc/directgeo/token "
+               "/var/lib/directgeo/flight-20260501T101500Z")
+    p.add_argument("--url", required=True, type=arg_type(ground_url), help="ground API base URL, e.g. http://ground:8600")
     p.add_argument("--token-file", type=Path, help="file holding the API token (else $DIRECTGEO_TOKEN)")
-    p.add_argument("--chunk-mib", type=float, default=4.0)
-    p.add_argument("--role", action="append", default=[], metavar="NAME=ROLE",
+    p.add_argument("--chunk-mib", type=arg_type(number, unit=" MiB", minimum=CHUNK_MIB_MIN, maximum=CHUNK_MIB_MAX),
+                   default=4.0, metavar="MIB",
+                   help=f"chunk size in MiB, {CHUNK_MIB_MIN:g}–{CHUNK_MIB_MAX:g} (default %(default)s; halved "
+                        "while the server says a chunk is over its limit)")
+    p.add_argument("--role", action="append", default=[], type=arg_type(file_role), metavar="NAME=ROLE",
                    help="role of a file, e.g. poses.csv=orientations (repeatable)")
-    p.add_argument("flights", nargs="+", type=Path)
+    p.add_argument("flights", nargs="+", type=Path, help="flight folders (flight-YYYYmmddTHHMMSSZ)")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    token = (args.token_file.read_text().strip() if args.token_file else os.environ.get("DIRECTGEO_TOKEN", ""))
-    if not token:
-        print("error: no token (--token-file or $DIRECTGEO_TOKEN)", file=sys.stderr)
-        return 2
-    roles = dict(r.split("=", 1) for r in args.role)
-    up = Uploader(args.url, token, UploaderOptions(chunk_bytes=int(args.chunk_mib * 1024 * 1024)))
+    try:
+        token = _read_token(args.token_file)
+    except ValueError as exc:
+        print(_error(str(exc)), file=sys.stderr)
+        return EXIT_USAGE
+    roles = dict(args.role)
+    up = Uploader(args.url, token, UploaderOptions(chunk_bytes=max(1024, int(args.chunk_mib * 1024 * 1024))))
     rc = 0
     try:
         for d in args.flights:
             try:
                 rep = up.upload_flight(d, roles)
                 print(f"{d}: flight {rep.flight_id} complete, {rep.bytes_sent} bytes sent, {rep.retries} retries")
-            except (UploadError, InputError) as exc:
-                print(f"{d}: error: {exc}", file=sys.stderr)
-                rc = 1
+            except (UploadError, InputError, OSError) as exc:
+                print(_error(f"{d}: {exc}"), file=sys.stderr)
+                rc = EXIT_FAILURE
     finally:
         up.close()
     return rc

@@ -15,8 +15,11 @@ from pathlib import Path
 
 import httpx
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from onboard.logger.journal import Manifest, SegmentInfo
+from tests.ground_api.conftest import TOKEN as TOKEN_LIVE
 from tests.ground_api.conftest import LiveServer
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -209,3 +212,106 @@ def test_serve_refuses_an_unusable_database_url(tmp_path: Path) -> None:
                              cwd=ROOT, env=_env(DIRECTGEO_TOKEN=TOKEN, DATABASE_URL=url), capture_output=True,
                              text=True, timeout=60, check=False)
         assert out.returncode == 2 and "cannot open the flight store" in out.stderr, out.stderr
+
+
+EMPTY_SHA256 = "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855"
+
+
+def test_uploader_sends_zero_size_files_with_their_true_sha(live: LiveServer, tmp_path: Path) -> None:
+    """An empty segment (a rotation right before the stop) and an empty events.jsonl go in the manifest with the
+    SHA-256 of no bytes (the server refuses any other), and the flight completes, resumably: a second run sends
+    nothing."""
+    from onboard.upload.client import Uploader, build_upload_manifest
+
+    flight = tmp_path / "flight-20240501T120000Z"
+    flight.mkdir()
+    seg = os.urandom(20_000)
+    (flight / "000000.ubx").write_bytes(seg)
+    (flight / "000001.ubx").write_bytes(b"")
+    (flight / "events.jsonl").write_bytes(b"")
+    m = Manifest(flight.name, 1, [SegmentInfo("000000.ubx", len(seg), hashlib.sha256(seg).hexdigest()),
+                                  SegmentInfo("000001.ubx", 0, EMPTY_SHA256)])
+    (flight / "manifest.json").write_text(json.dumps(m.to_json()))
+    _, entries = build_upload_manifest(flight)
+    by_name = {e.name: e for e in entries}
+    assert by_name["000001.ubx"].sha256 == by_name["events.jsonl"].sha256 == EMPTY_SHA256
+    assert by_name["000001.ubx"].size == 0
+    up = Uploader(live.url, TOKEN_LIVE)
+    try:
+        report = up.upload_flight(flight)
+        assert set(report.files) == set(by_name) and set(report.files.values()) == {"complete"}
+        assert up.upload_flight(flight).bytes_sent == 0
+    finally:
+        up.close()
+    with live.client() as c:
+        held = {f["name"]: f for f in c.get(f"/flights/{report.flight_id}").json()["files"]}
+    assert held["000001.ubx"]["sha256"] == held["events.jsonl"]["sha256"] == EMPTY_SHA256
+    assert all(f["status"] == "complete" for f in held.values())
+
+
+def test_uploader_refuses_a_segment_whose_manifest_sha_is_wrong(tmp_path: Path) -> None:
+    """The recorder's manifest says the empty segment had other bytes: the local copy is damaged, not sent."""
+    from onboard.upload.client import UploadError, build_upload_manifest
+
+    flight = tmp_path / "flight-20240501T120000Z"
+    flight.mkdir()
+    (flight / "000000.ubx").write_bytes(b"")
+    m = Manifest(flight.name, 1, [SegmentInfo("000000.ubx", 0, hashlib.sha256(b"x").hexdigest())])
+    (flight / "manifest.json").write_text(json.dumps(m.to_json()))
+    with pytest.raises(UploadError, match="local copy damaged"):
+        build_upload_manifest(flight)
+
+
+def _upload_main(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    from onboard.upload.client import main
+
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse's usage error
+        code = int(exc.code or 0)
+    return code, capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--chunk-mib", "nan"], "directgeo: upload: error: --chunk-mib nan: must be a finite number"),
+    (["--chunk-mib", "inf"], "directgeo: upload: error: --chunk-mib inf: must be a finite number"),
+    (["--chunk-mib", "-4"], "directgeo: upload: error: --chunk-mib -4: must be 0.01–1024 MiB"),
+    (["--chunk-mib", "0"], "directgeo: upload: error: --chunk-mib 0: must be 0.01–1024 MiB"),
+    (["--url", "ground:8600"], "directgeo: upload: error: --url ground:8600: must be an http:// or https:// URL"),
+    (["--role", "poses.csv"], "directgeo: upload: error: --role poses.csv: must be NAME=ROLE"),
+    (["--token-file", "/nonexistent/token"], ("directgeo: upload: error: --token-file /nonexistent/token: cannot "
+                                             "read it: No such file or directory")),
+])
+def test_uploader_options_are_checked(tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str],
+                                      message: str) -> None:
+    """Before: `--chunk-mib nan` traced back (int(nan)), `--role x` too (dict of a 1-tuple)."""
+    code, err = _upload_main(["--url", "http://127.0.0.1:9", *args, str(tmp_path)], capsys)
+    assert code == 2 and message in err and "Traceback" not in err, err
+
+
+def test_uploader_token_file_not_utf8(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "token").write_bytes(b"\xff\xfe token")
+    code, err = _upload_main(["--url", "http://127.0.0.1:9", "--token-file", str(tmp_path / "token"),
+                              str(tmp_path)], capsys)
+    assert code == 2 and f"--token-file {tmp_path / 'token'}: cannot read it" in err, err
+
+
+@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(chunk=st.one_of(st.floats(allow_nan=True, allow_infinity=True).map(repr), st.integers().map(str),
+                       st.text(max_size=12)))
+def test_uploader_chunk_mib_fuzz(tmp_path: Path, capsys: pytest.CaptureFixture[str], chunk: str) -> None:
+    """50 drawn `--chunk-mib` values (non-finite, huge, negative, text, unicode): exit 2 naming the option, or —
+    a valid size — the flight folder is looked at (exit 1 here: it is not a flight folder); never a traceback."""
+    missing = tmp_path / "no-flight"
+    (tmp_path / "token").write_text(TOKEN + "\n")
+    code, err = _upload_main(["--url", "http://127.0.0.1:9", "--token-file", str(tmp_path / "token"),
+                              f"--chunk-mib={chunk}", str(missing)], capsys)
+    assert "Traceback" not in err
+    try:
+        valid = 0.01 <= float(chunk) <= 1024
+    except ValueError:
+        valid = False
+    if valid:
+        assert code == 1 and f"directgeo: upload: error: {missing}: {missing} is not a flight folder" in err, err
+    else:
+        assert code == 2 and "directgeo: upload: error: --chunk-mib" in err, err
