@@ -130,7 +130,7 @@ GPIO_PIN = Bound(-1, 27, why="a BCM GPIO number of the 40-pin header, -1 = none"
 # Every numeric key's range, with the unit its message shows (`onboard.validate` words the refusal).
 BOUNDS: Mapping[str, Bound] = MappingProxyType(
     {
-        "port.baud": Bound(1200, 4_000_000, " bit/s"),
+        "port.baud": Bound(1200, 921600, " bit/s", why="921600 is the fastest a u-blox receiver talks"),
         "port.read_timeout_s": Bound(0, 5, " s", True),
         "port.reopen_min_s": Bound(0, 3600, " s", True),
         "port.reopen_max_s": Bound(0, 3600, " s", True),

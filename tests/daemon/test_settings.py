@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 from pathlib import Path
 
 import pytest
 
 from onboard.errors import ConfigFileError
 from onboard.recorder.settings import (
+    BOUNDS,
     KEYS,
     Settings,
     default_config_path,
@@ -16,6 +18,34 @@ from onboard.recorder.settings import (
     load_toml,
     receiver_options,
 )
+
+
+UNITS = {"_ms": r"\bms\b", "_s": r"\bs\b", "_mb": r"\bMB\b", "_ns": r"\bns\b", "baud": r"bit/s"}
+INTERNAL = r"issue \d|RTKLIB|onboard[./]|ReceiverOptions|RtkOptions|Daakir|hil_sim|MON-VER|CFG-|TIM-TM2|AID-EPH|seed"
+
+
+def _key_comments(text: str) -> dict[str, str]:
+    """`section.key` → the comment lines right above it (its own: a key line directly above ends the comment)."""
+    out: dict[str, str] = {}
+    section, comment = "", []
+    for line in text.splitlines():
+        if line.startswith("["):
+            section, comment = line.strip("[]"), []
+        elif line.startswith("#"):
+            comment.append(line.lstrip("# "))
+        elif "=" in line:
+            out[f"{section}.{line.split('=')[0].strip()}"] = " ".join(comment)
+            comment = []
+        else:
+            comment = []
+    return out
+
+
+def test_default_file_speaks_to_users() -> None:
+    """No names of our code, papers or tickets in the comments: what each key does, in the user's words."""
+    text = default_config_path().read_text()
+    found = re.findall(INTERNAL, text)
+    assert not found, found
 
 
 def test_default_file_documents_every_key_with_the_real_default() -> None:
@@ -33,13 +63,14 @@ def test_default_file_documents_every_key_with_the_real_default() -> None:
         assert (str(want) if isinstance(want, Path) else want) == got, key
     for f in dataclasses.fields(ReceiverOptions):
         assert flat[f"receiver.{f.name}"] == f.default, f.name
-    lines = path.read_text().splitlines()
-    for i, line in enumerate(lines):
-        if "=" in line and not line.startswith("#"):
-            j = i - 1  # a comment above (possibly shared by a group of keys)
-            while j >= 0 and "=" in lines[j] and not lines[j].startswith("#"):
-                j -= 1
-            assert lines[j].startswith("#"), f"key without a comment: {line}"
+    for key, comment in _key_comments(path.read_text()).items():
+        assert comment, f"key without a comment of its own: {key}"
+        unit = next((u for suffix, u in UNITS.items() if key.endswith(suffix)), None)
+        if unit is not None:
+            assert re.search(unit, comment), f"{key}: comment does not give the unit ({unit}): {comment}"
+        bound = BOUNDS.get(key)
+        if bound is not None and bound.maximum is not None:
+            assert f"{bound.maximum:g}" in comment, f"{key}: comment does not give the range: {comment}"
     # and loading the default file changes nothing
     s = load_settings(path, environ={})
     assert s.port_device == defaults.port_device and s.data_dir == defaults.data_dir
