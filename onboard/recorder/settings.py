@@ -149,6 +149,7 @@ BOUNDS: Mapping[str, Bound] = MappingProxyType(
         "rtk.max_base_age_s": Bound(0, 300, " s", True),
         # receiver options the receiver profile does not bound itself
         "receiver.ant_cable_delay_ns": Bound(-32768, 32767, " ns", why="CFG-TP5 holds it in 16 signed bits"),
+        "receiver.pulse_len_ms": Bound(0, 3000, " ms", True, "shorter than the camera period, at most 3 s"),
         "receiver.ack_timeout_s": Bound(0, 30, " s", True),
         "receiver.retries": Bound(0, 10),
         "receiver.aid_eph_poll_s": Bound(0, 86400, " s", why="0 = never"),
@@ -199,11 +200,17 @@ def _convert(key: str, value: Any, kind: Any, from_text: bool) -> Any:
     raise ConfigFileError(f"{key}: unsupported type {kind_name}")
 
 
+SECTIONS = frozenset({k.rsplit(".", 1)[0] for k in KEYS} | {"receiver", RTK_ENGINE.rstrip(".")})
+"""The tables of the file: one left empty (every key commented out) is fine."""
+
+
 def _flatten(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """`section.key` → value; an empty table other than a known section stays a value (`pps_pin = {}` is a bad
+    value of gpio.pps_pin, not nothing)."""
     out: dict[str, Any] = {}
     for k, v in table.items():
         key = f"{prefix}{k}"
-        if isinstance(v, dict):
+        if isinstance(v, dict) and (v or key in SECTIONS):
             out.update(_flatten(v, key + "."))
         else:
             out[key] = v
@@ -301,10 +308,7 @@ def validate(s: Settings) -> None:
     if s.watchdog_writer_stall_s <= s.port_read_timeout_s:
         raise ConfigFileError(f"watchdog.writer_stall_s {s.watchdog_writer_stall_s:g}: must be > port.read_timeout_s "
                               f"({s.port_read_timeout_s:g} s): one read may wait that long")
-    try:
-        opts = receiver_options(s)
-    except (TypeError, ValueError) as exc:
-        raise ConfigFileError(f"receiver: {exc}") from exc
+    opts = _check_receiver_options(s)
     if opts.trigger == "gpio" and (s.gpio_trigger_pin < 0 or s.gpio_pps_pin < 0):
         raise ConfigFileError("receiver.trigger = \"gpio\" needs gpio.trigger_pin and gpio.pps_pin (BCM numbers)")
     if s.gpio_flash_pin >= 0 and s.gpio_pps_pin < 0:
@@ -316,6 +320,8 @@ def validate(s: Settings) -> None:
         takeoff_position_ecef_m(s)
     except ValueError as exc:
         raise ConfigFileError(f"rtk.takeoff_position: {exc}") from exc
+    if "max_age_s" in s.rtk_engine:  # the service sets it from rtk.max_base_age_s: one place for one value
+        raise ConfigFileError(f"{RTK_ENGINE}max_age_s: set rtk.max_base_age_s instead")
     from onboard.rtk.options import options_from_mapping
 
     for key, value in s.rtk_engine.items():  # one at a time, so that an error names its key
@@ -331,6 +337,27 @@ def validate(s: Settings) -> None:
             if p >= 0]
     if len(used) != len(set(used)):
         raise ConfigFileError(f"gpio: trigger_pin, pps_pin and flash_pin must be different pins, got {used}")
+
+
+def _check_receiver_options(s: Settings) -> Any:
+    """The receiver options, each given key checked alone first so that an error names it (ConfigFileError)."""
+    from onboard.receiver.profiles import ReceiverOptions
+
+    base = {"baud": s.receiver_options.get("baud", s.port_baud)}
+    try:
+        ReceiverOptions(**base)
+    except (TypeError, ValueError) as exc:
+        key = "receiver.baud" if "baud" in s.receiver_options else "port.baud (receiver.baud follows it unless set)"
+        raise ConfigFileError(f"{key} {base['baud']}: {exc}") from exc
+    for opt, value in s.receiver_options.items():
+        try:
+            ReceiverOptions(**{**base, opt: value})
+        except (TypeError, ValueError, ArithmeticError) as exc:
+            raise ConfigFileError(f"receiver.{opt} {value!r}: {exc}") from exc
+    try:
+        return receiver_options(s)
+    except (TypeError, ValueError) as exc:  # a combination (a pulse as long as its period)
+        raise ConfigFileError(f"receiver: {exc}") from exc
 
 
 def check_recording_paths(s: Settings) -> None:
@@ -383,7 +410,7 @@ def rtk_engine_options(s: Settings) -> Any:
     from onboard.rtk.options import options_from_mapping
 
     if "max_age_s" in s.rtk_engine:  # the service sets it from rtk.max_base_age_s: one place for one value
-        raise ValueError("max_age_s: set rtk.max_base_age_s instead")
+        raise ValueError(f"{RTK_ENGINE}max_age_s: set rtk.max_base_age_s instead")
     return options_from_mapping(s.rtk_engine)  # RtkOptions checks its values (e.g. ar_mode) itself
 
 

@@ -19,7 +19,6 @@ from onboard.recorder.settings import (
     receiver_options,
 )
 
-
 UNITS = {"_ms": r"\bms\b", "_s": r"\bs\b", "_mb": r"\bMB\b", "_ns": r"\bns\b", "baud": r"bit/s"}
 INTERNAL = r"issue \d|RTKLIB|onboard[./]|ReceiverOptions|RtkOptions|Daakir|hil_sim|MON-VER|CFG-|TIM-TM2|AID-EPH|seed"
 
@@ -108,7 +107,9 @@ def test_layering_file_env_cli(tmp_path: Path) -> None:
         ("[rtk.engine]\nratio_threshold = 0.5\n", "rtk.engine.ratio_threshold 0.5: ratio_threshold must be ≥ 1"),
         ("[watchdog]\nwriter_stall_s = 0.05\n", "watchdog.writer_stall_s 0.05: must be > port.read_timeout_s"),
         ("[receiver]\nmodel = 'zed'\n", "receiver.model"),
-        ("[receiver]\nmeas_rate_ms = 5\n", "receiver: meas_rate_ms"),
+        ("[receiver]\nmeas_rate_ms = 5\n", "receiver.meas_rate_ms 5: meas_rate_ms must be within 25–65535 ms"),
+        ("[port]\nbaud = 1200\n", r"port.baud \(receiver.baud follows it unless set\) 1200: baud must be one of"),
+        ("[receiver]\npulse_len_ms = 2500\ncamera_period_s = 2.0\n", "receiver: pulse_len_ms must be > 0 and shorter"),
         ("[port\n", "not valid TOML"),
         ("[rtk]\nbase_stream = '/dev/ttyUSB0'\n", "rtk.base_stream: expected serial:DEV"),
     ],
