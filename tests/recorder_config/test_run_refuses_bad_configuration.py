@@ -79,11 +79,12 @@ def test_data_dir_that_is_a_file(tmp_path: Path) -> None:
 
 @contextlib.contextmanager
 def _read_only_dir(path: Path) -> Iterator[Path]:
-    """A folder this process cannot write: a read-only tmpfs when root (permissions do not stop root), else
+    """A folder this process cannot write: a read-only tmpfs when root (permissions do not stop root; 512 MB so
+    that the disk floor is not what refuses it), else
     mode 0555."""
     path.mkdir()
     if os.geteuid() == 0:
-        subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(path)], check=True)
+        subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=512m", "tmpfs", str(path)], check=True)
         try:
             yield path
         finally:
