@@ -18,7 +18,15 @@ from onboard.receiver.framing import Frame
 from onboard.recorder.daemon import EXIT_IN_USE, LOCK_NAME, Recorder, RecorderDeps
 from onboard.recorder.feature import FlightContext, RecorderFeature
 from onboard.recorder.status import read_status
-from tests.daemon.helpers import RunningRecorder, make_settings, numbered_frame, reap, status, tim_tm2, wait_until
+from tests.daemon.helpers import (
+    RunningRecorder,
+    make_settings,
+    numbered_frame,
+    reap,
+    status,
+    tim_tm2,
+    wait_until,
+)
 
 pytestmark = pytest.mark.timeout(60)
 

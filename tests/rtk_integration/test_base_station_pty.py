@@ -193,7 +193,7 @@ def test_python_m_onboard_base_end_to_end_and_sigterm(tmp_path: Path) -> None:
     numbers = [int(m.identity) for m in msgs]
     assert numbers.count(1002) >= 5 and 1006 in numbers
     assert all(int(m.DF003) == 7 for m in msgs if m.identity == "1002")
-    flights = list((tmp_path / "data").iterdir())
+    flights = list((tmp_path / "data").glob("flight-*"))
     assert len(flights) == 1 and (flights[0] / "radio-tx.rtcm3").read_bytes() == bytes(got)
 
 
