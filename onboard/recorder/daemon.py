@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from onboard.errors import ConfigRejected, DiskFull, InputError, LinkLost, ReceiverError
+from onboard.errors import ConfigRejected, DiskFull, InputError, LinkLost, OnboardError, ReceiverError
 from onboard.gnsstime import GpsTime
 from onboard.hw.ports import ByteStream, Clock, Edge, EdgeSource, SystemClock
 from onboard.logger.events import EventLog, read_events
@@ -95,7 +95,7 @@ class RecorderDeps:
     edge_sources: Callable[[], Sequence[EdgeSource]] | None = None
 
 
-class DataDirInUse(OSError):
+class DataDirInUse(OnboardError):
     """Another recorder holds the data directory's lock (`pid` its process id, None when unreadable)."""
 
     def __init__(self, data_dir: Path, pid: int | None) -> None:
@@ -114,7 +114,8 @@ class DataDirLock:
         self._fd: int | None = None
 
     def acquire(self) -> None:
-        """Take the lock; raises DataDirInUse when another process (or recorder) holds it."""
+        """Take the lock; raises DataDirInUse when another process (or recorder) holds it, OSError when the lock
+        file cannot be created (a read-only or foreign data directory)."""
         fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -307,6 +308,14 @@ class Recorder:
             self.refused = str(exc)
             log.error("refusing to record: %s", exc)
             return EXIT_IN_USE
+        except OSError as exc:
+            log.error("cannot lock the data directory %s: %s", s.data_dir, exc)
+            self.status.state = "error"
+            self.status.message = f"cannot lock the data directory {s.data_dir}: {exc}"
+            s.status_path.parent.mkdir(parents=True, exist_ok=True)
+            self._write_status()
+            self.deps.notifier.notify(STATUS=self.status.message)
+            return EXIT_IO_ERROR
         try:
             return await self._run_locked()
         finally:
@@ -349,7 +358,7 @@ class Recorder:
         context = FlightContext(flight_dir=flight_dir, clock=self.clock, journal_options=options,
                                 status_path=s.status_path, post=self._post, request_stop=self.request_stop)
         for feature in self.features:
-            self._feature_call(feature, "on_flight_opened", context)
+            self._feature_call(feature, feature.on_flight_opened, context)
         for sig in (signal.SIGTERM, signal.SIGINT):
             try:
                 self._loop.add_signal_handler(sig, self.request_stop, f"signal {sig.name}", EXIT_OK)
@@ -404,7 +413,7 @@ class Recorder:
             log.error("closing the flight failed: %s", exc)
             self.status.message = f"{reason}; closing failed: {exc}"
         for feature in self.features:
-            self._feature_call(feature, "on_flight_closed", reason)
+            self._feature_call(feature, feature.on_flight_closed, reason)
         if self._port is not None:
             self._port.close()
             self._port = None
@@ -707,7 +716,7 @@ class Recorder:
         st.skipped_bytes += self._framer.skipped_bytes - skipped_before
         self._frames_this_connection += len(frames)
         for feature in self.features:
-            self._feature_call(feature, "on_bytes", data, rx_monotonic_ns)
+            self._feature_call(feature, feature.on_bytes, data, rx_monotonic_ns)
         for frame in frames:
             self._on_frame(frame)
 
@@ -719,7 +728,7 @@ class Recorder:
             # (≤ port.read_timeout_s), with no executor callback waking the loop per mark.
             self._mark_sync.set()
         for feature in self.features:
-            self._feature_call(feature, "on_frame", frame)
+            self._feature_call(feature, feature.on_frame, frame)
         if self._decode is None:
             return
         item = self._decode(frame, self._decode_stats)  # never raises on content (decode.py contract)
@@ -755,23 +764,22 @@ class Recorder:
         elif isinstance(item, NavFix) and item.fix_type in (2, 3, 4):
             self._maybe_poll_aid_eph()
         for feature in self.features:
-            self._feature_call(feature, "on_decoded", item)
+            self._feature_call(feature, feature.on_decoded, item)
 
-    def _feature_call(self, feature: RecorderFeature, hook: str, *args: Any) -> Any:
-        """Call one feature hook; any exception is logged (traceback the first time per feature and hook) and
-        counted in `status.feature_errors`, and never reaches the recording path."""
+    def _feature_call(self, feature: RecorderFeature, hook: Callable[..., Any], *args: Any) -> Any:
+        """Call one hook of `feature`; any exception is logged (traceback the first time per feature and hook)
+        and counted in `status.feature_errors`, and never reaches the recording path."""
         try:
-            return getattr(feature, hook)(*args)
+            return hook(*args)
         except Exception as exc:  # a feature's bug must not stop recording: the raw bytes come first
             errors = self.status.feature_errors
             errors[feature.name] = errors.get(feature.name, 0) + 1
-            key = (feature.name, hook)
+            key = (feature.name, hook.__name__)
             if key not in self._logged_feature_errors:
                 self._logged_feature_errors.add(key)
-                log.exception("feature %s: %s failed (counted in feature_errors; recording goes on)",
-                              feature.name, hook)
+                log.exception("feature %s: %s failed (counted in feature_errors; recording goes on)", *key)
             else:
-                log.debug("feature %s: %s failed: %s", feature.name, hook, exc)
+                log.debug("feature %s: %s failed: %s", *key, exc)
             return None
 
     def _maybe_poll_aid_eph(self) -> None:
@@ -886,7 +894,7 @@ class Recorder:
         for feature in self.features:
             if feature.status_name is None:
                 continue
-            snapshot = self._feature_call(feature, "status")
+            snapshot = self._feature_call(feature, feature.status)
             if snapshot is None:
                 continue
             try:

@@ -199,3 +199,17 @@ def test_two_recorder_processes_the_second_exits_2_with_one_error_line(tmp_path:
     assert first.returncode == 0
     m = read_manifest(flight)
     assert m is not None and m.closed
+
+
+def test_a_lock_file_that_cannot_be_opened_is_a_clear_error(tmp_path: Path) -> None:
+    """`.lock` cannot be opened (here: a directory of that name; in the field a read-only data directory):
+    exit 1, the status says why, and nothing is recorded."""
+    from onboard.recorder.daemon import EXIT_IO_ERROR
+
+    settings = make_settings(tmp_path, receiver_configure=False)
+    (settings.data_dir / LOCK_NAME).mkdir(parents=True)
+    run = RunningRecorder(settings, RecorderDeps(open_port=FakeByteStream))
+    assert run.join() == EXIT_IO_ERROR
+    st = status(settings.status_path)
+    assert st["state"] == "error" and st["message"].startswith(f"cannot lock the data directory {settings.data_dir}")
+    assert not list(settings.data_dir.glob("flight-*"))
