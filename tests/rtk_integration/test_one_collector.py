@@ -62,3 +62,33 @@ def test_real_time_and_post_processing_collect_the_same_base_epochs(stream: Path
     assert live.position == post.base_position
     assert live.ephemerides == post.ephemerides
     assert [e.time for e in live.epochs] == sorted({e.time for e in live.epochs})  # strictly in time order
+
+
+def test_one_lnav_dispatch_for_both_subframe_forms_and_only_gps() -> None:
+    """`ephemeris_from_subframe` (used by real time, the base station and convert): RXM-SFRBX 30-bit words and
+    RXM-SFRB 24-bit data words of the same subframes give the same ephemeris; another system's subframe gives
+    None and leaves the assembler alone."""
+    from onboard.formats.rinex_nav import read_rinex_nav
+    from onboard.receiver.decode import SubframeWords, ephemeris_from_subframe
+    from onboard.rtk.lnav import LnavAssembler, encode_subframes, sfrbx_words24
+    from onboard.rtk.types import GNSS_GLONASS
+    from tests.conftest import shared_file
+
+    eph = read_rinex_nav(shared_file("gnss/broadcast-nav-20100701/brdc1820.10n")).ephemerides[0]
+    tow_s = float(int(eph.toe.tow_s) // 30 * 30)  # a frame start at the ephemeris' reference time
+    dwords = encode_subframes(eph, tow_s)
+    words24 = [sfrbx_words24(d)[0] for d in dwords]
+    results = []
+    for words, bits in ((dwords, 30), (words24, 24)):
+        assembler = LnavAssembler()
+        other = ephemeris_from_subframe(assembler, SubframeWords(eph.prn, tuple(words[0]), bits, "x", GNSS_GLONASS),
+                                        eph.toe.week)
+        assert other is None and assembler.rejected == assembler.parity_failures == 0
+        got = [ephemeris_from_subframe(assembler, SubframeWords(eph.prn, tuple(w), bits, "x"), eph.toe.week)
+               for w in words]
+        assert got[0] is None and got[1] is None and got[2] is not None
+        results.append(got[2])
+    reference = LnavAssembler()
+    expected = [reference.add(eph.prn, w, eph.toe.week) for w in dwords][2]
+    assert results[0] == results[1] == expected
+    assert results[0].prn == eph.prn and results[0].toe == eph.toe
