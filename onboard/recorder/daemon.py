@@ -218,6 +218,7 @@ class Recorder:
         """Why the recorder refused to start (the data directory is in use), for the command line's error."""
         self._lock = DataDirLock(settings.data_dir)
         self._logged_feature_errors: set[tuple[str, str]] = set()
+        self._features_open = False
         self.clock = deps.clock
         self.status = StatusSnapshot(
             pid=os.getpid(),
@@ -319,6 +320,8 @@ class Recorder:
         try:
             return await self._run_locked()
         finally:
+            if self._features_open:  # run() failed between flight opened and closed: stop the features' threads
+                self._close_features(self.stop_reason or "recorder failed")
             self._lock.release()
 
     async def _run_locked(self) -> int:
@@ -357,6 +360,7 @@ class Recorder:
         self._setup_decoder()
         context = FlightContext(flight_dir=flight_dir, clock=self.clock, journal_options=options,
                                 status_path=s.status_path, post=self._post, request_stop=self.request_stop)
+        self._features_open = True
         for feature in self.features:
             self._feature_call(feature, feature.on_flight_opened, context)
         for sig in (signal.SIGTERM, signal.SIGINT):
@@ -412,8 +416,7 @@ class Recorder:
             # Even a full disk leaves the fsync'd segment intact; the next start recovers the manifest.
             log.error("closing the flight failed: %s", exc)
             self.status.message = f"{reason}; closing failed: {exc}"
-        for feature in self.features:
-            self._feature_call(feature, feature.on_flight_closed, reason)
+        self._close_features(reason)
         if self._port is not None:
             self._port.close()
             self._port = None
@@ -424,6 +427,11 @@ class Recorder:
         self.status.port_open = False
         self._write_status()
         self.deps.notifier.notify(STOPPING=1, STATUS=f"stopped: {reason}")
+
+    def _close_features(self, reason: str) -> None:
+        self._features_open = False
+        for feature in self.features:
+            self._feature_call(feature, feature.on_flight_closed, reason)
 
     # -- reader/writer thread ---------------------------------------------------------------------------
     def _reader_thread(self) -> None:
