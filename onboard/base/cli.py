@@ -7,9 +7,17 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from onboard.recorder.settings import add_recorder_arguments
 from onboard.rtk.geodesy import parse_xyz_m
+
+if TYPE_CHECKING:
+    from onboard.base.station import BaseOptions
+    from onboard.hw.ports import ByteStream
+    from onboard.recorder.daemon import Recorder, RecorderDeps
+    from onboard.recorder.settings import Settings
 
 
 def _xyz(text: str) -> tuple[float, float, float]:
@@ -43,14 +51,12 @@ def add_base_parser(subparsers: argparse._SubParsersAction) -> argparse.Argument
 
 
 def base_main(args: argparse.Namespace) -> int:
-    """Run the base station; returns the exit code."""
-    import asyncio
-
-    from onboard.base.station import BaseOptions, BaseStation
+    """Run the base station; returns the exit code. With `rtk.base_stream` set, the base also solves its own
+    real-time RTK against that second base (both snapshots, base.json and rtk.json, are written)."""
+    from onboard.base.station import BaseOptions
     from onboard.errors import ConfigFileError
-    from onboard.hw.ports import ByteStream
     from onboard.hw.serial_port import SerialByteStream
-    from onboard.recorder.app import serial_port_opener
+    from onboard.recorder.app import run, serial_port_opener
     from onboard.recorder.daemon import RecorderDeps
     from onboard.recorder.sdnotify import SdNotifier
     from onboard.recorder.settings import load_settings, recorder_overrides
@@ -62,12 +68,27 @@ def base_main(args: argparse.Namespace) -> int:
                               obs_interval_s=args.obs_interval, position_ecef_m=args.position,
                               antenna_height_m=args.antenna_height, survey_in_s=args.survey_in or 0.0)
     except (ConfigFileError, ValueError) as exc:
-        print(f"onboard base: error: {exc}", file=sys.stderr)
+        print(f"directgeo: base: error: {exc}", file=sys.stderr)
         return 2
     deps = RecorderDeps(open_port=serial_port_opener(settings), notifier=SdNotifier())
 
     def open_radio() -> ByteStream:
         return SerialByteStream(args.radio, args.radio_baud, 0.1)
 
-    station = BaseStation(settings, deps, options, open_radio)
-    return asyncio.run(station.run())
+    try:
+        recorder = base_recorder(settings, deps, options, open_radio)
+    except ValueError as exc:  # a malformed rtk.base_stream
+        print(f"directgeo: base: error: {exc}", file=sys.stderr)
+        return 2
+    return run(recorder, "base")
+
+
+def base_recorder(settings: Settings, deps: RecorderDeps, options: BaseOptions,
+                  open_radio: Callable[[], ByteStream]) -> Recorder:
+    """Base-station mode's composition: the recorder with the base-station feature, and real-time RTK too when
+    `rtk.base_stream` names a second base (ValueError if malformed)."""
+    from onboard.base.station import BaseStationFeature
+    from onboard.recorder.app import recorder_for
+
+    return recorder_for(settings, deps, settings.rtk_base_stream or None,
+                        features=[BaseStationFeature(options, open_radio)])

@@ -15,8 +15,9 @@ sent before it is known (a rover cannot use corrections without it). What was se
 `radio-tx.rtcm3` (or `.ubx`) in the flight directory.
 
 Pure parts: `CorrectionScheduler`, `SurveyIn`, `BaseCore` (decoded items in, frames out). Shell: `RadioSender`
-(a thread with a bounded queue: a slow or unplugged radio never stalls recording) and `BaseStation`, a
-`Recorder` whose decoded-item and frame hooks feed the core.
+(a thread with a bounded queue: a slow or unplugged radio never stalls recording) and `BaseStationFeature`, the
+recorder feature (`onboard.recorder.feature`) that feeds the core from the recorder's frames and decoded items,
+opens the radio when the flight opens and writes `base.json` beside the status snapshot.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ import numpy.typing as npt
 
 from onboard.errors import LinkLost
 from onboard.gnsstime import GpsTime
-from onboard.hw.ports import ByteStream
+from onboard.hw.ports import ByteStream, Clock
 from onboard.receiver.framing import Frame, Protocol
 from onboard.receiver.rtcm import (
     BasePosition,
@@ -43,8 +44,7 @@ from onboard.receiver.rtcm import (
     encode_ephemeris,
     encode_gps_observations,
 )
-from onboard.recorder.daemon import Recorder, RecorderDeps
-from onboard.recorder.settings import Settings
+from onboard.recorder.feature import FlightContext, RecorderFeature
 from onboard.rtk.ephemeris import EphemerisStore, satellite_states
 from onboard.rtk.pntpos import pntpos
 from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP, Ephemeris, ObsEpoch
@@ -153,8 +153,8 @@ class SurveyIn:
     def __init__(self, duration_s: float) -> None:
         self.duration_s = duration_s
         self._first: GpsTime | None = None
-        self._sum = np.zeros(3)
         self.count = 0
+        """Single-point fixes taken so far."""
         self.result_ecef_m: Arr | None = None
         self.spread_m = float("nan")
         self._positions: list[Arr] = []
@@ -166,6 +166,7 @@ class SurveyIn:
         if self._first is None:
             self._first = time
         self._positions.append(np.asarray(pos_ecef_m, float))
+        self.count = len(self._positions)
         if time.diff_s(self._first) >= self.duration_s and len(self._positions) >= 2:
             pts = np.array(self._positions)
             self.result_ecef_m = pts.mean(axis=0)
@@ -208,19 +209,15 @@ class BaseCore:
 
     def on_item(self, item: Any) -> list[tuple[str, bytes]]:
         """One decoded item (ObsEpoch, Ephemeris, SubframeWords); returns (kind, frame) to send now."""
-        from onboard.receiver.decode import SubframeWords
+        from onboard.receiver.decode import SubframeWords, ephemeris_from_subframe
 
         if isinstance(item, Ephemeris):
             self._add_ephemeris(item)
             return []
         if isinstance(item, SubframeWords):
-            if item.gnss_id == 0:
-                if item.bits == 30:
-                    eph = self._lnav.add_subframe_words30(item.prn, item.words, reference_week=self._week)
-                else:
-                    eph = self._lnav.add_subframe(item.prn, item.words, reference_week=self._week)
-                if eph is not None:
-                    self._add_ephemeris(eph)
+            eph = ephemeris_from_subframe(self._lnav, item, self._week)
+            if eph is not None:
+                self._add_ephemeris(eph)
             return []
         if not isinstance(item, ObsEpoch):
             return []
@@ -433,38 +430,51 @@ class RadioSender:
             self._log_file = None
 
 
-class BaseStation(Recorder):
-    """The recorder plus the correction sender: records the base journal, sends RTCM3 (or UBX) by radio."""
+class BaseStationFeature(RecorderFeature):
+    """The base station as a recorder feature: the base receiver's decoded items (RTCM mode) or raw frames (UBX
+    relay) → `BaseCore` → `RadioSender`. The radio and its tx log (`radio-tx.rtcm3` / `.ubx` in the flight
+    directory) open when the flight opens; `base.json` is the snapshot."""
 
-    def __init__(self, settings: Settings, deps: RecorderDeps, options: BaseOptions,
-                 open_radio: Callable[[], ByteStream]) -> None:
-        super().__init__(settings, deps)
-        self.base_options = options
+    name = "base"
+    status_name = BASE_STATUS_NAME
+
+    def __init__(self, options: BaseOptions, open_radio: Callable[[], ByteStream]) -> None:
+        self.options = options
         self.core = BaseCore(options)
         self._open_radio = open_radio
         self.sender: RadioSender | None = None
+        self._clock: Clock | None = None
 
-    async def run(self) -> int:
-        """Record and send until stopped; returns the exit code."""
-        try:
-            return await super().run()
-        finally:
-            if self.sender is not None:
-                self.sender.stop()
-                c = self.core.scheduler.counts
-                log.info("base: sent %d B (%s), deferred %s, radio wrote %d B, queue drops %d", c.sent_bytes,
-                         c.sent, c.deferred, self.sender.bytes_written, self.sender.frames_dropped)
+    def on_flight_opened(self, flight: FlightContext) -> None:
+        suffix = "ubx" if self.options.relay == "ubx" else "rtcm3"
+        self._clock = flight.clock
+        self.sender = RadioSender(self._open_radio, flight.flight_dir / f"radio-tx.{suffix}")
+        self.sender.start()
 
-    def base_snapshot(self) -> dict[str, Any]:
+    def on_frame(self, frame: Frame) -> None:
+        if self.options.relay == "ubx" and self._clock is not None:
+            self._send(self.core.on_frame(frame, self._clock.monotonic_ns() / 1e9))
+
+    def on_decoded(self, item: Any) -> None:
+        # (In relay mode this only surveys and collects ephemerides; the frames go out from on_frame.)
+        self._send(self.core.on_item(item))
+
+    def _send(self, frames: list[tuple[str, bytes]]) -> None:
+        if self.sender is None:
+            return
+        for _, frame in frames:
+            self.sender.send(frame)
+
+    def status(self) -> dict[str, Any]:
         """What the base sends (JSON-able): position, survey-in, bytes and messages sent/deferred, radio state."""
         c = self.core.scheduler.counts
         pos = self.core.position
         survey = self.core.survey
         return {
-            "relay": self.base_options.relay,
-            "budget_bytes_s": self.base_options.radio_budget_bytes_s,
+            "relay": self.options.relay,
+            "budget_bytes_s": self.options.radio_budget_bytes_s,
             "position_ecef_m": None if pos is None else list(pos.arp_ecef_m),
-            "survey_in": None if survey is None else {"fixes": len(survey._positions), "spread_m": survey.spread_m,
+            "survey_in": None if survey is None else {"fixes": survey.count, "spread_m": survey.spread_m,
                                                       "duration_s": survey.duration_s},
             "sent_bytes": c.sent_bytes, "sent": dict(c.sent), "deferred": dict(c.deferred),
             "radio_open": self.sender is not None and self.sender.radio_open,
@@ -474,39 +484,10 @@ class BaseStation(Recorder):
             "over_budget": self.core.over_budget,
         }
 
-    def _write_status(self) -> None:
-        super()._write_status()
-        from onboard.realtime.service import write_rtk_status
-
-        try:
-            write_rtk_status(self.settings.status_path.with_name(BASE_STATUS_NAME), self.base_snapshot())
-        except OSError as exc:
-            log.warning("base status not written: %s", exc)
-
-    def _ensure_sender(self) -> RadioSender | None:
-        if self.sender is None and self.status.flight_dir is not None:
-            suffix = "ubx" if self.base_options.relay == "ubx" else "rtcm3"
-            self.sender = RadioSender(self._open_radio, Path(self.status.flight_dir) / f"radio-tx.{suffix}")
-            self.sender.start()
-        return self.sender
-
-    def _send(self, frames: list[tuple[str, bytes]]) -> None:
-        sender = self._ensure_sender()
-        if sender is None:
+    def on_flight_closed(self, reason: str) -> None:
+        if self.sender is None:
             return
-        for _, frame in frames:
-            sender.send(frame)
-
-    def _on_frame(self, frame: Frame) -> None:
-        super()._on_frame(frame)
-        if self.base_options.relay == "ubx":
-            self._send(self.core.on_frame(frame, self.clock.monotonic_ns() / 1e9))
-
-    def _on_decoded(self, item: Any) -> None:
-        super()._on_decoded(item)
-        # Best effort like all parsing: a bug here must never reach the recording path. (In relay mode this
-        # only surveys and collects ephemerides; the frames go out from _on_frame.)
-        try:
-            self._send(self.core.on_item(item))
-        except (ValueError, ArithmeticError, IndexError) as exc:
-            log.error("base corrections: %s", exc)
+        self.sender.stop()
+        c = self.core.scheduler.counts
+        log.info("base: sent %d B (%s), deferred %s, radio wrote %d B, queue drops %d", c.sent_bytes,
+                 c.sent, c.deferred, self.sender.bytes_written, self.sender.frames_dropped)

@@ -28,6 +28,7 @@ from onboard.receiver.decode import (
     NavFix,
     SubframeWords,
     TimeMarks,
+    ephemeris_from_subframe,
     iter_decoded,
     iter_file_bytes,
 )
@@ -83,11 +84,7 @@ def collect(chunks: Iterator[bytes], options: ConvertOptions = ConvertOptions())
         elif isinstance(item, TimeMarks):
             out.marks += [m for m in item.marks if m.edge in edges]
         elif isinstance(item, SubframeWords):
-            week = out.stats.reference_week
-            if item.bits == 30:
-                eph = assembler.add_subframe_words30(item.prn, item.words, reference_week=week)
-            else:
-                eph = assembler.add_subframe(item.prn, item.words, reference_week=week)
+            eph = ephemeris_from_subframe(assembler, item, out.stats.reference_week)
             if eph is not None:
                 out.ephemerides.append(eph)
         elif isinstance(item, Ephemeris):

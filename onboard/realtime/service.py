@@ -18,22 +18,18 @@ keeps its held fix through 5-20 s gaps (hil_sim: no wrong fix, fixed throughout)
 used (single-point solution) and the filter's ambiguities wait, slips watched, for the base to return.
 `rtk.json` shows the age of the newest base epoch (`age_s`) in both cases.
 
-Wiring into the recorder: `RtkRecorder` is the recorder with this service attached through its decoded-item
-hook (`Recorder._on_decoded`) and its status writes; `rtk.json` is written beside the status snapshot. The
-daemon's own wiring (a settings key for the radio device and these three calls: `start(flight_dir)` after the
-flight directory is chosen, `submit(item)` for each decoded item, `stop()` at close) is left to the daemon's
-owner; see `RtkRecorder` for the exact calls. The base stream comes from `onboard.hw.net_stream.open_base_stream`
+Wiring into the recorder: `RtkFeature` (a `onboard.recorder.feature.RecorderFeature`) starts the service when
+the flight opens (`start(flight_dir)`), hands it every decoded item (`submit`), writes its snapshot as `rtk.json`
+beside the status snapshot and stops it when the flight closes; the composition root (`onboard.recorder.app`)
+adds it when `rtk.base_stream` names the corrections: `onboard.hw.net_stream.open_base_stream`
 ("serial:/dev/ttyUSB0@57600", "tcp://HOST:PORT" or "ntrip://USER:PASS@HOST:PORT/MOUNT").
 """
 
 from __future__ import annotations
 
-import json
 import logging
-import os
 import queue
 import threading
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -46,10 +42,10 @@ from onboard.errors import LinkLost
 from onboard.gnsstime import GpsTime
 from onboard.hw.ports import ByteStream, Clock, SystemClock
 from onboard.logger.journal import Journal, JournalOptions
+from onboard.receiver.base_epochs import RtcmCollector
 from onboard.receiver.framing import Frame, Protocol, StreamFramer
-from onboard.receiver.rtcm import BasePosition, RtcmDecoder
-from onboard.recorder.daemon import Recorder, RecorderDeps
-from onboard.recorder.settings import Settings
+from onboard.receiver.rtcm import BasePosition
+from onboard.recorder.feature import FlightContext, RecorderFeature
 from onboard.recorder.status import RTK_STATUS_NAME
 from onboard.rtk.ephemeris import EphemerisStore
 from onboard.rtk.options import RtkOptions
@@ -133,9 +129,10 @@ class RtkStatus:
 class BaseStream:
     """Radio bytes → base epochs / position / ephemerides (pure: no I/O, no clock, no threads).
 
-    RTCM3 frames go through `RtcmDecoder` (GPS week from `reference`, the latest rover time); UBX frames (a
-    raw relay) through the UBX decoder with RTKLIB's lock rules. Epochs of one time from several messages are
-    merged.
+    RTCM3 frames go through the post-processing collector (`onboard.receiver.base_epochs.RtcmCollector`: the
+    same merge, order and week rules as `onboard rtk` on the radio journal; GPS week from the rover's first
+    epoch, then from the stream); UBX frames (a raw relay) through the UBX decoder with RTKLIB's lock rules,
+    their GPS part into the same collector. `epochs` keeps the newest `buffer_epochs`.
     """
 
     def __init__(self, buffer_epochs: int = 30) -> None:
@@ -143,70 +140,59 @@ class BaseStream:
         from onboard.rtk.lnav import LnavAssembler
 
         self.framer = StreamFramer()
-        self.rtcm = RtcmDecoder()
+        self.collector = RtcmCollector(None, max_epochs=buffer_epochs)
         self.ubx_stats = DecodeStats()
         self.tracker = LockTracker()
         self.lnav = LnavAssembler()
-        self.epochs: deque[ObsEpoch] = deque(maxlen=buffer_epochs)
-        self.position: BasePosition | None = None
-        self.ephemerides: list[Ephemeris] = []
         self.frames = 0
-        self.epoch_count = 0
+
+    @property
+    def epochs(self) -> list[ObsEpoch]:
+        """The newest base epochs, in time order."""
+        return self.collector.out.epochs
+
+    @property
+    def epoch_count(self) -> int:
+        """Base epochs received since the start."""
+        return self.collector.epoch_count
+
+    @property
+    def position(self) -> BasePosition | None:
+        """The last base position (1005/1006) received."""
+        return self.collector.out.base_position
+
+    @property
+    def ephemerides(self) -> list[Ephemeris]:
+        """Every ephemeris received (1019, or LNAV subframes / AID-EPH of a UBX relay), in arrival order."""
+        return self.collector.out.ephemerides
 
     def feed(self, data: bytes, reference: GpsTime | None) -> int:
-        """Decode what `data` completes; returns the number of new base epochs."""
-        new = 0
+        """Decode what `data` completes; returns the number of new base epochs. `reference` (the latest rover
+        epoch time, None before the first) gives the collector its week reference once."""
+        if reference is not None:
+            self.collector.set_reference(reference)
+        before = self.collector.epoch_count
         for frame in self.framer.feed(data):
-            new += self._frame(frame, reference)
-        return new
+            self._frame(frame)
+        return self.collector.epoch_count - before
 
-    def _add_epoch(self, ep: ObsEpoch) -> int:
-        from onboard.receiver.base_epochs import EPOCH_MERGE_TOLERANCE_NS, _merge
+    def _frame(self, frame: Frame) -> None:
+        from onboard.receiver.decode import SubframeWords, decode_frame, ephemeris_from_subframe
 
-        ep = ep.gps_only()
-        if len(ep) == 0:
-            return 0
-        last = self.epochs[-1] if self.epochs else None
-        if last is not None and abs(ep.time.diff_ns(last.time)) < EPOCH_MERGE_TOLERANCE_NS:
-            self.epochs[-1] = _merge(last, ep)
-            return 0
-        if last is not None and ep.time < last.time:
-            return 0
-        self.epochs.append(ep)
-        self.epoch_count += 1
-        return 1
-
-    def _frame(self, frame: Frame, reference: GpsTime | None) -> int:
         self.frames += 1
         if frame.protocol is Protocol.RTCM3:
-            if reference is None:
-                if frame.msg_id not in (1005, 1006):
-                    return 0  # no week to resolve yet: the rover has not produced an epoch
-                reference = GpsTime(0, 0)
-            item: Any = self.rtcm.decode(frame, reference)
-        elif frame.protocol is Protocol.UBX:
-            from onboard.receiver.decode import SubframeWords, decode_frame
-
-            item = decode_frame(frame, self.ubx_stats)
-            if isinstance(item, ObsEpoch):
-                item = self.tracker.update(item)
-            elif isinstance(item, SubframeWords):
-                week = self.ubx_stats.reference_week
-                if item.gnss_id != 0:
-                    item = None
-                elif item.bits == 30:
-                    item = self.lnav.add_subframe_words30(item.prn, item.words, reference_week=week)
-                else:
-                    item = self.lnav.add_subframe(item.prn, item.words, reference_week=week)
-        else:
-            return 0
+            self.collector.add(frame)
+            return
+        if frame.protocol is not Protocol.UBX:
+            return
+        item: Any = decode_frame(frame, self.ubx_stats)
+        if isinstance(item, SubframeWords):
+            item = ephemeris_from_subframe(self.lnav, item, self.ubx_stats.reference_week)
         if isinstance(item, ObsEpoch):
-            return self._add_epoch(item)
-        if isinstance(item, BasePosition):
-            self.position = item
+            # the engine is GPS L1 (RTCM epochs are GPS already): a relay's other systems are left out here
+            self.collector.add_epoch(self.tracker.update(item).gps_only())
         elif isinstance(item, Ephemeris):
             self.ephemerides.append(item)
-        return 0
 
     def latest_at(self, t: GpsTime, tolerance_s: float) -> ObsEpoch | None:
         """Latest base epoch with time ≤ t + tolerance (None when none is buffered)."""
@@ -352,7 +338,12 @@ class RtkService:
         return rtk_init(replace(self.engine_options, static_start=True), np.array(takeoff, float))
 
     def _engine_thread(self) -> None:
-        from onboard.receiver.decode import LockTracker, LockTrackerOptions, SubframeWords
+        from onboard.receiver.decode import (
+            LockTracker,
+            LockTrackerOptions,
+            SubframeWords,
+            ephemeris_from_subframe,
+        )
         from onboard.rtk.lnav import LnavAssembler
 
         state = self._new_state()
@@ -372,12 +363,10 @@ class RtkService:
                 store.add(item)
                 continue
             if isinstance(item, SubframeWords):
-                if item.gnss_id == 0:
-                    week = self._reference.week if self._reference is not None else None
-                    eph = (lnav.add_subframe_words30(item.prn, item.words, reference_week=week) if item.bits == 30
-                           else lnav.add_subframe(item.prn, item.words, reference_week=week))
-                    if eph is not None:
-                        store.add(eph)
+                week = self._reference.week if self._reference is not None else None
+                eph = ephemeris_from_subframe(lnav, item, week)
+                if eph is not None:
+                    store.add(eph)
                 continue
             rover = tracker.update(item)
             self._reference = rover.time
@@ -471,45 +460,29 @@ class RtkService:
             log.error("solution file: %s", exc)
 
 
-def write_rtk_status(path: Path, snapshot: dict[str, Any]) -> None:
-    """Write the RTK snapshot atomically (temp file + rename), like the recorder's status."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(snapshot, indent=1, sort_keys=True) + "\n")
-    os.replace(tmp, path)
+class RtkFeature(RecorderFeature):
+    """Real-time RTK as a recorder feature: `RtkService` started when the flight opens (radio journal and
+    solution.pos in the flight directory), fed every decoded item, stopped when the flight closes; its
+    snapshot is `rtk.json` beside the status snapshot."""
 
+    name = "rtk"
+    status_name = RTK_STATUS_NAME
 
-class RtkRecorder(Recorder):
-    """The recorder with real-time RTK attached (the three calls the daemon needs, through its hooks)."""
+    def __init__(self, options: RtkServiceOptions, open_radio: Callable[[], ByteStream] | None,
+                 clock: Clock | None = None) -> None:
+        self.rtk = RtkService(options, open_radio, clock)
+        self._started = False
 
-    def __init__(self, settings: Settings, deps: RecorderDeps, options: RtkServiceOptions,
-                 open_radio: Callable[[], ByteStream] | None) -> None:
-        super().__init__(settings, deps)
-        self.rtk = RtkService(options, open_radio, deps.clock)
-        self._rtk_started = False
+    def on_flight_opened(self, flight: FlightContext) -> None:
+        self.rtk.start(flight.flight_dir)
+        self._started = True
 
-    async def run(self) -> int:
-        """Record (and solve) until stopped; returns the exit code."""
-        try:
-            return await super().run()
-        finally:
-            if self._rtk_started:
-                self.rtk.stop()
-                self._write_rtk_status()
-
-    def _on_decoded(self, item: Any) -> None:
-        super()._on_decoded(item)
+    def on_decoded(self, item: Any) -> None:
         self.rtk.submit(item)
 
-    def _write_status(self) -> None:
-        if not self._rtk_started and self.status.flight_dir is not None:
-            self._rtk_started = True  # first status write after the flight directory was chosen
-            self.rtk.start(Path(self.status.flight_dir))
-        super()._write_status()
-        if self._rtk_started:
-            self._write_rtk_status()
+    def status(self) -> dict[str, Any] | None:
+        return self.rtk.snapshot() if self._started else None
 
-    def _write_rtk_status(self) -> None:
-        try:
-            write_rtk_status(self.settings.status_path.with_name(RTK_STATUS_NAME), self.rtk.snapshot())
-        except OSError as exc:
-            log.warning("rtk status not written: %s", exc)
+    def on_flight_closed(self, reason: str) -> None:
+        if self._started:
+            self.rtk.stop()

@@ -23,6 +23,8 @@ log = logging.getLogger(__name__)
 
 EPOCH_MERGE_TOLERANCE_NS = 1_000_000
 """RTCM observation messages of one epoch (several MSM/legacy messages) share a time tag to the ms."""
+RTCM_POSITION = frozenset({1005, 1006})
+"""Base position messages (antenna reference point): decodable without a time reference."""
 
 
 @dataclass
@@ -52,12 +54,28 @@ def _merge(a: ObsEpoch, b: ObsEpoch) -> ObsEpoch:
 
 
 class RtcmCollector:
-    """Incremental RTCM3 stream → `RtcmCollected` (feed frames in stream order). Pure: no I/O."""
+    """Incremental RTCM3 stream → `RtcmCollected` (feed frames in stream order). Pure: no I/O.
 
-    def __init__(self, reference: GpsTime) -> None:
+    The one set of epoch rules for post-processing (`collect_rtcm`) and real time
+    (`onboard.realtime.service.BaseStream`): messages of one time tag (within EPOCH_MERGE_TOLERANCE_NS) merge
+    into one epoch; an epoch not after the last one is dropped (logged); the GPS week of an RTCM epoch is
+    resolved from `reference`, which then follows the stream's own epochs (a long log never drifts past half a
+    week). `reference` None (real time before the rover's first epoch): only 1005/1006 (which carry no time)
+    are decoded until `set_reference`. `max_epochs` keeps only the newest epochs (real time; None: all).
+    """
+
+    def __init__(self, reference: GpsTime | None, max_epochs: int | None = None) -> None:
         self.reference = reference
+        self.max_epochs = max_epochs
         self.decoder = RtcmDecoder()
         self.out = RtcmCollected()
+        self.epoch_count = 0
+        """Epochs appended since the start (the kept list may be shorter, see `max_epochs`)."""
+
+    def set_reference(self, reference: GpsTime) -> None:
+        """Give the week reference if none was given yet (the rover's first epoch); later calls change nothing."""
+        if self.reference is None:
+            self.reference = reference
 
     def add(self, frame: Frame) -> ObsEpoch | BasePosition | Ephemeris | None:
         """Decode one frame (non-RTCM frames are ignored); returns what it decoded to."""
@@ -66,26 +84,40 @@ class RtcmCollector:
         out = self.out
         out.frames += 1
         out.messages[frame.msg_id] = out.messages.get(frame.msg_id, 0) + 1
+        reference = self.reference
+        if reference is None:
+            if frame.msg_id not in RTCM_POSITION:
+                return None  # no week to resolve yet
+            reference = GpsTime(0, 0)  # a position message carries no time
         before = self.decoder.errors
-        item = self.decoder.decode(frame, self.reference)
+        item = self.decoder.decode(frame, reference)
         out.undecodable += self.decoder.errors - before
         if isinstance(item, ObsEpoch):
-            if len(item) == 0:
-                return item
-            # Keep the reference near the stream, so a long log never drifts past half a week.
-            self.reference = item.time
-            last = out.epochs[-1] if out.epochs else None
-            if last is not None and abs(item.time.diff_ns(last.time)) < EPOCH_MERGE_TOLERANCE_NS:
-                out.epochs[-1] = _merge(last, item)
-            elif last is not None and item.time <= last.time:
-                log.warning("RTCM epoch %s not after %s: dropped", item.time, last.time)
-            else:
-                out.epochs.append(item)
+            self.add_epoch(item)
         elif isinstance(item, Ephemeris):
             out.ephemerides.append(item)
         elif isinstance(item, BasePosition):
             out.base_position = item
         return item
+
+    def add_epoch(self, epoch: ObsEpoch) -> bool:
+        """Add one base epoch by the rules above (also for epochs of a raw UBX relay); True if it is a new one."""
+        if len(epoch) == 0:
+            return False
+        self.reference = epoch.time
+        epochs = self.out.epochs
+        last = epochs[-1] if epochs else None
+        if last is not None and abs(epoch.time.diff_ns(last.time)) < EPOCH_MERGE_TOLERANCE_NS:
+            epochs[-1] = _merge(last, epoch)
+            return False
+        if last is not None and epoch.time <= last.time:
+            log.warning("RTCM epoch %s not after %s: dropped", epoch.time, last.time)
+            return False
+        epochs.append(epoch)
+        self.epoch_count += 1
+        if self.max_epochs is not None and len(epochs) > self.max_epochs:
+            del epochs[: len(epochs) - self.max_epochs]
+        return True
 
 
 def collect_rtcm(chunks: Iterable[bytes], reference: GpsTime) -> RtcmCollected:

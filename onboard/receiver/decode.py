@@ -37,7 +37,7 @@ import zlib
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from pyubx2 import UBXReader
@@ -60,6 +60,9 @@ from onboard.rtk.types import (
     Ephemeris,
     ObsEpoch,
 )
+
+if TYPE_CHECKING:
+    from onboard.rtk.lnav import LnavAssembler
 
 log = logging.getLogger(__name__)
 
@@ -706,3 +709,15 @@ def observation_epochs(items: Iterable[Decoded], tracker: LockTracker | None = N
     for item in items:
         if isinstance(item, ObsEpoch):
             yield tracker.update(item)
+
+
+def ephemeris_from_subframe(assembler: LnavAssembler, item: SubframeWords,
+                            reference_week: int | None) -> Ephemeris | None:
+    """The one subframe → LNAV dispatch: a GPS subframe (24-bit RXM-SFRB data words or 30-bit RXM-SFRBX words)
+    into `assembler`; returns the new Ephemeris when it completes a set, None otherwise (other systems too).
+    `reference_week` (full GPS week, e.g. of the latest epoch) resolves the subframe's 10-bit week."""
+    if item.gnss_id != GNSS_GPS:
+        return None
+    if item.bits == 30:
+        return assembler.add_subframe_words30(item.prn, item.words, reference_week=reference_week)
+    return assembler.add_subframe(item.prn, item.words, reference_week=reference_week)

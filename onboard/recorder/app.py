@@ -4,16 +4,18 @@ configuration asks for, assembled into one `Recorder` and run."""
 from __future__ import annotations
 
 import asyncio
+import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 from onboard.hw.ports import ByteStream, EdgeSource
 from onboard.recorder.daemon import Recorder, RecorderDeps
+from onboard.recorder.feature import RecorderFeature
 from onboard.recorder.sdnotify import SdNotifier
 from onboard.recorder.settings import Settings, receiver_options, rtk_engine_options, takeoff_position_ecef_m
 
 if TYPE_CHECKING:
-    from onboard.realtime.service import RtkServiceOptions
+    from onboard.realtime.service import RtkFeature, RtkServiceOptions
 
 
 def serial_port_opener(settings: Settings) -> Callable[[], ByteStream]:
@@ -56,22 +58,41 @@ def gpio_edge_sources(settings: Settings) -> Callable[[], Sequence[EdgeSource]] 
 
 
 def run_recorder(settings: Settings, deps: RecorderDeps | None = None) -> int:
-    """Run the recorder to completion in a fresh event loop; returns the exit code."""
+    """Run the recorder (with the features the settings ask for) to completion in a fresh event loop; returns the
+    exit code. A data directory in use by another recorder: the error line on stderr and exit 2."""
     if deps is None:
         deps = RecorderDeps(open_port=serial_port_opener(settings), notifier=SdNotifier())
-    return asyncio.run(recorder_for(settings, deps, settings.rtk_base_stream or None).run())
+    return run(recorder_for(settings, deps, settings.rtk_base_stream or None), "run")
 
 
-def recorder_for(settings: Settings, deps: RecorderDeps, base_stream: str | None,
-                 options: RtkServiceOptions | None = None) -> Recorder:
-    """The composition root's one call: the plain recorder, or with real-time RTK when a base stream is named
-    (`serial:DEV[@BAUD]`, `tcp://HOST:PORT`, `ntrip://[USER:PASS@]HOST[:PORT]/MOUNT`; ValueError if malformed)."""
-    if not base_stream:
-        return Recorder(settings, deps)
+def run(recorder: Recorder, command: str) -> int:
+    """Run an assembled recorder in a fresh event loop; returns its exit code (a refusal to start is printed as
+    `directgeo: <command>: error: ...`)."""
+    code = asyncio.run(recorder.run())
+    if recorder.refused is not None:
+        print(f"directgeo: {command}: error: {recorder.refused}", file=sys.stderr)
+    return code
+
+
+def rtk_feature(settings: Settings, deps: RecorderDeps, base_stream: str,
+                options: RtkServiceOptions | None = None) -> RtkFeature:
+    """Real-time RTK on the corrections of `base_stream` (`serial:DEV[@BAUD]`, `tcp://HOST:PORT`,
+    `ntrip://[USER:PASS@]HOST[:PORT]/MOUNT`; ValueError if malformed), with the settings' engine options."""
     from onboard.hw.net_stream import open_base_stream
-    from onboard.realtime.service import RtkRecorder, RtkServiceOptions
+    from onboard.realtime.service import RtkFeature, RtkServiceOptions
 
     options = options or RtkServiceOptions(engine=rtk_engine_options(settings),
                                            max_base_age_s=settings.rtk_max_base_age_s,
                                            takeoff_position_ecef_m=takeoff_position_ecef_m(settings))
-    return RtkRecorder(settings, deps, options, open_base_stream(base_stream))
+    return RtkFeature(options, open_base_stream(base_stream), deps.clock)
+
+
+def recorder_for(settings: Settings, deps: RecorderDeps, base_stream: str | None,
+                 options: RtkServiceOptions | None = None,
+                 features: Sequence[RecorderFeature] = ()) -> Recorder:
+    """The composition root's one call: the recorder with `features` (e.g. the base station's), plus real-time
+    RTK when a base stream is named (see `rtk_feature`)."""
+    assembled = list(features)
+    if base_stream:
+        assembled.append(rtk_feature(settings, deps, base_stream, options))
+    return Recorder(settings, deps, features=assembled)

@@ -12,14 +12,20 @@ Parsing and configuration are best effort: an exception there is logged and coun
 Threads hand work to the loop through one ordered queue with at most one pending loop wake-up (`_post`): a
 wake-up per serial read filled asyncio's self-pipe when the loop lagged behind a burst, and a full self-pipe
 drops the SIGTERM wake-up (CPython writes signals to the same socket), so the daemon ignored `systemctl stop`.
-Exit codes: 0 clean stop (SIGTERM/SIGINT), 1 journal I/O failure, 3 disk below the floor (at start: nothing
-recorded; while recording: the flight is closed cleanly first).
+Features (`onboard.recorder.feature`: real-time RTK, the base station's sender, ...) get the flight's lifecycle
+and the stream's bytes, frames and decoded items through explicit hooks; their failures are logged and counted.
+
+One recorder per data directory: `<data_dir>/.lock` is held (`fcntl.flock`) for the recorder's life; a second
+recorder on the same directory refuses before touching anything (exit 2: systemd does not restart on it).
+Exit codes: 0 clean stop (SIGTERM/SIGINT), 1 journal I/O failure, 2 data directory in use, 3 disk below the floor
+(at start: nothing recorded; while recording: the flight is closed cleanly first).
 """
 
 from __future__ import annotations
 
 import asyncio
 import errno
+import fcntl
 import functools
 import logging
 import os
@@ -32,13 +38,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from onboard.errors import ConfigRejected, DiskFull, InputError, LinkLost, ReceiverError
+from onboard.errors import ConfigRejected, DiskFull, InputError, LinkLost, OnboardError, ReceiverError
 from onboard.gnsstime import GpsTime
 from onboard.hw.ports import ByteStream, Clock, Edge, EdgeSource, SystemClock
 from onboard.logger.events import EventLog, read_events
 from onboard.logger.files import FileLayer, OsFileLayer
 from onboard.logger.journal import EVENTS_NAME, Journal, JournalOptions, flight_name, read_manifest
 from onboard.receiver.framing import Frame, StreamFramer
+from onboard.recorder.feature import FlightContext, RecorderFeature
 from onboard.recorder.sdnotify import SdNotifier, WatchdogGate
 from onboard.recorder.settings import Settings, receiver_options
 from onboard.recorder.status import SatelliteStatus, StatusSnapshot, write_status
@@ -60,7 +67,10 @@ log = logging.getLogger(__name__)
 
 EXIT_OK = 0
 EXIT_IO_ERROR = 1
+EXIT_IN_USE = 2
 EXIT_DISK_FULL = 3
+LOCK_NAME = ".lock"
+"""The data directory's advisory lock file (holds the pid of the recorder that owns the directory)."""
 READ_CHUNK_BYTES = 4096
 TIM_TM2 = (0x0D, 0x03)
 
@@ -83,6 +93,47 @@ class RecorderDeps:
     # "flash" (hot-shoe input, when gpio.flash_pin is set) and "pps" (receiver 1 PPS, the time anchor).
     # Built by the composition root from gpiozero pins.
     edge_sources: Callable[[], Sequence[EdgeSource]] | None = None
+
+
+class DataDirInUse(OnboardError):
+    """Another recorder holds the data directory's lock (`pid` its process id, None when unreadable)."""
+
+    def __init__(self, data_dir: Path, pid: int | None) -> None:
+        who = f"pid {pid}" if pid is not None else "pid unknown"
+        super().__init__(f"{data_dir} is in use by another recorder ({who})")
+        self.pid = pid
+
+
+class DataDirLock:
+    """`<data_dir>/.lock` held with `fcntl.flock` (advisory, exclusive, released by the kernel when the process
+    dies, so a crash leaves no stale lock). The holder's pid is written into the file for the error message."""
+
+    def __init__(self, data_dir: Path) -> None:
+        self.data_dir = Path(data_dir)
+        self.path = self.data_dir / LOCK_NAME
+        self._fd: int | None = None
+
+    def acquire(self) -> None:
+        """Take the lock; raises DataDirInUse when another process (or recorder) holds it, OSError when the lock
+        file cannot be created (a read-only or foreign data directory)."""
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            try:
+                text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+            finally:
+                os.close(fd)
+            raise DataDirInUse(self.data_dir, int(text) if text.isdigit() else None) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+        self._fd = fd
+
+    def release(self) -> None:
+        """Release the lock (the file stays: removing it would race with a recorder that just opened it)."""
+        if self._fd is not None:
+            os.close(self._fd)  # closing the descriptor releases the flock
+            self._fd = None
 
 
 def choose_flight_dir(data_dir: Path, wall_ns: int) -> Path:
@@ -153,16 +204,21 @@ class GpioTiming:
 
 
 class Recorder:
-    """The recorder: owns the journal, event log, port thread, decoder hook-up and status.
+    """The recorder: owns the journal, event log, port thread, decoder hook-up and status, and calls its
+    `features` (`onboard.recorder.feature.RecorderFeature`) at the points that module names."""
 
-    Subclass hooks (used by `rtk_service.RtkRecorder` and `base_station.BaseStation`; kept stable): called on
-    the event loop, always call `super()` first — `_on_frame(frame)` every valid frame, `_on_decoded(item)`
-    every decoded item, `_write_status()` every snapshot.
-    """
-
-    def __init__(self, settings: Settings, deps: RecorderDeps) -> None:
+    def __init__(self, settings: Settings, deps: RecorderDeps, features: Sequence[RecorderFeature] = ()) -> None:
         self.settings = settings
         self.deps = deps
+        self.features: tuple[RecorderFeature, ...] = tuple(features)
+        names = [f.name for f in self.features]
+        if len(set(names)) != len(names):
+            raise ValueError(f"recorder features must have distinct names, got {names}")
+        self.refused: str | None = None
+        """Why the recorder refused to start (the data directory is in use), for the command line's error."""
+        self._lock = DataDirLock(settings.data_dir)
+        self._logged_feature_errors: set[tuple[str, str]] = set()
+        self._features_open = False
         self.clock = deps.clock
         self.status = StatusSnapshot(
             pid=os.getpid(),
@@ -246,6 +302,31 @@ class Recorder:
         self._stopped = asyncio.Event()
         s = self.settings
         s.data_dir.mkdir(parents=True, exist_ok=True)
+        try:
+            self._lock.acquire()
+        except DataDirInUse as exc:
+            # Before anything else: the other recorder's flight, manifest and status snapshot stay untouched.
+            self.refused = str(exc)
+            log.error("refusing to record: %s", exc)
+            return EXIT_IN_USE
+        except OSError as exc:
+            log.error("cannot lock the data directory %s: %s", s.data_dir, exc)
+            self.status.state = "error"
+            self.status.message = f"cannot lock the data directory {s.data_dir}: {exc}"
+            s.status_path.parent.mkdir(parents=True, exist_ok=True)
+            self._write_status()
+            self.deps.notifier.notify(STATUS=self.status.message)
+            return EXIT_IO_ERROR
+        try:
+            return await self._run_locked()
+        finally:
+            if self._features_open:  # run() failed between flight opened and closed: stop the features' threads
+                self._close_features(self.stop_reason or "recorder failed")
+            self._lock.release()
+
+    async def _run_locked(self) -> int:
+        assert self._loop is not None and self._stopped is not None
+        s = self.settings
         s.status_path.parent.mkdir(parents=True, exist_ok=True)
         try:
             self.check_disk()
@@ -277,6 +358,11 @@ class Recorder:
         self.status.flight = flight_dir.name
         self.status.flight_dir = str(flight_dir)
         self._setup_decoder()
+        context = FlightContext(flight_dir=flight_dir, clock=self.clock, journal_options=options,
+                                status_path=s.status_path, post=self._post, request_stop=self.request_stop)
+        self._features_open = True
+        for feature in self.features:
+            self._feature_call(feature, feature.on_flight_opened, context)
         for sig in (signal.SIGTERM, signal.SIGINT):
             try:
                 self._loop.add_signal_handler(sig, self.request_stop, f"signal {sig.name}", EXIT_OK)
@@ -330,6 +416,7 @@ class Recorder:
             # Even a full disk leaves the fsync'd segment intact; the next start recovers the manifest.
             log.error("closing the flight failed: %s", exc)
             self.status.message = f"{reason}; closing failed: {exc}"
+        self._close_features(reason)
         if self._port is not None:
             self._port.close()
             self._port = None
@@ -340,6 +427,11 @@ class Recorder:
         self.status.port_open = False
         self._write_status()
         self.deps.notifier.notify(STOPPING=1, STATUS=f"stopped: {reason}")
+
+    def _close_features(self, reason: str) -> None:
+        self._features_open = False
+        for feature in self.features:
+            self._feature_call(feature, feature.on_flight_closed, reason)
 
     # -- reader/writer thread ---------------------------------------------------------------------------
     def _reader_thread(self) -> None:
@@ -631,6 +723,8 @@ class Recorder:
         st.frames += len(frames)
         st.skipped_bytes += self._framer.skipped_bytes - skipped_before
         self._frames_this_connection += len(frames)
+        for feature in self.features:
+            self._feature_call(feature, feature.on_bytes, data, rx_monotonic_ns)
         for frame in frames:
             self._on_frame(frame)
 
@@ -641,6 +735,8 @@ class Recorder:
             # The time mark is already in the journal: the reader thread fsyncs it after its current read
             # (≤ port.read_timeout_s), with no executor callback waking the loop per mark.
             self._mark_sync.set()
+        for feature in self.features:
+            self._feature_call(feature, feature.on_frame, frame)
         if self._decode is None:
             return
         item = self._decode(frame, self._decode_stats)  # never raises on content (decode.py contract)
@@ -675,6 +771,24 @@ class Recorder:
                 self._sync_events()
         elif isinstance(item, NavFix) and item.fix_type in (2, 3, 4):
             self._maybe_poll_aid_eph()
+        for feature in self.features:
+            self._feature_call(feature, feature.on_decoded, item)
+
+    def _feature_call(self, feature: RecorderFeature, hook: Callable[..., Any], *args: Any) -> Any:
+        """Call one hook of `feature`; any exception is logged (traceback the first time per feature and hook)
+        and counted in `status.feature_errors`, and never reaches the recording path."""
+        try:
+            return hook(*args)
+        except Exception as exc:  # a feature's bug must not stop recording: the raw bytes come first
+            errors = self.status.feature_errors
+            errors[feature.name] = errors.get(feature.name, 0) + 1
+            key = (feature.name, hook.__name__)
+            if key not in self._logged_feature_errors:
+                self._logged_feature_errors.add(key)
+                log.exception("feature %s: %s failed (counted in feature_errors; recording goes on)", *key)
+            else:
+                log.debug("feature %s: %s failed: %s", *key, exc)
+            return None
 
     def _maybe_poll_aid_eph(self) -> None:
         """Backup ephemeris path (ublox.md): RXM-SFRB(X) are logged continuously; AID-EPH is polled after the
@@ -785,6 +899,16 @@ class Recorder:
             write_status(self.settings.status_path, st)
         except OSError as exc:
             log.warning("status snapshot not written: %s", exc)
+        for feature in self.features:
+            if feature.status_name is None:
+                continue
+            snapshot = self._feature_call(feature, feature.status)
+            if snapshot is None:
+                continue
+            try:
+                write_status(self.settings.status_path.with_name(feature.status_name), snapshot)
+            except (OSError, TypeError, ValueError) as exc:  # a full /run, or a snapshot that is not JSON
+                log.warning("%s snapshot not written: %s", feature.status_name, exc)
 
 
 def _set_future(fut: asyncio.Future[None], exc: BaseException | None) -> None:

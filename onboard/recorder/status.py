@@ -86,6 +86,8 @@ class StatusSnapshot:
     journal_syncs: int = 0
     disk_free_bytes: int | None = None
     disk_floor_bytes: int = 0
+    feature_errors: dict[str, int] = field(default_factory=dict)
+    """Exceptions in each recorder feature's hooks (`onboard.recorder.feature`), by feature name."""
 
     def to_json(self) -> dict[str, Any]:
         """JSON-able dict."""

@@ -6,13 +6,14 @@ import asyncio
 import subprocess
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
 from onboard.receiver.framing import ubx_frame
 from onboard.recorder.daemon import Recorder, RecorderDeps
+from onboard.recorder.feature import RecorderFeature
 from onboard.recorder.settings import Settings
 
 SEQ_CLASS_ID = (0x02, 0x10)  # RXM-RAW class/id; a payload of the wrong length just fails to decode (counted)
@@ -62,8 +63,8 @@ def make_settings(tmp_path: Path, **kw: Any) -> Settings:
 class RunningRecorder:
     """A Recorder running `run()` in its own thread and event loop."""
 
-    def __init__(self, settings: Settings, deps: RecorderDeps) -> None:
-        self.recorder = Recorder(settings, deps)
+    def __init__(self, settings: Settings, deps: RecorderDeps, features: Sequence[RecorderFeature] = ()) -> None:
+        self.recorder = Recorder(settings, deps, features)
         self.exit_code: int | None = None
         self.error: BaseException | None = None
         self.thread = threading.Thread(target=self._main, daemon=True)

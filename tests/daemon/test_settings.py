@@ -153,9 +153,9 @@ def test_rtk_base_stream_selects_the_real_time_rtk_recorder(tmp_path: Path) -> N
     """`rtk.base_stream` (file or ONBOARD_RTK_BASE_STREAM) is what makes the composition root add the RTK service."""
     import socket
 
-    from onboard.realtime.service import RtkRecorder
+    from onboard.realtime.service import RtkFeature
     from onboard.recorder.app import recorder_for
-    from onboard.recorder.daemon import Recorder, RecorderDeps
+    from onboard.recorder.daemon import RecorderDeps
 
     cfg = tmp_path / "r.toml"
     cfg.write_text("[rtk]\nbase_stream = 'serial:/dev/ttyUSB0@57600'\n")
@@ -166,6 +166,6 @@ def test_rtk_base_stream_selects_the_real_time_rtk_recorder(tmp_path: Path) -> N
         stream = f"tcp://127.0.0.1:{server.getsockname()[1]}"
         s = load_settings(None, environ={"ONBOARD_RTK_BASE_STREAM": stream, "ONBOARD_JOURNAL_DATA_DIR": str(tmp_path)})
         deps = RecorderDeps(open_port=lambda: None)  # type: ignore[arg-type,return-value]
-        assert type(recorder_for(s, deps, s.rtk_base_stream or None)) is RtkRecorder
+        assert [type(f) for f in recorder_for(s, deps, s.rtk_base_stream or None).features] == [RtkFeature]
     plain = load_settings(None, environ={"ONBOARD_JOURNAL_DATA_DIR": str(tmp_path)})
-    assert type(recorder_for(plain, deps, plain.rtk_base_stream or None)) is Recorder
+    assert recorder_for(plain, deps, plain.rtk_base_stream or None).features == ()

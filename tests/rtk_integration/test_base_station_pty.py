@@ -20,13 +20,14 @@ import numpy as np
 import pytest
 from pyrtcm import RTCMReader
 
-from onboard.base.station import BaseOptions, BaseStation
+from onboard.base.cli import base_recorder
+from onboard.base.station import BaseOptions, BaseStationFeature
 from onboard.hw.fake import FakeByteStream
 from onboard.hw.serial_port import SerialByteStream
 from onboard.receiver.decode import iter_journal
 from onboard.receiver.framing import Protocol, StreamFramer
 from onboard.receiver.rtcm import PRUNIT_GPS_M
-from onboard.recorder.daemon import RecorderDeps
+from onboard.recorder.daemon import Recorder, RecorderDeps
 from onboard.rtk.types import ObsEpoch
 from tests.conftest import shared_file
 from tests.daemon.helpers import make_settings, status, wait_until
@@ -70,7 +71,9 @@ def test_base_station_sends_rtcm_matching_its_journal_within_budget(tmp_path: Pa
     deps = RecorderDeps(open_port=lambda: SerialByteStream(port, 9600, 0.05))
     options = BaseOptions(station_id=42, position_ecef_m=tuple(world.base_ecef_m), radio_budget_bytes_s=BUDGET_B_S,
                           radio_burst_bytes=BURST_B)
-    station = BaseStation(settings, deps, options, lambda: SerialByteStream(radio_path, 57600, 0.05))
+    station = base_recorder(settings, deps, options, lambda: SerialByteStream(radio_path, 57600, 0.05))
+    (base,) = station.features
+    assert isinstance(base, BaseStationFeature)
     result: dict[str, int] = {}
     thread = threading.Thread(target=lambda: result.setdefault("rc", asyncio.run(station.run())), daemon=True)
     thread.start()
@@ -78,7 +81,7 @@ def test_base_station_sends_rtcm_matching_its_journal_within_budget(tmp_path: Pa
         st = wait_until(lambda: (s := status(settings.status_path)).get("config_state") in ("verified", "failed")
                         and s, timeout_s=60, what="configuration")
         assert st["config_state"] == "verified", st.get("config_error")
-        wait_until(lambda: station.core.scheduler.counts.sent.get("obs", 0) >= 40, timeout_s=40,
+        wait_until(lambda: base.core.scheduler.counts.sent.get("obs", 0) >= 40, timeout_s=40,
                    what="40 epochs of corrections")
     finally:
         loop = station._loop
@@ -129,7 +132,7 @@ def test_base_station_sends_rtcm_matching_its_journal_within_budget(tmp_path: Pa
     times = sorted({int(m.DF004) for m in msgs if m.identity == "1004"})
     span_s = (times[-1] - times[0]) / 1000.0 + 1.0
     assert len(got) <= BUDGET_B_S * span_s + BURST_B
-    assert station.sender is not None and station.sender.frames_dropped == 0
+    assert base.sender is not None and base.sender.frames_dropped == 0
     snap = json.loads(settings.status_path.with_name("base.json").read_text())
     assert snap["sent_bytes"] == len(got) and snap["sent"]["obs"] >= 40 and snap["queue_drops"] == 0
     np.testing.assert_allclose(snap["position_ecef_m"], world.base_ecef_m, atol=1e-3)
@@ -190,7 +193,7 @@ def test_python_m_onboard_base_end_to_end_and_sigterm(tmp_path: Path) -> None:
     numbers = [int(m.identity) for m in msgs]
     assert numbers.count(1002) >= 5 and 1006 in numbers
     assert all(int(m.DF003) == 7 for m in msgs if m.identity == "1002")
-    flights = list((tmp_path / "data").iterdir())
+    flights = list((tmp_path / "data").glob("flight-*"))
     assert len(flights) == 1 and (flights[0] / "radio-tx.rtcm3").read_bytes() == bytes(got)
 
 
@@ -207,13 +210,13 @@ def test_survey_in_over_the_emulated_base_gates_corrections_and_lands_near_the_a
     radio = FakeByteStream()
     settings = make_settings(tmp_path, port_device=port, port_baud=9600, receiver_options=MappingProxyType(
         {"ack_timeout_s": 0.5, "retries": 1, "meas_rate_ms": 1000}))
-    station = BaseStation(settings, RecorderDeps(open_port=lambda: SerialByteStream(port, 9600, 0.05)),
-                          BaseOptions(survey_in_s=20.0), lambda: radio)
+    base = BaseStationFeature(BaseOptions(survey_in_s=20.0), lambda: radio)
+    station = Recorder(settings, RecorderDeps(open_port=lambda: SerialByteStream(port, 9600, 0.05)), features=[base])
     result: dict[str, int] = {}
     thread = threading.Thread(target=lambda: result.setdefault("rc", asyncio.run(station.run())), daemon=True)
     thread.start()
     try:
-        wait_until(lambda: station.core.scheduler.counts.sent.get("obs", 0) >= 5, timeout_s=60,
+        wait_until(lambda: base.core.scheduler.counts.sent.get("obs", 0) >= 5, timeout_s=60,
                    what="survey-in done and corrections flowing")
     finally:
         loop = station._loop
@@ -222,7 +225,7 @@ def test_survey_in_over_the_emulated_base_gates_corrections_and_lands_near_the_a
         thread.join(20)
         emu.stop()
     assert result.get("rc") == 0
-    survey = station.core.survey
+    survey = base.core.survey
     assert survey is not None and survey.result_ecef_m is not None
     assert np.linalg.norm(survey.result_ecef_m - world.base_ecef_m) < 5.0  # mean of SPP over 20 s
     framer = StreamFramer()

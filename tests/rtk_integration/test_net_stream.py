@@ -93,13 +93,15 @@ def test_malformed_specs_are_refused() -> None:
 
 def test_recorder_for_adds_rtk_only_when_a_base_stream_is_named(tmp_path) -> None:
     from onboard.hw.fake import FakeByteStream
-    from onboard.realtime.service import RtkRecorder
+    from onboard.realtime.service import RtkFeature
     from onboard.recorder.app import recorder_for
     from onboard.recorder.daemon import Recorder, RecorderDeps
     from tests.daemon.helpers import make_settings
 
     settings, deps = make_settings(tmp_path), RecorderDeps(open_port=FakeByteStream)
-    assert type(recorder_for(settings, deps, None)) is Recorder
-    assert isinstance(recorder_for(settings, deps, "ntrip://u:p@127.0.0.1:2101/BASE"), RtkRecorder)
+    plain = recorder_for(settings, deps, None)
+    assert type(plain) is Recorder and plain.features == ()
+    with_rtk = recorder_for(settings, deps, "ntrip://u:p@127.0.0.1:2101/BASE")
+    assert type(with_rtk) is Recorder and [type(f) for f in with_rtk.features] == [RtkFeature]
     with pytest.raises(ValueError, match="base stream"):
         recorder_for(settings, deps, "radio0")

@@ -1,7 +1,7 @@
 """Acceptance: the whole real-time chain over real ptys, against the hil_sim World's truth.
 
-    base emulator (pty) → `onboard base` (BaseStation: journal + RTCM3 within budget) → radio link (two ptys,
-    5-20 s dropouts, air budget) → recorder with real-time RTK (RtkRecorder) ← rover emulator (pty)
+    base emulator (pty) → `onboard base` (recorder + BaseStationFeature: journal + RTCM3 within budget) → radio
+    link (two ptys, 5-20 s dropouts, air budget) → recorder with real-time RTK (RtkFeature) ← rover emulator (pty)
 
 Both recorders configure their receivers (rover 2 Hz, base 1 Hz). Checked: no wrong fix (Q=1 > 10 cm 3D from
 the true antenna), float or a held fix (never single) on the ageing corrections of a 12-20 s dropout, fixes
@@ -21,11 +21,11 @@ from types import MappingProxyType
 import numpy as np
 import pytest
 
-from onboard.base.station import BaseOptions, BaseStation
+from onboard.base.station import BaseOptions, BaseStationFeature
 from onboard.formats.pos import read_pos
 from onboard.hw.serial_port import SerialByteStream
 from onboard.logger.journal import iter_journal_bytes
-from onboard.realtime.service import RADIO_DIR, RTK_STATUS_NAME, SOLUTION_NAME, RtkRecorder, RtkServiceOptions
+from onboard.realtime.service import RADIO_DIR, RTK_STATUS_NAME, SOLUTION_NAME, RtkFeature, RtkServiceOptions
 from onboard.recorder.daemon import Recorder, RecorderDeps
 from onboard.rtk.types import Q_FIX, Q_FLOAT
 from tests.conftest import shared_file
@@ -102,13 +102,13 @@ def chain(tmp_path_factory: pytest.TempPathFactory) -> ChainRun:
             {"ack_timeout_s": 0.5, "retries": 1, "meas_rate_ms": rate_ms}))
 
     base_settings, rover_settings = settings("base", 1000), settings("rover", 500)
-    base = BaseStation(base_settings, RecorderDeps(open_port=lambda: SerialByteStream(base_port, 9600, 0.05)),
-                       BaseOptions(station_id=5, position_ecef_m=tuple(world.base_ecef_m),
-                                   radio_budget_bytes_s=1200.0),
-                       lambda: SerialByteStream(tx, 57600, 0.05))
+    base = Recorder(base_settings, RecorderDeps(open_port=lambda: SerialByteStream(base_port, 9600, 0.05)),
+                    features=[BaseStationFeature(BaseOptions(station_id=5, position_ecef_m=tuple(world.base_ecef_m),
+                                                             radio_budget_bytes_s=1200.0),
+                                                 lambda: SerialByteStream(tx, 57600, 0.05))])
     rtk_opts = RtkServiceOptions()
-    rover = RtkRecorder(rover_settings, RecorderDeps(open_port=lambda: SerialByteStream(rover_port, 9600, 0.05)),
-                        rtk_opts, lambda: SerialByteStream(rx, 57600, 0.05))
+    rover = Recorder(rover_settings, RecorderDeps(open_port=lambda: SerialByteStream(rover_port, 9600, 0.05)),
+                     features=[RtkFeature(rtk_opts, lambda: SerialByteStream(rx, 57600, 0.05))])
     runs = [_Running(base), _Running(rover)]
     try:
         for s in (base_settings, rover_settings):

@@ -219,7 +219,7 @@ def test_ubx_relay_from_the_base_decodes_to_the_base_epochs(world) -> None:
 
 
 def test_max_base_age_comes_from_the_settings_and_defaults_to_30_s(tmp_path) -> None:
-    from onboard.realtime.service import RtkRecorder
+    from onboard.realtime.service import RtkFeature
     from onboard.recorder.app import recorder_for
     from onboard.recorder.daemon import RecorderDeps
     from onboard.recorder.settings import default_config_path, load_settings
@@ -229,14 +229,14 @@ def test_max_base_age_comes_from_the_settings_and_defaults_to_30_s(tmp_path) -> 
     assert shipped.rtk_max_base_age_s == 30.0 and RtkServiceOptions().max_base_age_s == 30.0
     settings = load_settings(default_config_path(), environ={}, overrides={
         "rtk.max_base_age_s": 12.5, "rtk.base_stream": "tcp://127.0.0.1:9", "journal.data_dir": str(tmp_path)})
-    rec = recorder_for(settings, deps, settings.rtk_base_stream)
-    assert isinstance(rec, RtkRecorder)
-    assert rec.rtk.options.max_base_age_s == 12.5 and rec.rtk.engine_options.max_age_s == 12.5
-    assert rec.rtk.options.takeoff_position_ecef_m is None  # shipped: a cold start
+    (feature,) = recorder_for(settings, deps, settings.rtk_base_stream).features
+    assert isinstance(feature, RtkFeature)
+    assert feature.rtk.options.max_base_age_s == 12.5 and feature.rtk.engine_options.max_age_s == 12.5
+    assert feature.rtk.options.takeoff_position_ecef_m is None  # shipped: a cold start
 
 
 def test_engine_options_come_from_the_rtk_engine_table_and_bad_ones_are_refused(tmp_path) -> None:
-    from onboard.realtime.service import RtkRecorder
+    from onboard.realtime.service import RtkFeature
     from onboard.recorder.app import recorder_for
     from onboard.recorder.daemon import RecorderDeps
     from onboard.recorder.settings import ConfigFileError, default_config_path, load_settings
@@ -244,12 +244,13 @@ def test_engine_options_come_from_the_rtk_engine_table_and_bad_ones_are_refused(
     base = {"rtk.base_stream": "tcp://127.0.0.1:9", "journal.data_dir": str(tmp_path)}
     settings = load_settings(default_config_path(), environ={"ONBOARD_RTK_ENGINE_PARTIAL_AR": "false"}, overrides={
         **base, "rtk.engine.elevation_mask_deg": 20, "rtk.engine.max_first_fix_baseline_km": 4.5})
-    rec = recorder_for(settings, RecorderDeps(open_port=lambda: FakeByteStream(0.02)), settings.rtk_base_stream)
-    assert isinstance(rec, RtkRecorder)
-    engine = rec.rtk.engine_options
+    (feature,) = recorder_for(settings, RecorderDeps(open_port=lambda: FakeByteStream(0.02)),
+                              settings.rtk_base_stream).features
+    assert isinstance(feature, RtkFeature)
+    engine = feature.rtk.engine_options
     assert (engine.elmask_deg, engine.partial_ar, engine.max_first_fix_baseline_km) == (20.0, False, 4.5)
     assert engine.max_age_s == 30.0  # from rtk.max_base_age_s
-    assert rec.rtk.snapshot()["max_first_fix_baseline_km"] == 4.5  # what the pre-flight page reads
+    assert feature.rtk.snapshot()["max_first_fix_baseline_km"] == 4.5  # what the pre-flight page reads
     for bad, why in ((("rtk.engine.elevation_mask", 20), "unknown key 'rtk.engine.elevation_mask'"),
                      (("rtk.engine.ratio_threshold", "three"), "rtk.engine.ratio_threshold .three.: must be a number"),
                      (("rtk.engine.ar_mode", "sometimes"), "rtk.engine.ar_mode .sometimes.: ar_mode must be one of"),
@@ -274,7 +275,7 @@ def test_the_shipped_configuration_documents_the_engine_defaults() -> None:
 
 
 def test_the_take_off_position_comes_from_the_settings_and_bad_values_are_refused(tmp_path) -> None:
-    from onboard.realtime.service import RtkRecorder
+    from onboard.realtime.service import RtkFeature
     from onboard.recorder.app import recorder_for
     from onboard.recorder.daemon import RecorderDeps
     from onboard.recorder.settings import ConfigFileError, default_config_path, load_settings
@@ -282,9 +283,10 @@ def test_the_take_off_position_comes_from_the_settings_and_bad_values_are_refuse
     base = {"rtk.base_stream": "tcp://127.0.0.1:9", "journal.data_dir": str(tmp_path)}
     settings = load_settings(default_config_path(), environ={}, overrides={
         **base, "rtk.takeoff_position": "4027893.9, 307045.6, 4919475.2"})
-    rec = recorder_for(settings, RecorderDeps(open_port=lambda: FakeByteStream(0.02)), settings.rtk_base_stream)
-    assert isinstance(rec, RtkRecorder)
-    assert rec.rtk.options.takeoff_position_ecef_m == (4027893.9, 307045.6, 4919475.2)
+    (feature,) = recorder_for(settings, RecorderDeps(open_port=lambda: FakeByteStream(0.02)),
+                              settings.rtk_base_stream).features
+    assert isinstance(feature, RtkFeature)
+    assert feature.rtk.options.takeoff_position_ecef_m == (4027893.9, 307045.6, 4919475.2)
     for bad, why in (("4027893.9,307045.6", "expected X,Y,Z"), ("a,b,c", "expected X,Y,Z"),
                      ("48.85,2.35,35.0", "not near the Earth's surface"), ("nan,0,0", "expected X,Y,Z")):
         with pytest.raises(ConfigFileError, match=why):

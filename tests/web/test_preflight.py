@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import uvicorn
 
-from onboard.realtime.service import RtkStatus, write_rtk_status
+from onboard.realtime.service import RtkStatus
 from onboard.recorder.status import RTK_STATUS_NAME, SatelliteStatus, StatusSnapshot, write_status
 from onboard.web.app import create_app
 from onboard.web.checks import FAIL, OK, WARN, overall, preflight_checks
@@ -166,10 +166,10 @@ def test_page_in_a_real_browser_follows_the_snapshot(live_page: tuple[str, Path]
         write_status(status_path, _healthy(time.time_ns()))
         rtk = _rtk_fixed()
         rtk.q, rtk.ratio = 2, 1.4
-        write_rtk_status(status_path.with_name(RTK_STATUS_NAME), rtk.to_json())
+        write_status(status_path.with_name(RTK_STATUS_NAME), rtk.to_json())
         page.wait_for_function("document.getElementById('overall').textContent === 'CHECK WARNINGS'", timeout=10000)
         assert "wait for the fix before take-off" in page.inner_text("#checks")
-        write_rtk_status(status_path.with_name(RTK_STATUS_NAME), _rtk_fixed().to_json())
+        write_status(status_path.with_name(RTK_STATUS_NAME), _rtk_fixed().to_json())
         page.wait_for_function("document.getElementById('overall').textContent === 'READY TO FLY'", timeout=10000)
         assert "fixed: ratio 12.5" in page.inner_text("#checks")
         # a snapshot with a field of the wrong kind: a no-go that names it (the API answered 500 before)
@@ -202,6 +202,6 @@ def test_api_survives_a_garbage_rtk_snapshot(live_page: tuple[str, Path]) -> Non
     status_path.with_name(RTK_STATUS_NAME).write_text("[1, 2]")  # JSON, but not an RTK snapshot
     body = httpx.get(url + "/api/preflight", timeout=5).json()
     assert any("not a JSON object" in c["detail"] for c in body["checks"] if c["name"] == "RTK")
-    write_rtk_status(status_path.with_name(RTK_STATUS_NAME), _rtk_fixed().to_json())
+    write_status(status_path.with_name(RTK_STATUS_NAME), _rtk_fixed().to_json())
     body = httpx.get(url + "/api/preflight", timeout=5).json()
     assert body["overall"] == OK and body["rtk"]["q"] == 1

@@ -1,0 +1,84 @@
+"""The recorder's extension seam: a `RecorderFeature` gets the flight's lifecycle and the receiver's data.
+
+A feature is one thing the recorder does besides recording (real-time RTK, the base station's correction sender,
+an autopilot link): the composition root (`onboard.recorder.app`) builds the features the settings ask for and
+passes them to `Recorder(settings, deps, features)`. The recorder calls each hook at one defined point, on its
+event loop, in the order the features were given:
+
+    on_flight_opened(flight)   once, right after the flight directory is chosen and the journal and event log
+                               are open, before the reader thread starts (so before any other hook): start
+                               threads, open files in `flight.flight_dir`
+    on_bytes(data, rx_ns)      every chunk read from the receiver port, after it was journaled
+    on_frame(frame)            every checksum-valid frame (UBX, NMEA, RTCM3) of that stream
+    on_decoded(item)           every decoded item (`onboard.receiver.decode` types: ObsEpoch, SubframeWords, ...)
+    status()                   every status snapshot (~1 s) and at close: a JSON-able dict written as
+                               `status_name` beside the recorder's status.json (through `write_status`), or
+                               None for nothing
+    on_flight_closed(reason)   once, after the journal was closed, before the last snapshot: stop threads,
+                               close files
+
+A hook must return quickly (it runs on the loop that also times marks and pets the watchdog): slow work goes to
+the feature's own threads, which hand results back with `flight.post(fn, *args)` (run on the loop, in order).
+An exception in a hook is logged (with its traceback, the first time) and counted in the status snapshot's
+`feature_errors`; it never stops recording (the raw bytes are the product).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from onboard.hw.ports import Clock
+from onboard.logger.journal import JournalOptions
+from onboard.receiver.framing import Frame
+
+
+@dataclass(frozen=True)
+class FlightContext:
+    """What a feature gets when the flight opens.
+
+    `flight_dir` the flight being recorded (a resumed flight after a crash is the same directory); `clock` the
+    recorder's clock (monotonic and wall ns); `journal_options` how the recorder journals (segment size/age,
+    sync interval), for a feature that journals a stream of its own; `status_path` the recorder's status.json
+    (a feature's snapshot goes beside it); `post(fn, *args)` runs `fn(*args)` on the recorder's loop in posting
+    order (safe from any thread); `request_stop(reason, exit_code)` stops the recorder (loop only).
+    """
+
+    flight_dir: Path
+    clock: Clock
+    journal_options: JournalOptions
+    status_path: Path
+    post: Callable[..., None]
+    request_stop: Callable[[str, int], None]
+
+
+class RecorderFeature:
+    """Base of the recorder's features: every hook does nothing; override those you need (see module doc).
+
+    `name` identifies the feature in logs and in the status snapshot's `feature_errors`; `status_name` is the
+    file its `status()` is written to, beside status.json (None: the feature writes no snapshot).
+    """
+
+    name: str = "feature"
+    status_name: str | None = None
+
+    def on_flight_opened(self, flight: FlightContext) -> None:
+        """The flight is open (journal and event log): start threads, open files."""
+
+    def on_bytes(self, data: bytes, rx_monotonic_ns: int) -> None:
+        """Bytes read from the receiver port (already journaled) and the monotonic ns they arrived at."""
+
+    def on_frame(self, frame: Frame) -> None:
+        """One checksum-valid frame of the receiver stream."""
+
+    def on_decoded(self, item: Any) -> None:
+        """One decoded item of the receiver stream."""
+
+    def status(self) -> dict[str, Any] | None:
+        """This feature's snapshot (JSON-able), written as `status_name`; None: nothing to write now."""
+        return None
+
+    def on_flight_closed(self, reason: str) -> None:
+        """The flight is closed (`reason` why the recorder stopped): stop threads, close files."""
