@@ -112,3 +112,8 @@ def output_dir(text: str) -> Path:
         if parent.exists() and not parent.is_dir():
             raise argparse.ArgumentTypeError(f"{text}: must be a directory ({parent} is a file)")
     return path
+
+
+def warning_line(command: str, message: str) -> str:
+    """A warning in the same shape: `directgeo: <command>: warning: <message>` (something was skipped or lost)."""
+    return f"{PROGRAM}: {command}: warning: {' '.join(str(message).split())}"

@@ -135,25 +135,53 @@ def test_cli_prints_what_it_wrote(tmp_path: Path, capsys: pytest.CaptureFixture[
 
 # ----------------------------------------------------------------------------------------------- failure paths
 
-def test_truncated_gzip_is_a_clear_error_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    blob = shared_file(f"{M8P}/raw/rover-20181004-1237.ubx.gz").read_bytes()
+def test_truncated_gzip_is_salvaged_with_a_warning(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A gzip log cut short converts up to the cut; the warning names the compressed offset (was: refused)."""
+    src = shared_file(f"{M8P}/raw/rover-20181004-1237.ubx.gz")
+    blob = src.read_bytes()
     cut = tmp_path / "cut.ubx.gz"
     cut.write_bytes(blob[: len(blob) // 2])
+    whole = convert_one(src, tmp_path / "whole")
+    capsys.readouterr()
     code = convert_main([str(cut), "-o", str(tmp_path / "out"), "--no-progress"])
     err = capsys.readouterr().err
-    assert code == 2 and "cut.ubx.gz: gzip data is truncated" in err
-    assert not (tmp_path / "out" / "cut.obs").exists()
+    assert code == 0
+    assert f"directgeo: convert: warning: {cut}: gzip data is cut short at compressed byte {len(blob) // 2}" in err
+    obs = read_rinex_obs(tmp_path / "out" / "cut.obs")
+    assert 0.3 * whole.obs.epochs < len(obs.epochs) < whole.obs.epochs
 
 
-def test_corrupt_gzip_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    blob = bytearray(shared_file(f"{M8P}/raw/rover-20181004-1237.ubx.gz").read_bytes())
-    for k in range(1000, 1200):
+def test_corrupt_gzip_is_salvaged_up_to_the_damage(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    src = shared_file(f"{M8P}/raw/rover-20181004-1237.ubx.gz")
+    blob = bytearray(src.read_bytes())
+    damage = len(blob) // 3
+    for k in range(damage, damage + 200):
         blob[k] ^= 0x5A
     bad = tmp_path / "bad.ubx.gz"
     bad.write_bytes(bytes(blob))
+    whole = convert_one(src, tmp_path / "whole")
+    capsys.readouterr()
     code = convert_main([str(bad), "-o", str(tmp_path), "--no-progress"])
     err = capsys.readouterr().err
-    assert code == 2 and "bad.ubx.gz: gzip data is corrupt" in err
+    assert code == 0
+    line = next(ln for ln in err.splitlines() if "gzip data is corrupt" in ln)
+    assert line.startswith(f"directgeo: convert: warning: {bad}: gzip data is corrupt")
+    at = int(line.split("noticed at compressed byte ")[1].split(":")[0])
+    assert at >= damage  # deflate notices the damage at or after it (here only at the end, by the CRC)
+    corrupt = next(ln for ln in err.splitlines() if "hold no valid frame (corrupt, skipped)" in ln)
+    first = int(corrupt.split(f"{bad} byte ")[1].split()[0])  # decompressed offset of the first garbage
+    assert 0.25 * 2549319 < first < 0.45 * 2549319
+    obs = read_rinex_obs(tmp_path / "bad.obs")
+    assert 0.25 * whole.obs.epochs < len(obs.epochs) < 0.45 * whole.obs.epochs
+
+
+def test_gzip_damaged_from_the_start_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.ubx.gz"
+    bad.write_bytes(b"\x1f\x8b\x08\x00" + bytes(range(256)) * 8)
+    code = convert_main([str(bad), "-o", str(tmp_path / "out"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and "bad.ubx.gz: gzip data is corrupt" in err and "nothing decompressed" in err
+    assert not (tmp_path / "out" / "bad.obs").exists()
 
 
 def test_missing_empty_and_foreign_inputs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
