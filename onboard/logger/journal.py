@@ -403,13 +403,9 @@ def read_index(path: Path) -> list[IndexRecord]:
     return [IndexRecord(*rec) for rec in INDEX_RECORD.iter_unpack(data[:whole])]
 
 
-def journal_gaps(flight_dir: Path) -> list[str]:
-    """What is missing from the flight's journal, one sentence each: segments absent from the numbering
-    (`000002.ubx missing between 000001.ubx and 000003.ubx`), segments the manifest lists that are gone, and
-    segments shorter than the manifest says (truncated). Empty for a complete journal."""
-    flight_dir = Path(flight_dir)
-    segments = list_segments(flight_dir)
-    found = {p.name for p in segments}
+def numbering_gaps(segments: list[Path]) -> list[str]:
+    """Segments absent from the numbering of `segments` (as `list_segments` gives them), one sentence per gap:
+    `segment 000002.ubx missing between 000001.ubx and 000003.ubx`."""
     gaps: list[str] = []
     numbers = [int(p.name[:6]) for p in segments]
     for a, b in itertools.pairwise(numbers):
@@ -418,6 +414,18 @@ def journal_gaps(flight_dir: Path) -> list[str]:
             more = f" and {b - a - 6} more" if b - a - 1 > 5 else ""
             gaps.append(f"segment{'s' if b - a > 2 else ''} {names}{more} missing between {segment_name(a)} and "
                         f"{segment_name(b)}")
+    return gaps
+
+
+def journal_gaps(flight_dir: Path) -> list[str]:
+    """What is missing from the flight's journal, one sentence each: segments absent from the numbering
+    (`numbering_gaps`), segments the manifest lists that are gone, and segments shorter than the manifest
+    says (truncated). Empty for a complete journal."""
+    flight_dir = Path(flight_dir)
+    segments = list_segments(flight_dir)
+    found = {p.name for p in segments}
+    numbers = [int(p.name[:6]) for p in segments]
+    gaps = numbering_gaps(segments)
     manifest = read_manifest(flight_dir)
     for seg in manifest.segments if manifest is not None else []:
         if seg.name in found:
