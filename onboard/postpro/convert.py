@@ -382,9 +382,10 @@ def convert_main_args(args: argparse.Namespace) -> int:
             code = report_error(COMMAND, str(exc), EXIT_INPUT_ERROR)
             continue
         except OSError as exc:
-            where = exc.filename or args.out_dir
-            return report_error(COMMAND, f"cannot write {where}: {exc.strerror or exc} (the previous "
-                                f"{stems[path]}.obs/.nav in {args.out_dir}, if any, are unchanged)", EXIT_FAILURE)
+            if exc.filename and Path(exc.filename).parent.resolve() != Path(args.out_dir).resolve():
+                return report_error(COMMAND, f"cannot read {exc.filename}: {exc.strerror or exc}", EXIT_FAILURE)
+            return report_error(COMMAND, f"cannot write {stems[path]}.obs/.nav in {args.out_dir}: "
+                                f"{exc.strerror or exc} (the previous files, if any, are unchanged)", EXIT_FAILURE)
         s = result.obs
         systems = ", ".join(f"{k} {len(v)}" for k, v in sorted(s.satellites.items()))
         print(f"{result.obs_path}: {s.epochs} epochs, {s.satellite_count} satellites ({systems}), "
