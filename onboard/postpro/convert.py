@@ -295,7 +295,9 @@ def convert_one(path: Path, out_dir: Path, options: ConvertOptions = ConvertOpti
                          f"({collected.stats.frames} UBX frames, {collected.stats.failures} undecodable)")
     stem = stem or output_stem(path)
     when = now_utc or _dt.datetime.now(_dt.UTC)
-    info = header_info(collected, options.marker_name or stem, when)
+    # the header is ASCII (RINEX): a stem with other characters is written with "?" in their place, 60 at most
+    marker = options.marker_name or stem.encode("ascii", "replace").decode("ascii")[:60]
+    info = header_info(collected, marker, when)
     out_dir.mkdir(parents=True, exist_ok=True)
     obs_path = out_dir / f"{stem}.obs"
     nav_path = out_dir / f"{stem}.nav"
@@ -342,9 +344,17 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--marks", choices=EDGES, default="falling",
                    help="TIM-TM2 edges written as event records: falling (default: the flash, as RTKLIB), "
                         "rising or both")
-    p.add_argument("--marker", default=None, metavar="NAME",
-                   help="MARKER NAME in the observation header (default: the input's stem)")
+    p.add_argument("--marker", default=None, metavar="NAME", type=marker_name,
+                   help="MARKER NAME in the observation header, up to 60 ASCII characters (default: the input's "
+                        "stem)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar even on a terminal")
+
+
+def marker_name(text: str) -> str:
+    """argparse `type=` for a RINEX MARKER NAME: 1–60 printable ASCII characters (the header field is A60)."""
+    if not 0 < len(text) <= 60 or not all(" " <= c <= "~" for c in text):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be 1–60 printable ASCII characters (RINEX MARKER NAME)")
+    return text
 
 
 def _stems(inputs: list[Path]) -> dict[Path, str] | str:
