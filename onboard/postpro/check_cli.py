@@ -59,6 +59,10 @@ def _check(args: argparse.Namespace) -> int:
                   + (f", torn tails in {', '.join(torn)}" if torn else "") + torn_events)
             for problem in result.problems:
                 print(f"  PROBLEM: {problem}")
-        if not result.ok and code == EXIT_OK:
-            code = EXIT_FAILURE
+        if not result.ok:
+            n = len(result.problems)
+            print(error_line(COMMAND, f"{flight}: {n} problem{'s' if n > 1 else ''} (see the PROBLEM lines)"),
+                  file=sys.stderr)
+            if code == EXIT_OK:
+                code = EXIT_FAILURE
     return code

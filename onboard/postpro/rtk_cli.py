@@ -82,8 +82,8 @@ def add_rtk_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
                         "--static-start")
     p.add_argument("--ar-mode", choices=[m for m in AR_MODES if m != "off"], default="fix-and-hold",
                    help="integer ambiguity resolution: continuous, instantaneous or fix-and-hold (default)")
-    p.add_argument("--elmask", type=arg_type(elevation_mask_deg), default=15.0, metavar="DEG",
-                   help="elevation mask, degrees above the horizon, 0–90 (default 15)")
+    p.add_argument("--elmask", type=_elmask_deg, default=15.0, metavar="DEG",
+                   help="elevation mask, degrees above the horizon, 0 to below 90 (default 15)")
     p.add_argument("--direction", choices=DIRECTIONS, default="forward",
                    help="filter in time order (forward, default), reverse (backward) or both combined")
     p.add_argument("--velocity", action="store_true", help="append RTKLIB's velocity columns (m/s)")
@@ -95,6 +95,15 @@ def add_rtk_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
                    help="output .pos file (replaced only once complete)")
     p.set_defaults(func=rtk_main)
     return p
+
+
+def _elmask_deg(text: str) -> float:
+    """argparse type of --elmask: `onboard.validate.elevation_mask_deg`, and below 90° (the engine's rule: a mask
+    at the zenith leaves no satellite)."""
+    value = arg_type(elevation_mask_deg)(text)
+    if value >= 90.0:
+        raise argparse.ArgumentTypeError(f"{text}: must be below 90° (a mask at the zenith leaves no satellite)")
+    return value
 
 
 class Refused(Exception):
@@ -152,8 +161,11 @@ def _run(args: argparse.Namespace) -> int:
                          f"{bas_gps[-1].time}) have no common epochs")
     if not _ephemerides_cover(nav, rov_gps):
         raise Refused(_no_ephemeris_message(nav, rov_gps))
-    options = replace(RtkOptions(), elmask_deg=args.elmask, ar_elmask_deg=max(args.elmask, 15.0),
-                      ar_mode=args.ar_mode, static_start=args.static_start or args.init_pos is not None)
+    try:
+        options = replace(RtkOptions(), elmask_deg=args.elmask, ar_elmask_deg=max(args.elmask, 15.0),
+                          ar_mode=args.ar_mode, static_start=args.static_start or args.init_pos is not None)
+    except ValueError as exc:  # an option the engine's own checks refuse
+        raise InputError(f"options refused by the engine: {exc}") from None
     init_pos = np.array(args.init_pos) if args.init_pos is not None else None
     passes = 2 if args.direction == "combined" else 1
     bar = None

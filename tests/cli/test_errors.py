@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import onboard.postpro.rtk_cli as rtk_cli
 from onboard.__main__ import build_parser, main
 from onboard.formats.pos import read_pos, write_pos
 from onboard.gnsstime import GpsTime
+from onboard.postpro import rtk_cli
 from onboard.rtk.types import Q_FIX, Q_NONE, Solution
 from tests.conftest import shared_file
 
@@ -207,7 +207,7 @@ def test_a_bug_is_one_line_and_exit_1(monkeypatch: pytest.MonkeyPatch, capsys: p
 
     monkeypatch.setattr(rtk_cli, "rtk_main", broken)
     monkeypatch.setattr(rtk_cli, "_run", broken)
-    import onboard.postpro.check_cli as check_cli
+    from onboard.postpro import check_cli
 
     monkeypatch.setattr(check_cli, "_check", broken)
     assert main(["check", "somewhere"]) == 1

@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import onboard.postpro.rtk_cli as rtk_cli
 from onboard.__main__ import main
 from onboard.gnsstime import GpsTime
+from onboard.postpro import rtk_cli
 from onboard.rtk.types import Q_FIX, Solution
 from tests.conftest import shared_file
 

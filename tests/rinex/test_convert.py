@@ -324,8 +324,8 @@ def test_clean_input_reports_nothing_and_a_real_capture_its_header_and_torn_tail
     assert convert_main([str(log), "-o", str(tmp_path), "--no-progress"]) == 0
     assert capsys.readouterr().err.splitlines() == [  # gpsd's 314-byte comment header, a frame cut at the end
         f"directgeo: convert: warning: torn tail: 314 bytes at {log} byte 25904 are not a complete frame (skipped)",
-        f"directgeo: convert: warning: 314 bytes in 1 region hold no valid frame (corrupt, skipped): at {log} byte 0 "
-        "(314 B)"]
+        (f"directgeo: convert: warning: 314 bytes in 1 region hold no valid frame (corrupt, skipped): at {log} "
+         "byte 0 (314 B)")]
 
 
 def test_two_inputs_of_one_stem_are_refused_before_writing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
