@@ -183,3 +183,15 @@ def test_rinex_run_imports_only_what_rinex_needs(tmp_path):
     unneeded = {"pyubx2", "pyrtcm", "scipy", "pyproj", "tqdm", "fastapi", "serial", "tomllib", "onboard.recorder.settings",
                 "onboard.postpro.convert", "onboard.receiver.decode", "onboard.base.cli", "onboard.web", "onboard.recorder.daemon"}
     assert not loaded & unneeded, sorted(loaded & unneeded)
+
+
+def test_rtk_says_what_its_ubx_reader_skipped(tmp_path, caplog):
+    """A corrupted region of a UBX rover log is reported with its byte offset (it was skipped without a word)."""
+    data = bytearray(shared_file("ubx/gpsd_ublox-neo-m8t.log").read_bytes())
+    data[5000:5400] = bytes(400)
+    rover = tmp_path / "damaged.ubx"
+    rover.write_bytes(bytes(data))
+    with caplog.at_level("WARNING"):
+        main(["rtk", "--rover", str(rover), "--base", str(rover), "-o", str(tmp_path / "x.pos")])
+    corrupt = [r.getMessage() for r in caplog.records if "hold no valid frame" in r.getMessage()]
+    assert corrupt and f"{rover} byte 4996 (492 B)" in corrupt[0]
