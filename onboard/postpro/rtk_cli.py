@@ -138,12 +138,13 @@ def _run(args: argparse.Namespace) -> int:
     nav = read_navigation(args.nav, rover.ephemerides + base.ephemerides)
     if len(nav.store) == 0:
         raise InputError("no GPS ephemeris: give --nav FILE (RINEX navigation) or logs with RXM-SFRB(X)/AID-EPH")
+    header_pos = base.antenna_pos_ecef_m
     if args.base_pos is not None:
         base_pos = np.array(args.base_pos)
+    elif header_pos is None:
+        raise InputError(f"no base position: {args.base} has none in its header; give --base-pos X,Y,Z")
     else:
-        base_pos = base.antenna_pos_ecef_m
-        if base_pos is None:
-            raise InputError(f"no base position: {args.base} has none in its header; give --base-pos X,Y,Z")
+        base_pos = header_pos
         try:
             ecef_position_m(base_pos.tolist(), name=f"{args.base}: header position")
         except ValueError as exc:

@@ -37,8 +37,8 @@ def test_cut_file_keeps_what_decompressed(tmp_path: Path) -> None:
     path.write_bytes(blob[: len(blob) // 2])
     got, warnings = _read(path)
     assert 0.4 * len(data) < len(got) < 0.6 * len(data) and data.startswith(got)
-    assert warnings == [f"{path}: gzip data is cut short at compressed byte {len(blob) // 2}: kept the {len(got)} "
-                        "bytes decompressed before the end"]
+    assert warnings == [(f"{path}: gzip data is cut short at compressed byte {len(blob) // 2}: kept the "
+                         f"{len(got)} bytes decompressed before the end")]
 
 
 def test_damaged_block_is_salvaged_up_to_where_deflate_notices(tmp_path: Path) -> None:
