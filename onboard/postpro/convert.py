@@ -378,21 +378,21 @@ def convert_main_args(args: argparse.Namespace) -> int:
         return report_error(COMMAND, stems, EXIT_USAGE)
     code = EXIT_OK
     done: set[Path] = set()
+
+    def warn(message: str) -> None:
+        print(warning_line(COMMAND, message), file=sys.stderr)
+
     for path in args.inputs:
         if path.resolve() in done:
             continue  # the same input twice: converted once
         done.add(path.resolve())
-
-        def warn(message: str) -> None:
-            print(warning_line(COMMAND, message), file=sys.stderr)
-
         try:
             result = _run_one(path, args.out_dir, options, show_progress=not args.no_progress, warn=warn)
         except InputError as exc:
             code = report_error(COMMAND, str(exc), EXIT_INPUT_ERROR)
             continue
         except OSError as exc:
-            if exc.filename and Path(exc.filename).parent.resolve() != Path(args.out_dir).resolve():
+            if exc.filename and not _is_within(Path(exc.filename), Path(args.out_dir)):
                 return report_error(COMMAND, f"cannot read {exc.filename}: {exc.strerror or exc}", EXIT_FAILURE)
             return report_error(COMMAND, f"cannot write {stems[path]}.obs/.nav in {args.out_dir}: "
                                 f"{exc.strerror or exc} (the previous files, if any, are unchanged)", EXIT_FAILURE)
@@ -405,6 +405,12 @@ def convert_main_args(args: argparse.Namespace) -> int:
         if st.failures:
             warn(f"{path}: {st.failures} of {st.frames} UBX frames did not decode (skipped)")
     return code
+
+
+def _is_within(path: Path, directory: Path) -> bool:
+    """True when `path` is `directory` or inside it (an OSError there is a failure to write the output)."""
+    p, d = path.resolve(), directory.resolve()
+    return p == d or d in p.parents
 
 
 def _run_one(path: Path, out_dir: Path, options: ConvertOptions, show_progress: bool,
