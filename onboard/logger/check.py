@@ -105,6 +105,10 @@ def check_flight(flight_dir: Path) -> FlightCheck:
             result.problems.append(f"{idx_path.name}: index missing (the host times of {path.name} are lost)")
         elif not index_ok:
             result.problems.append(f"{idx_path.name}: index points beyond the data or goes backwards")
+        elif seg.index_torn_bytes and entry is not None and not entry.recovered and result.closed:
+            # a segment closed cleanly had its index fsync'd whole: a partial record is damage, not a power cut
+            result.problems.append(f"{idx_path.name}: truncated or extended ({idx_size} bytes, not whole "
+                                   f"{INDEX_RECORD.size}-byte records) in a cleanly closed segment")
     for name in listed:
         if not (flight_dir / name).exists():
             result.problems.append(f"{name}: listed in the manifest but missing")

@@ -132,3 +132,16 @@ def test_not_a_directory_is_a_usage_error(tmp_path: Path) -> None:
     (tmp_path / "file").write_text("x")
     out = _check_cli(tmp_path / "file")
     assert out.returncode == 2 and out.stderr.strip() == f"directgeo: check: error: {tmp_path / 'file'}: not a flight directory"
+
+
+def test_index_truncated_or_with_garbage_is_a_problem(tmp_path: Path) -> None:
+    make_flight(tmp_path / "f")
+    idx = tmp_path / "f" / "000000.idx"
+    whole = idx.read_bytes()
+    idx.write_bytes(whole[:-5])
+    r = check_flight(tmp_path / "f")
+    expected = (f"000000.idx: truncated or extended ({len(whole) - 5} bytes, not whole 24-byte records) in a "
+                "cleanly closed segment")
+    assert r.problems == [expected]
+    idx.write_bytes(whole + b"\xff" * 24)  # one more record, of garbage: it points beyond the data
+    assert check_flight(tmp_path / "f").problems == ["000000.idx: index points beyond the data or goes backwards"]
