@@ -46,7 +46,7 @@ def _command_parser(command: str) -> argparse.ArgumentParser:
     return sub.choices[command]
 
 
-@pytest.mark.parametrize("command", ["check", "convert", "rtk", "web"])
+@pytest.mark.parametrize("command", ["run", "check", "convert", "rtk", "base", "web"])
 def test_every_option_is_described(command: str) -> None:
     parser = _command_parser(command)
     bare = [a.dest for a in parser._actions if not a.help or a.help == argparse.SUPPRESS]
