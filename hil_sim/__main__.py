@@ -1,7 +1,13 @@
-"""`python -m hil_sim receiver …`: a u-blox receiver on a pseudo-terminal until SIGTERM/SIGINT.
+"""`python -m hil_sim`: the hardware-in-the-loop simulator (stand-ins for the drone's hardware).
 
-The first stdout line is the pty slave path (flushed), so a parent process can read it and open the port.
-`python -m hil_sim radio …` prints "<base-side pty> <drone-side pty>" and forwards between them.
+Three commands:
+  receiver  a u-blox LEA-6T or NEO-M8T on a pseudo-terminal, answering the recorder as the real receiver does
+            (configuration, raw measurements of a simulated sky, camera time marks, injected faults) until
+            SIGTERM/SIGINT; its first stdout line is the pty path to open (flushed).
+  radio     the base-to-drone telemetry radio: prints "<base-side pty> <drone-side pty>" and forwards between
+            them with dropouts and an air byte budget, until SIGTERM/SIGINT.
+  flight    a whole simulated flight through the real recorder daemons (rover and base), RINEX conversion,
+            RTK post-processing and the block adjustment; prints each stage's result and a summary.json.
 """
 
 from __future__ import annotations
@@ -30,26 +36,42 @@ def _window(text: str) -> tuple[float, float]:
     return at, dur
 
 
+EPILOG = """examples:
+  python -m hil_sim receiver --model m8t --speed 6 --link /tmp/gnss0   (then: python -m onboard run --port /tmp/gnss0)
+  python -m hil_sim receiver --model lea6t --corrupt-rate 1e-4 --unplug 60:5
+  python -m hil_sim radio --speed 6 --mean-interval 60
+  python -m hil_sim flight --model m8t --speed 6 --out demo-output
+  python -m hil_sim <command> --help   (each command's options and units)"""
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The command-line interface (one sub-command for now: receiver)."""
-    p = argparse.ArgumentParser(prog="python -m hil_sim", description=__doc__)
-    sub = p.add_subparsers(dest="command", required=True)
-    r = sub.add_parser("receiver", help="u-blox LEA-6T / NEO-M8T emulator on a pseudo-terminal")
-    r.add_argument("--model", choices=sorted(MODELS), required=True)
+    """The command-line interface: receiver, radio, flight."""
+    p = argparse.ArgumentParser(prog="python -m hil_sim", description=__doc__, epilog=EPILOG,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    r = sub.add_parser("receiver", help="u-blox LEA-6T / NEO-M8T emulator on a pseudo-terminal",
+                       description="A u-blox receiver on a pseudo-terminal until SIGTERM/SIGINT: the first stdout "
+                                   "line is the pty path. Times are simulated seconds (--speed N runs N× real "
+                                   "time); probabilities are 0–1.")
+    r.add_argument("--model", choices=sorted(MODELS), required=True, help="receiver model to emulate")
     r.add_argument("--speed", type=float, default=1.0, help="simulated time runs N× real time")
     r.add_argument("--seed", type=int, default=1, help="seed of the world and the faults")
     r.add_argument("--baud", type=int, default=9600, help="UART1 rate at power-on (factory 9600)")
     r.add_argument("--link", help="stable symlink to the current pty slave (re-pointed after port loss)")
-    r.add_argument("--receiver", choices=("rover", "base"), default="rover")
+    r.add_argument("--receiver", choices=("rover", "base"), default="rover",
+                   help="which antenna of the world: the drone's (rover, default) or the base station's")
     r.add_argument("--nav", help="RINEX navigation file of the world (default: the scenario's)")
     r.add_argument("--duration", type=float, default=None,
                    help="simulated span in s (default: the scenario's); afterwards no more measurements")
     g = r.add_mutually_exclusive_group()
     g.add_argument("--clear-align-to-tow", dest="align", action="store_const", const="clear", default="clear",
                    help="clear alignToTow for periods that do not divide 1 s (default)")
-    g.add_argument("--keep-align-to-tow", dest="align", action="store_const", const="keep")
-    r.add_argument("--rawx-on-u6", choices=("nak", "ack-ignore"), default="nak")
-    r.add_argument("--tp5-on-u6", choices=("ack", "nak"), default="ack")
+    g.add_argument("--keep-align-to-tow", dest="align", action="store_const", const="keep",
+                   help="keep alignToTow as requested, whatever the period")
+    r.add_argument("--rawx-on-u6", choices=("nak", "ack-ignore"), default="nak",
+                   help="LEA-6T answer to enabling RXM-RAWX: NAK (default) or ACK and ignore it")
+    r.add_argument("--tp5-on-u6", choices=("ack", "nak"), default="ack",
+                   help="LEA-6T answer to CFG-TP5: ACK (default, firmware ≥ 7.0) or NAK (older firmware)")
     r.add_argument("--silent", action="store_true", help="never answer; stream the factory output")
     r.add_argument("--ack-invalid-rates", action="store_true", help="ACK too-fast CFG-RATE, apply the minimum")
     r.add_argument("--camera-tp", type=int, choices=(0, 1), default=1,
@@ -64,15 +86,17 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--bounce-prob", type=float, default=0.0, help="hot-shoe bounce probability per flash")
     r.add_argument("--unplug", type=_window, action="append", default=[], metavar="AT_S:DURATION_S",
                    help="port disappears at simulated AT_S for DURATION_S (repeatable)")
-    r.add_argument("-v", "--verbose", action="store_true")
-    a = sub.add_parser("radio", help="base→drone radio link: two ptys with dropouts and an air byte budget")
-    a.add_argument("--speed", type=float, default=1.0)
-    a.add_argument("--seed", type=int, default=1)
-    a.add_argument("--air-baud", type=int, default=19200)
+    r.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    a = sub.add_parser("radio", help="base→drone radio link: two ptys with dropouts and an air byte budget",
+                       description="Print '<base-side pty> <drone-side pty>' and forward bytes between them, "
+                                   "losing them in dropouts and beyond the air rate, until SIGTERM/SIGINT.")
+    a.add_argument("--speed", type=float, default=1.0, help="simulated time runs N× real time (default 1)")
+    a.add_argument("--seed", type=int, default=1, help="seed of the dropouts (default 1)")
+    a.add_argument("--air-baud", type=int, default=19200, help="air data rate, baud: the byte budget (default 19200)")
     a.add_argument("--mean-interval", type=float, default=120.0, help="mean s between dropouts (simulated)")
-    a.add_argument("--gap-min", type=float, default=5.0)
-    a.add_argument("--gap-max", type=float, default=20.0)
-    a.add_argument("-v", "--verbose", action="store_true")
+    a.add_argument("--gap-min", type=float, default=5.0, help="shortest dropout, simulated s (default 5)")
+    a.add_argument("--gap-max", type=float, default=20.0, help="longest dropout, simulated s (default 20)")
+    a.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     from hil_sim.mission import add_parser as add_flight_parser
 
     add_flight_parser(sub)

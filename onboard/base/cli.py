@@ -6,25 +6,18 @@ Kept apart from `onboard.base.station` so that registering the command imports n
 from __future__ import annotations
 
 import argparse
-import sys
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from onboard.cmdline import EXIT_USAGE, report_error
 from onboard.recorder.settings import add_recorder_arguments
-from onboard.rtk.geodesy import parse_xyz_m
+from onboard.validate import arg_type, ecef_position_m, integer, number, positive
 
 if TYPE_CHECKING:
     from onboard.base.station import BaseOptions
     from onboard.hw.ports import ByteStream
     from onboard.recorder.daemon import Recorder, RecorderDeps
     from onboard.recorder.settings import Settings
-
-
-def _xyz(text: str) -> tuple[float, float, float]:
-    try:  # spaces separate as well as commas here ("X Y Z" pasted from a survey report)
-        return parse_xyz_m(",".join(v for v in text.replace(" ", ",").split(",") if v))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected X,Y,Z in ECEF metres, got {text!r}") from None
 
 
 def add_base_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:  # type: ignore[type-arg]
@@ -35,15 +28,23 @@ def add_base_parser(subparsers: argparse._SubParsersAction) -> argparse.Argument
                                           "a byte budget.")
     p.add_argument("--port", required=True, help="base receiver serial device")
     p.add_argument("--radio", required=True, help="telemetry radio serial device")
-    p.add_argument("--radio-baud", type=int, default=57600)
+    p.add_argument("--radio-baud", type=arg_type(integer, minimum=1200, maximum=4_000_000), default=57600,
+                   help="telemetry radio line rate, baud (default 57600)")
     where = p.add_mutually_exclusive_group(required=True)
-    where.add_argument("--position", type=_xyz, metavar="X,Y,Z", help="base antenna ECEF m (use --position=...)")
-    where.add_argument("--survey-in", type=float, metavar="SECONDS", help="mean of single-point fixes over S s")
-    p.add_argument("--antenna-height", type=float, default=0.0, help="ARP to phase centre, m (sent in 1006)")
-    p.add_argument("--station-id", type=int, default=0)
-    p.add_argument("--message", type=int, choices=(1002, 1004), default=1004)
-    p.add_argument("--budget", type=float, default=600.0, help="radio byte budget, B/s (default 600)")
-    p.add_argument("--obs-interval", type=float, default=1.0, help="send observations every S s (default 1)")
+    where.add_argument("--position", type=arg_type(ecef_position_m), metavar="X,Y,Z",
+                       help='surveyed base antenna position, ECEF metres: X,Y,Z or "X Y Z"')
+    where.add_argument("--survey-in", type=arg_type(positive, unit=" s", maximum=86400.0), metavar="SECONDS",
+                       help="position = mean of single-point fixes over SECONDS s")
+    p.add_argument("--antenna-height", type=arg_type(number, unit=" m", minimum=0.0, maximum=100.0), default=0.0,
+                   help="ARP to phase centre, m (sent in 1006)")
+    p.add_argument("--station-id", type=arg_type(integer, minimum=0, maximum=4095), default=0,
+                   help="RTCM reference station id, 0–4095 (default 0)")
+    p.add_argument("--message", type=int, choices=(1002, 1004), default=1004,
+                   help="RTCM3 GPS observation message: 1004 (L1+L2, default) or 1002 (L1)")
+    p.add_argument("--budget", type=arg_type(positive, unit=" B/s"), default=600.0,
+                   help="radio byte budget, B/s (default 600)")
+    p.add_argument("--obs-interval", type=arg_type(positive, unit=" s", maximum=3600.0), default=1.0,
+                   help="send observations every S s (default 1)")
     p.add_argument("--relay", choices=("rtcm", "ubx"), default="rtcm", help="RTCM3 (default) or raw UBX relay")
     add_recorder_arguments(p)
     p.set_defaults(func=base_main)
@@ -68,8 +69,7 @@ def base_main(args: argparse.Namespace) -> int:
                               obs_interval_s=args.obs_interval, position_ecef_m=args.position,
                               antenna_height_m=args.antenna_height, survey_in_s=args.survey_in or 0.0)
     except (ConfigFileError, ValueError) as exc:
-        print(f"directgeo: base: error: {exc}", file=sys.stderr)
-        return 2
+        return report_error("base", str(exc), EXIT_USAGE)
     deps = RecorderDeps(open_port=serial_port_opener(settings), notifier=SdNotifier())
 
     def open_radio() -> ByteStream:
@@ -78,8 +78,7 @@ def base_main(args: argparse.Namespace) -> int:
     try:
         recorder = base_recorder(settings, deps, options, open_radio)
     except ValueError as exc:  # a malformed rtk.base_stream
-        print(f"directgeo: base: error: {exc}", file=sys.stderr)
-        return 2
+        return report_error("base", str(exc), EXIT_USAGE)
     return run(recorder, "base")
 
 

@@ -50,7 +50,8 @@ def atomic_output(path: str | Path, mode: str = "w", *, fsync: bool = True,
         f.close()
         os.replace(tmp, target)
     except BaseException:
-        f.close()
+        with contextlib.suppress(OSError):  # closing flushes the buffer, which fails again on a full disk
+            f.close()
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise

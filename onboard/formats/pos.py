@@ -17,9 +17,10 @@ import numpy as np
 import numpy.typing as npt
 
 from onboard.errors import InputError
+from onboard.formats.atomic import atomic_output
 from onboard.gnsstime import GpsTime, gpst_from_calendar
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation, llh_to_ecef
-from onboard.rtk.types import Solution
+from onboard.rtk.types import Q_NONE, Solution
 
 _XYZ_TITLES = ("x-ecef(m)", "y-ecef(m)", "z-ecef(m)", "Q", "ns", "sdx(m)", "sdy(m)", "sdz(m)", "sdxy(m)",
                "sdyz(m)", "sdzx(m)", "age(s)", "ratio")
@@ -96,17 +97,30 @@ def format_solution(sol: Solution, llh: bool = False, velocity: bool = False, ca
 
 def write_pos(out: str | Path | IO[str], solutions: Iterable[Solution], header: Sequence[str] = (),
               llh: bool = False, velocity: bool = False, calendar: bool = False) -> int:
-    """Write solutions as an RTKLIB .pos file (path or open text file); returns the number of lines written."""
+    """Write solutions as an RTKLIB .pos file (path or open text file); returns the number of lines written.
+
+    A path is written atomically (`onboard.formats.atomic`: a failure leaves the previous file as it was).
+    Raises ValueError for a solution that is no position (Q_NONE, or a coordinate not finite): a row that a
+    reader would take for an antenna position must be one (nothing is written under the path then).
+    """
     if isinstance(out, (str, Path)):
-        with open(out, "w", encoding="ascii") as f:
+        with atomic_output(out, "w", encoding="ascii") as f:
             return write_pos(f, solutions, header, llh, velocity, calendar)
     for line in pos_header_lines(llh, velocity, calendar, header):
         out.write(line + "\n")
     n = 0
     for sol in solutions:
+        if not is_position(sol):
+            raise ValueError(f"solution at {sol.time} (Q={sol.q}) has no position: not written to a .pos file")
         out.write(format_solution(sol, llh, velocity, calendar) + "\n")
         n += 1
     return n
+
+
+def is_position(sol: Solution) -> bool:
+    """True when `sol` carries a position (Q is not Q_NONE and every ECEF coordinate is finite)."""
+    x, y, z = sol.pos_ecef_m.tolist()
+    return sol.q != Q_NONE and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
 
 
 @dataclass

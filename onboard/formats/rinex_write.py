@@ -15,7 +15,7 @@ import datetime as _dt
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import TextIO
+from typing import IO
 
 import numpy as np
 
@@ -218,7 +218,7 @@ def epoch_records(epoch: ObsEpoch) -> list[str]:
     return lines
 
 
-def write_obs(fp: TextIO, epochs: Sequence[ObsEpoch], marks: Iterable[CameraMark] = (),
+def write_obs(fp: IO[str], epochs: Sequence[ObsEpoch], marks: Iterable[CameraMark] = (),
               info: ObsHeaderInfo = ObsHeaderInfo()) -> ObsWriteSummary:
     """Write a RINEX 3.04 observation file: header, epochs in the given order, an event record (flag 5) for
     each mark with a time, placed before the first epoch at or after it (marks after the last epoch at the end).
@@ -296,7 +296,7 @@ def nav_record(eph: Ephemeris) -> str:
     )
 
 
-def write_nav(fp: TextIO, ephemerides: Iterable[Ephemeris], program: str = "directgeo", run_by: str = "",
+def write_nav(fp: IO[str], ephemerides: Iterable[Ephemeris], program: str = "directgeo", run_by: str = "",
               date_utc: str = "", leap_s: int | None = None,
               iono_alpha: Sequence[float] | None = None, iono_beta: Sequence[float] | None = None) -> int:
     """Write a RINEX 3.04 GPS navigation file; ephemerides sorted by toc then PRN, exact repeats dropped.

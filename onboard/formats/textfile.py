@@ -30,8 +30,9 @@ def read_head_bytes(path: Path, n_bytes: int) -> bytes:
     """Up to the first `n_bytes` of a plain or gzip-compressed file (decompressed), to tell what it holds.
 
     Light on imports on purpose: `onboard rtk` sniffs every input with it before deciding which reader (and
-    which decoder modules) it needs. Raises InputError for an unreadable file and for gzip data that is
-    corrupt or ends within the first `n_bytes` (the messages of the UBX log reader's).
+    which decoder modules) it needs. Gzip data cut short or damaged within the first `n_bytes` gives what
+    decompressed before (the file's reader salvages and reports the damage); nothing decompressing is an
+    InputError, as is an unreadable file.
     """
     try:
         with open(path, "rb") as f:
@@ -39,12 +40,19 @@ def read_head_bytes(path: Path, n_bytes: int) -> bytes:
             f.seek(0)
             if magic != b"\x1f\x8b":
                 return f.read(n_bytes)
-            with gzip.GzipFile(fileobj=f) as gz:
+            d = zlib.decompressobj(wbits=31)
+            out = b""
+            while len(out) < n_bytes and not d.eof and (piece := f.read(4096)):
                 try:
-                    return gz.read(n_bytes)
-                except EOFError as exc:
-                    raise InputError(f"{path}: gzip data is truncated ({exc})") from exc
-                except (OSError, zlib.error) as exc:
-                    raise InputError(f"{path}: gzip data is corrupt ({exc})") from exc
+                    out += d.decompress(piece, n_bytes - len(out))
+                except zlib.error as exc:
+                    if not out:
+                        raise InputError(f"{path}: gzip data is corrupt ({exc})") from exc
+                    break
+                while d.unconsumed_tail and len(out) < n_bytes:
+                    out += d.decompress(d.unconsumed_tail, n_bytes - len(out))
+            if not out and not d.eof:
+                raise InputError(f"{path}: gzip data is truncated (nothing decompressed)")
+            return out
     except OSError as exc:
         raise InputError(f"cannot read {path}: {exc.strerror or exc}") from exc

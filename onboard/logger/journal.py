@@ -15,11 +15,12 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
+import itertools
 import json
 import logging
 import re
 import struct
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -402,11 +403,53 @@ def read_index(path: Path) -> list[IndexRecord]:
     return [IndexRecord(*rec) for rec in INDEX_RECORD.iter_unpack(data[:whole])]
 
 
-def iter_journal_bytes(flight_dir: Path, chunk_bytes: int = 1 << 20) -> Iterator[bytes]:
+def numbering_gaps(segments: list[Path]) -> list[str]:
+    """Segments absent from the numbering of `segments` (as `list_segments` gives them), one sentence per gap:
+    `segment 000002.ubx missing between 000001.ubx and 000003.ubx`."""
+    gaps: list[str] = []
+    numbers = [int(p.name[:6]) for p in segments]
+    for a, b in itertools.pairwise(numbers):
+        if b > a + 1:
+            names = ", ".join(segment_name(n) for n in range(a + 1, min(b, a + 6)))
+            more = f" and {b - a - 6} more" if b - a - 1 > 5 else ""
+            gaps.append(f"segment{'s' if b - a > 2 else ''} {names}{more} missing between {segment_name(a)} and "
+                        f"{segment_name(b)}")
+    return gaps
+
+
+def journal_gaps(flight_dir: Path) -> list[str]:
+    """What is missing from the flight's journal, one sentence each: segments absent from the numbering
+    (`numbering_gaps`), segments the manifest lists that are gone, and segments shorter than the manifest
+    says (truncated). Empty for a complete journal."""
+    flight_dir = Path(flight_dir)
+    segments = list_segments(flight_dir)
+    found = {p.name for p in segments}
+    numbers = [int(p.name[:6]) for p in segments]
+    gaps = numbering_gaps(segments)
+    manifest = read_manifest(flight_dir)
+    for seg in manifest.segments if manifest is not None else []:
+        if seg.name in found:
+            size = (flight_dir / seg.name).stat().st_size
+            if size < seg.bytes:
+                gaps.append(f"segment {seg.name} is truncated: {size} bytes, the manifest lists {seg.bytes}")
+            continue
+        number = int(seg.name[:6]) if _SEGMENT_RE.match(seg.name) else -1
+        if not (numbers and numbers[0] < number < numbers[-1]):  # inside the numbering it is named above
+            gaps.append(f"segment {seg.name} listed in the manifest is missing")
+    return gaps
+
+
+def iter_journal_bytes(flight_dir: Path, chunk_bytes: int = 1 << 20,
+                       warn: Callable[[str], None] | None = None) -> Iterator[bytes]:
     """The flight's recorded bytes, segment after segment in recording order (torn tails included as-is).
 
-    Feed them to `StreamFramer` (which drops a torn frame and resynchronises) or a UBX reader.
+    Feed them to `StreamFramer` (which drops a torn frame and resynchronises) or a UBX reader. Each gap of
+    `journal_gaps` (a missing or truncated segment) goes to `warn` (default: a logged warning) before the first
+    byte, so that a reader never returns part of a flight without saying so.
     """
+    report = warn if warn is not None else log.warning
+    for gap in journal_gaps(flight_dir):
+        report(f"{Path(flight_dir)}: {gap}")
     for path in list_segments(Path(flight_dir)):
         with open(path, "rb") as f:
             while chunk := f.read(chunk_bytes):

@@ -2,9 +2,11 @@
 
 For each input writes `DIR/<stem>.obs` (L1 code, phase, Doppler, C/N0 of every system present, LLI by RTKLIB's
 u-blox rules, flag-5 event records for TIM-TM2 marks in GPS time) and `DIR/<stem>.nav` (GPS LNAV ephemerides
-from RXM-SFRB/SFRBX subframes and AID-EPH replies), and prints what it wrote. Unreadable input: a message on
-stderr and exit code 2, no traceback. Entry points for `onboard/__main__.py`: `add_convert_parser(subparsers)`
-and `convert_main(argv)`.
+from RXM-SFRB/SFRBX subframes and AID-EPH replies), both atomically (a failure leaves the previous pair), and
+prints what it wrote. What the input lacks is said on stderr: missing or truncated journal segments, regions
+that hold no valid frame (with byte offsets), torn tails, a damaged gzip salvaged up to the damage. Exit codes:
+0 written, 1 cannot write, 2 unusable arguments or input. Entry points for `onboard/__main__.py`:
+`add_convert_parser(subparsers)` and `convert_main(argv)`.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import logging
+import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -19,7 +22,18 @@ from pathlib import Path
 
 import numpy as np
 
+from onboard.cmdline import (
+    EXIT_FAILURE,
+    EXIT_OK,
+    EXIT_USAGE,
+    CommandParser,
+    add_command,
+    output_dir,
+    report_error,
+    warning_line,
+)
 from onboard.errors import InputError
+from onboard.formats.atomic import atomic_output
 from onboard.formats.rinex_write import ObsHeaderInfo, ObsWriteSummary, write_nav, write_obs
 from onboard.receiver.decode import (
     DecodeStats,
@@ -32,12 +46,15 @@ from onboard.receiver.decode import (
     iter_decoded,
     iter_file_bytes,
 )
+from onboard.receiver.framing import MAX_UBX_PAYLOAD, Frame, iter_frames
 from onboard.rtk.types import CameraMark, Ephemeris, ObsEpoch
 
 log = logging.getLogger(__name__)
 
-EXIT_OK = 0
-EXIT_INPUT_ERROR = 2
+COMMAND = "convert"
+MAX_FRAME_BYTES = MAX_UBX_PAYLOAD + 8
+"""A region longer than the longest frame cannot be one torn frame: it is reported as corrupt."""
+EXIT_INPUT_ERROR = EXIT_USAGE
 EDGES = ("falling", "rising", "both")
 
 
@@ -61,18 +78,103 @@ class Collected:
     fixes_ecef_m: list[tuple[float, float, float]] = field(default_factory=list)
     leap_s: int | None = None
     stats: DecodeStats = field(default_factory=DecodeStats)
+    unframed: list[tuple[int, int]] = field(default_factory=list)
+    """Regions (stream byte offset, length) that hold no valid frame of any protocol: corruption, torn tails."""
+    stream_bytes: int = 0
+
+
+@dataclass(frozen=True)
+class StreamPlaces:
+    """Where a byte of a concatenated input stream lives: the files (name, size in bytes) in stream order; a
+    size None for the last file when it is not known (gzip)."""
+
+    files: tuple[tuple[str, int | None], ...]
+
+    def where(self, offset: int) -> str:
+        """`name byte k` for stream byte `offset`."""
+        start = 0
+        for name, size in self.files:
+            if size is None or offset < start + size:
+                return f"{name} byte {offset - start}"
+            start += size
+        return f"byte {offset}"
+
+    def ends(self) -> set[int]:
+        """Stream offsets at which a file ends (a region ending there is that file's torn tail)."""
+        out, start = set(), 0
+        for _, size in self.files:
+            if size is None:
+                break
+            start += size
+            out.add(start)
+        return out
+
+
+class _UnframedBytes:
+    """Finds the stream regions between consecutive UBX frames that are not NMEA/RTCM3 either (pass the chunks
+    through `feed` and every frame to `frame`); only the bytes since the last frame are held."""
+
+    def __init__(self) -> None:
+        self.buf = bytearray()
+        self.base = 0  # stream offset of buf[0]
+        self.end = 0  # stream offset after the last frame
+        self.total = 0
+        self.regions: list[tuple[int, int]] = []
+
+    def feed(self, chunks: Iterator[bytes]) -> Iterator[bytes]:
+        for chunk in chunks:
+            del self.buf[: self.end - self.base]  # once per chunk: the bytes before the last frame are done
+            self.base = self.end
+            self.buf += chunk
+            self.total += len(chunk)
+            yield chunk
+
+    def frame(self, frame: Frame) -> None:
+        if frame.offset > self.end:
+            self._gap(self.end, frame.offset)
+        self.end = frame.offset + len(frame.raw)
+
+    def finish(self) -> list[tuple[int, int]]:
+        if self.total > self.end:
+            self._gap(self.end, self.total)
+        return self.regions
+
+    def _gap(self, start: int, stop: int) -> None:
+        data = bytes(self.buf[start - self.base : stop - self.base])
+        if sum(len(f.raw) for f in iter_frames(data)) < len(data):
+            self.regions.append((start, stop - start))
+
+
+def describe_unframed(collected: Collected, places: StreamPlaces, listed: int = 5) -> list[str]:
+    """Sentences for the regions of `Collected.unframed`: torn tails (a region no longer than a frame ending
+    where a file or the stream ends) one each, corrupt regions summed with the first `listed` named by place."""
+    regions = collected.unframed
+    ends = places.ends() | {collected.stream_bytes}
+    out = []
+    torn = [(o, n) for o, n in regions if o + n in ends and n <= MAX_FRAME_BYTES]
+    for o, n in torn:
+        out.append(f"torn tail: {n} bytes at {places.where(o)} are not a complete frame (skipped)")
+    corrupt = [r for r in regions if r not in torn]
+    if corrupt:
+        shown = ", ".join(f"{places.where(o)} ({n} B)" for o, n in corrupt[:listed])
+        more = f" and {len(corrupt) - listed} more" if len(corrupt) > listed else ""
+        out.append(f"{sum(n for _, n in corrupt)} bytes in {len(corrupt)} region{'s' if len(corrupt) > 1 else ''} "
+                   f"hold no valid frame (corrupt, skipped): at {shown}{more}")
+    return out
 
 
 def collect(chunks: Iterator[bytes], options: ConvertOptions = ConvertOptions()) -> Collected:
-    """Decode a byte stream into what the RINEX writers need (epochs with RTKLIB's LLI, marks, ephemerides)."""
+    """Decode a byte stream into what the RINEX writers need (epochs with RTKLIB's LLI, marks, ephemerides),
+    noting in `unframed` the regions that held no valid frame."""
     from onboard.rtk.lnav import LnavAssembler
 
     out = Collected()
+    unframed = _UnframedBytes()
     tracker = LockTracker()
     assembler = LnavAssembler()
     edges = ("falling", "rising") if options.mark_edges == "both" else (options.mark_edges,)
     last_time = None
-    for item in iter_decoded(chunks, out.stats):
+    for item in iter_decoded(unframed.feed(chunks), out.stats, on_frame=unframed.frame):
         if isinstance(item, ObsEpoch):
             if last_time is not None and item.time <= last_time:
                 log.warning("epoch %s not after %s: dropped", item.time, last_time)
@@ -93,6 +195,8 @@ def collect(chunks: Iterator[bytes], options: ConvertOptions = ConvertOptions())
             out.mon_ver = item
         elif isinstance(item, NavFix) and (item.fix_type is None or item.fix_type >= 3):
             out.fixes_ecef_m.append(item.pos_ecef_m)
+    out.unframed = unframed.finish()
+    out.stream_bytes = unframed.total
     return out
 
 
@@ -136,25 +240,43 @@ class ConvertResult:
     stats: DecodeStats
 
 
-def input_chunks(path: Path) -> Iterator[bytes]:
-    """Bytes of an input: a flight journal directory (segments in order) or a UBX log (gzip accepted)."""
+def input_chunks(path: Path, warn: Callable[[str], None] | None = None) -> tuple[Iterator[bytes], StreamPlaces]:
+    """Bytes of an input (a flight journal directory, segments in order, or a UBX log, gzip accepted) and
+    where each byte lives; missing segments and gzip damage go to `warn` (default: logged warnings)."""
     if path.is_dir():
         from onboard.logger.journal import iter_journal_bytes, list_segments
 
-        if not list_segments(path):
+        segments = list_segments(path)
+        if not segments:
             raise InputError(f"{path}: no journal segments (*.ubx) in this directory")
-        return iter(iter_journal_bytes(path))
+        places = StreamPlaces(tuple((f"{path / p.name}", p.stat().st_size) for p in segments))
+        return iter(iter_journal_bytes(path, warn=warn)), places
     if not path.exists():
         raise InputError(f"{path}: no such file")
-    return iter_file_bytes(path)
+    gz = path.is_file() and _starts_with(path, b"\x1f\x8b")
+    return iter_file_bytes(path, warn=warn), StreamPlaces(((str(path), None if gz else path.stat().st_size),))
+
+
+def _starts_with(path: Path, magic: bytes) -> bool:
+    try:
+        with open(path, "rb") as f:
+            return f.read(len(magic)) == magic
+    except OSError:
+        return False  # the reader says why it cannot read the file
 
 
 def convert_one(path: Path, out_dir: Path, options: ConvertOptions = ConvertOptions(),
                 progress: Callable[[int], None] | None = None,
-                now_utc: _dt.datetime | None = None) -> ConvertResult:
-    """Convert one input to `<stem>.obs` and `<stem>.nav` in `out_dir`. Raises InputError on unusable input
-    (nothing is written then)."""
-    chunks = input_chunks(path)
+                now_utc: _dt.datetime | None = None, warn: Callable[[str], None] | None = None,
+                stem: str | None = None) -> ConvertResult:
+    """Convert one input to `<stem>.obs` and `<stem>.nav` in `out_dir` (stem: `output_stem(path)` by default).
+
+    Both files are written atomically and renamed only once both are complete, so a failure (a full disk)
+    leaves the previous pair. What the input lacks (gaps, corrupt regions, torn tails) goes to `warn`
+    (default: logged warnings). Raises InputError on unusable input (nothing is written then), OSError when
+    the output cannot be written."""
+    report = warn if warn is not None else log.warning
+    chunks, places = input_chunks(path, report)
 
     def counted() -> Iterator[bytes]:
         for chunk in chunks:
@@ -163,27 +285,49 @@ def convert_one(path: Path, out_dir: Path, options: ConvertOptions = ConvertOpti
             yield chunk
 
     collected = collect(counted(), options)
+    for message in describe_unframed(collected, places):
+        report(message)
     if not collected.epochs and not collected.ephemerides:
         raise InputError(f"{path}: no raw observations or ephemerides found "
                          f"({collected.stats.frames} UBX frames, {collected.stats.failures} undecodable)")
-    stem = output_stem(path)
+    stem = stem or output_stem(path)
     when = now_utc or _dt.datetime.now(_dt.UTC)
-    info = header_info(collected, options.marker_name or stem, when)
+    # the header is ASCII (RINEX): a stem with other characters is written with "?" in their place, 60 at most
+    marker = options.marker_name or stem.encode("ascii", "replace").decode("ascii")[:60]
+    info = header_info(collected, marker, when)
     out_dir.mkdir(parents=True, exist_ok=True)
     obs_path = out_dir / f"{stem}.obs"
     nav_path = out_dir / f"{stem}.nav"
-    with open(obs_path, "w", encoding="ascii", newline="\n") as f:
-        summary = write_obs(f, collected.epochs, collected.marks, info)
-    with open(nav_path, "w", encoding="ascii", newline="\n") as f:
-        n_eph = write_nav(f, collected.ephemerides, program="directgeo convert",
+    with atomic_output(obs_path, "w", encoding="ascii") as fo, atomic_output(nav_path, "w", encoding="ascii") as fn:
+        summary = write_obs(fo, collected.epochs, collected.marks, info)
+        n_eph = write_nav(fn, collected.ephemerides, program="directgeo convert",
                           date_utc=info.date_utc, leap_s=collected.leap_s)
+        for f in (fo, fn):  # both complete on disk before either replaces its previous version
+            f.flush()
+            os.fsync(f.fileno())
     return ConvertResult(obs_path, nav_path, summary, n_eph, collected.stats)
+
+
+DESCRIPTION = """\
+Convert the receiver's raw UBX data (a flight's journal folder, or a UBX log, .gz accepted) to RINEX 3.04:
+<stem>.obs with the L1 code (m), phase (cycles), Doppler (Hz) and C/N0 (dB-Hz) of every system present and
+one event record (epoch flag 5, GPS time) per camera time mark, and <stem>.nav with the GPS ephemerides the
+receiver decoded. Files appear under their names only once complete; what the input lacks (missing
+segments, corrupt regions, torn tails, a damaged gzip kept up to the damage) is reported as a warning."""
+
+EPILOG = """\
+examples:
+  python -m onboard convert /data/flights/flight-20260501T101500Z -o rinex/
+  python -m onboard convert rover.ubx.gz base.ubx -o rinex/ --marks both
+
+exit codes: 0 written, 1 cannot write (full disk, permissions), 2 bad arguments or an unusable input
+(the other inputs are still converted)."""
 
 
 def add_convert_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:  # type: ignore[type-arg]
     """Register `convert` on the `python -m onboard` sub-command parser; sets `func=convert_main_args`."""
-    p = subparsers.add_parser("convert", help="UBX logs or flight journals -> RINEX 3.04 .obs/.nav",
-                              description=__doc__.split("\n\n")[0])
+    p = add_command(subparsers, COMMAND, summary="UBX logs or flight journals -> RINEX 3.04 .obs/.nav",
+                    description=DESCRIPTION, epilog=EPILOG)
     _add_arguments(p)
     p.set_defaults(func=convert_main_args)
     return p
@@ -191,28 +335,64 @@ def add_convert_parser(subparsers: argparse._SubParsersAction) -> argparse.Argum
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("inputs", nargs="+", type=Path, metavar="INPUT",
-                   help="UBX log (.ubx/.log, .gz accepted) or flight journal directory")
-    p.add_argument("-o", "--out-dir", type=Path, required=True, help="output directory")
+                   help="UBX log (.ubx/.log, .gz accepted) or flight journal directory (repeatable)")
+    p.add_argument("-o", "--out-dir", type=output_dir, required=True, metavar="DIR",
+                   help="output directory (created if missing); <stem>.obs/.nav of an input named <stem>")
     p.add_argument("--marks", choices=EDGES, default="falling",
-                   help="TIM-TM2 edges written as event records (default: falling = flash)")
-    p.add_argument("--marker", default=None, help="MARKER NAME (default: input stem)")
+                   help="TIM-TM2 edges written as event records: falling (default: the flash, as RTKLIB), "
+                        "rising or both")
+    p.add_argument("--marker", default=None, metavar="NAME", type=marker_name,
+                   help="MARKER NAME in the observation header, up to 60 ASCII characters (default: the input's "
+                        "stem)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar even on a terminal")
 
 
+def marker_name(text: str) -> str:
+    """argparse `type=` for a RINEX MARKER NAME: 1–60 printable ASCII characters (the header field is A60)."""
+    if not 0 < len(text) <= 60 or not all(" " <= c <= "~" for c in text):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be 1–60 printable ASCII characters (RINEX MARKER NAME)")
+    return text
+
+
+def _stems(inputs: list[Path]) -> dict[Path, str] | str:
+    """The output stem of each input, or the message refusing two inputs that would write the same files."""
+    seen: dict[str, Path] = {}
+    for path in inputs:
+        stem = output_stem(path)
+        if stem in seen and seen[stem].resolve() != path.resolve():
+            return (f"{seen[stem]} and {path} would both write {stem}.obs/.nav: convert them into different "
+                    f"-o directories (nothing written)")
+        seen.setdefault(stem, path)
+    return {path: output_stem(path) for path in inputs}
+
+
 def convert_main_args(args: argparse.Namespace) -> int:
-    """Run `convert` with parsed arguments; returns the exit code (2 when any input was unusable)."""
+    """Run `convert` with parsed arguments; returns the exit code (2 when any input was unusable, 1 when an
+    output could not be written)."""
     options = ConvertOptions(mark_edges=args.marks, marker_name=args.marker)
+    stems = _stems(list(args.inputs))
+    if isinstance(stems, str):
+        return report_error(COMMAND, stems, EXIT_USAGE)
     code = EXIT_OK
+    done: set[Path] = set()
+
+    def warn(message: str) -> None:
+        print(warning_line(COMMAND, message), file=sys.stderr)
+
     for path in args.inputs:
+        if path.resolve() in done:
+            continue  # the same input twice: converted once
+        done.add(path.resolve())
         try:
-            result = _run_one(path, args.out_dir, options, show_progress=not args.no_progress)
+            result = _run_one(path, args.out_dir, options, show_progress=not args.no_progress, warn=warn)
         except InputError as exc:
-            print(f"convert: error: {exc}", file=sys.stderr)
-            code = EXIT_INPUT_ERROR
+            code = report_error(COMMAND, str(exc), EXIT_INPUT_ERROR)
             continue
         except OSError as exc:
-            print(f"convert: error: cannot write to {args.out_dir}: {exc.strerror or exc}", file=sys.stderr)
-            return EXIT_INPUT_ERROR
+            if exc.filename and not _is_within(Path(exc.filename), Path(args.out_dir)):
+                return report_error(COMMAND, f"cannot read {exc.filename}: {exc.strerror or exc}", EXIT_FAILURE)
+            return report_error(COMMAND, f"cannot write {stems[path]}.obs/.nav in {args.out_dir}: "
+                                f"{exc.strerror or exc} (the previous files, if any, are unchanged)", EXIT_FAILURE)
         s = result.obs
         systems = ", ".join(f"{k} {len(v)}" for k, v in sorted(s.satellites.items()))
         print(f"{result.obs_path}: {s.epochs} epochs, {s.satellite_count} satellites ({systems}), "
@@ -220,26 +400,38 @@ def convert_main_args(args: argparse.Namespace) -> int:
         print(f"{result.nav_path}: {result.ephemerides} GPS ephemerides")
         st = result.stats
         if st.failures:
-            print(f"{path}: {st.failures} of {st.frames} UBX frames did not decode (skipped)")
+            warn(f"{path}: {st.failures} of {st.frames} UBX frames did not decode (skipped)")
     return code
 
 
-def _run_one(path: Path, out_dir: Path, options: ConvertOptions, show_progress: bool) -> ConvertResult:
+def _is_within(path: Path, directory: Path) -> bool:
+    """True when `path` is `directory` or inside it (an OSError there is a failure to write the output)."""
+    p, d = path.resolve(), directory.resolve()
+    return p == d or d in p.parents
+
+
+def _run_one(path: Path, out_dir: Path, options: ConvertOptions, show_progress: bool,
+             warn: Callable[[str], None]) -> ConvertResult:
     if not (show_progress and sys.stderr.isatty()) or path.is_dir():
-        return convert_one(path, out_dir, options)
+        return convert_one(path, out_dir, options, warn=warn)
     from tqdm import tqdm
 
     total = path.stat().st_size if path.exists() else None
     gz = path.suffix.lower() == ".gz"
     with tqdm(total=None if gz else total, unit="B", unit_scale=True, desc=path.name, leave=False) as bar:
-        return convert_one(path, out_dir, options, progress=bar.update)
+        return convert_one(path, out_dir, options, progress=bar.update, warn=warn)
 
 
 def convert_main(argv: Sequence[str] | None = None) -> int:
     """`convert` as a standalone command line (argv without the program and sub-command names)."""
-    parser = argparse.ArgumentParser(prog="python -m onboard convert", description=__doc__.split("\n\n")[0])
+    parser = CommandParser(prog="python -m onboard convert", description=DESCRIPTION, epilog=EPILOG,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
     _add_arguments(parser)
-    return convert_main_args(parser.parse_args(argv))
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    return convert_main_args(args)
 
 
 if __name__ == "__main__":

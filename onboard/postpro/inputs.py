@@ -55,10 +55,12 @@ def read_observations(path: str | Path) -> ObsInput:
         # (M8P rover + RAWX base 0.065 -> 0.049 s CPU, with the GLW1 CORS base 0.091 -> 0.070 s)
         rnx = read_rinex_obs(path, systems="G")
         return ObsInput(rnx.epochs, [], rnx.header.antenna_position_ecef_m(), "rinex")
-    from onboard.postpro.convert import collect
+    from onboard.postpro.convert import StreamPlaces, collect, describe_unframed
     from onboard.receiver.decode import iter_file_bytes
 
     col = collect(iter_file_bytes(path))
+    for message in describe_unframed(col, StreamPlaces(((str(path), None),))):  # what the reader skipped
+        log.warning("%s", message)
     if not col.epochs:
         raise InputError(f"{path}: neither a RINEX observation file nor a UBX log with RXM-RAW/RXM-RAWX epochs")
     pos = np.median(np.array(col.fixes_ecef_m), axis=0) if col.fixes_ecef_m else None

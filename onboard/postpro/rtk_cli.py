@@ -1,8 +1,9 @@
 """`python -m onboard rtk`: post-process rover + base observations into an RTKLIB-compatible .pos file.
 
-Thin shell: reads the inputs (RINEX 2/3 obs/nav, gzip accepted; UBX logs), builds the engine's typed inputs,
-runs `onboard.rtk.postpro.postprocess` and writes `onboard.formats.pos`. Register with
-`add_rtk_parser(subparsers)`; the parsed namespace goes to `rtk_main(args)`.
+Thin shell: reads the inputs (RINEX 2/3 obs/nav, gzip accepted; UBX logs; RTCM3 streams and journal folders
+for the base), builds the engine's typed inputs, runs `onboard.rtk.postpro.postprocess` and writes
+`onboard.formats.pos` atomically. Exit codes: 0 written, 1 cannot write, 2 unusable arguments or inputs,
+3 refused by a data rule (no epoch with a solution, a base position the data contradicts).
 """
 
 from __future__ import annotations
@@ -16,63 +17,114 @@ from pathlib import Path
 
 import numpy as np
 
+from onboard.cmdline import (
+    EXIT_FAILURE,
+    EXIT_OK,
+    EXIT_REFUSED,
+    EXIT_USAGE,
+    CommandParser,
+    add_command,
+    coordinate_action,
+    output_file,
+    report_error,
+)
 from onboard.errors import InputError
 from onboard.postpro.inputs import is_rinex, read_base_observations, read_navigation, read_observations
-from onboard.rtk.geodesy import parse_xyz_m
+from onboard.rtk.ephemeris import MAX_EPH_AGE_S
 from onboard.rtk.options import AR_MODES, RtkOptions
 from onboard.rtk.postpro import DIRECTIONS, postprocess
-from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE
+from onboard.rtk.rtkpos import Nav
+from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE, ObsEpoch
+from onboard.validate import arg_type, ecef_position_m, elevation_mask_deg
 
 log = logging.getLogger(__name__)
 
+COMMAND = "rtk"
 
-def _xyz(text: str) -> np.ndarray:
-    try:
-        return np.array(parse_xyz_m(text))
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+DESCRIPTION = """\
+Post-process a drone's GNSS observations against a base station's (GPS L1 carrier-phase RTK) and write
+one position per rover epoch to an RTKLIB-compatible .pos file (ECEF X/Y/Z in metres by default, or
+latitude/longitude/height with --llh; GPS time). Q is 1 fixed, 2 float, 5 single; epochs without a
+solution are not written.
+
+Inputs: RINEX 2.11/3.0x observation files (.gz accepted) or UBX logs with RXM-RAW/RXM-RAWX (a flight's
+journal converted with `onboard convert`, or the raw log); the base may also be an RTCM3 stream or a
+journal folder such as the rover's radio/ journal. Ephemerides come from --nav and from the logs."""
+
+EPILOG = """\
+examples:
+  python -m onboard rtk --rover rover.obs --base base.obs --nav rover.nav -o rover.pos
+  python -m onboard rtk --rover rover.obs --base base.rtcm3 --nav rover.nav \\
+      --base-pos=-3976219.1,3382371.6,3652511.1 --direction combined --llh -o rover.pos
+  python -m onboard rtk --rover flight/rinex/rover.obs --base flight/radio --nav flight/rinex/rover.nav \\
+      --init-pos "3774088.99 -601661.82 5089321.39" --static-start -o rover.pos
+
+exit codes: 0 written, 1 cannot write the output, 2 bad arguments or unusable input files,
+3 refused by the data (no epoch has a solution, or the base position contradicts the base's data)."""
 
 
-def add_rtk_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_rtk_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:  # type: ignore[type-arg]
     """Register the `rtk` subcommand on an argparse subparsers object; returns its parser."""
-    p = subparsers.add_parser("rtk", help="post-process rover + base observations (GPS L1 RTK) into a .pos file",
-                              description=__doc__)
-    p.add_argument("--rover", required=True, help="rover observations: RINEX 2.11/3.0x obs (gzip ok) or UBX log")
-    p.add_argument("--base", required=True,
+    p = add_command(subparsers, COMMAND, summary="post-process rover + base observations (GPS L1 RTK) into a .pos "
+                    "file", description=DESCRIPTION, epilog=EPILOG)
+    p.add_argument("--rover", required=True, metavar="FILE",
+                   help="rover observations: RINEX 2.11/3.0x obs (gzip ok) or UBX log")
+    p.add_argument("--base", required=True, metavar="FILE_OR_DIR",
                    help="base observations: RINEX obs, UBX log, RTCM3 stream (gzip ok) or a journal folder")
-    p.add_argument("--nav", action="append", default=[], help="RINEX navigation file (repeatable)")
-    p.add_argument("--base-pos", nargs="+", metavar="X,Y,Z",
-                   help="base antenna L1 phase centre, ECEF m: X,Y,Z or X Y Z (use --base-pos=X,Y,Z when X < 0)")
-    p.add_argument("--init-pos", nargs="+", metavar="X,Y,Z",
-                   help="surveyed take-off antenna position, ECEF m (same forms as --base-pos)")
-    p.add_argument("--ar-mode", choices=[m for m in AR_MODES if m != "off"], default="fix-and-hold")
-    p.add_argument("--elmask", type=float, default=15.0, help="elevation mask (deg, default 15)")
-    p.add_argument("--direction", choices=DIRECTIONS, default="forward")
-    p.add_argument("--velocity", action="store_true", help="append RTKLIB's velocity columns")
-    p.add_argument("--llh", action="store_true", help="write latitude/longitude/height instead of ECEF")
+    p.add_argument("--nav", action="append", default=[], metavar="FILE",
+                   help="RINEX navigation file of the observations' day (repeatable; gzip ok)")
+    xyz = coordinate_action(ecef_position_m)
+    p.add_argument("--base-pos", nargs="+", action=xyz, metavar="X,Y,Z",
+                   help="base antenna L1 phase centre, ECEF metres: X,Y,Z or \"X Y Z\" (default: the base "
+                        "file's header or RTCM 1005/1006 position)")
+    p.add_argument("--init-pos", nargs="+", action=xyz, metavar="X,Y,Z",
+                   help="surveyed take-off antenna position, ECEF metres (same forms as --base-pos); implies "
+                        "--static-start")
+    p.add_argument("--ar-mode", choices=[m for m in AR_MODES if m != "off"], default="fix-and-hold",
+                   help="integer ambiguity resolution: continuous, instantaneous or fix-and-hold (default)")
+    p.add_argument("--elmask", type=_elmask_deg, default=15.0, metavar="DEG",
+                   help="elevation mask, degrees above the horizon, 0 to below 90 (default 15)")
+    p.add_argument("--direction", choices=DIRECTIONS, default="forward",
+                   help="filter in time order (forward, default), reverse (backward) or both combined")
+    p.add_argument("--velocity", action="store_true", help="append RTKLIB's velocity columns (m/s)")
+    p.add_argument("--llh", action="store_true", help="write latitude/longitude (deg)/height (m) instead of ECEF")
     p.add_argument("--calendar", action="store_true", help="time as yyyy/mm/dd hh:mm:ss GPST instead of week tow")
     p.add_argument("--static-start", action="store_true", help="rover static on the ground until take-off")
     p.add_argument("--no-progress", action="store_true", help="no progress bar even on a terminal")
-    p.add_argument("-o", "--output", required=True, help="output .pos file")
+    p.add_argument("-o", "--output", required=True, type=output_file, metavar="FILE.pos",
+                   help="output .pos file (replaced only once complete)")
     p.set_defaults(func=rtk_main)
     return p
 
 
+def _elmask_deg(text: str) -> float:
+    """argparse type of --elmask: `onboard.validate.elevation_mask_deg`, and below 90° (the engine's rule: a mask
+    at the zenith leaves no satellite)."""
+    value = arg_type(elevation_mask_deg)(text)
+    if value >= 90.0:
+        raise argparse.ArgumentTypeError(f"{text}: must be below 90° (a mask at the zenith leaves no satellite)")
+    return value
+
+
+class Refused(Exception):
+    """The data cannot support an answer (exit 3); the message says why."""
+
+
 def rtk_main(args: argparse.Namespace) -> int:
-    """Run the command; returns the process exit code (0 ok, 2 unusable input). Prints a summary."""
-    try:
-        for name in ("base_pos", "init_pos"):
-            value = getattr(args, name, None)
-            if isinstance(value, list):
-                setattr(args, name, _xyz(",".join(value).replace(",,", ",")))
-    except argparse.ArgumentTypeError as exc:
-        print(f"onboard rtk: error: {exc}", file=sys.stderr)
-        return 2
+    """Run the command; returns the process exit code (see the module docstring). Prints a summary."""
+    inputs = [Path(args.rover), Path(args.base), *(Path(n) for n in args.nav)]
+    out = Path(args.output)
+    if any(out.exists() and p.exists() and out.resolve() == p.resolve() for p in inputs):
+        return report_error(COMMAND, f"-o {out}: is one of the inputs (it would be overwritten)", EXIT_USAGE)
     try:
         return _run(args)
     except InputError as exc:
-        print(f"onboard rtk: error: {exc}", file=sys.stderr)
-        return 2
+        return report_error(COMMAND, str(exc), EXIT_USAGE)
+    except Refused as exc:
+        return report_error(COMMAND, str(exc), EXIT_REFUSED)
+    except OSError as exc:
+        kept = "the previous file is unchanged" if out.exists() else "nothing written"
+        return report_error(COMMAND, f"cannot write {out}: {exc.strerror or exc} ({kept})", EXIT_FAILURE)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -86,9 +138,17 @@ def _run(args: argparse.Namespace) -> int:
     nav = read_navigation(args.nav, rover.ephemerides + base.ephemerides)
     if len(nav.store) == 0:
         raise InputError("no GPS ephemeris: give --nav FILE (RINEX navigation) or logs with RXM-SFRB(X)/AID-EPH")
-    base_pos = args.base_pos if args.base_pos is not None else base.antenna_pos_ecef_m
-    if base_pos is None:
+    header_pos = base.antenna_pos_ecef_m
+    if args.base_pos is not None:
+        base_pos = np.array(args.base_pos)
+    elif header_pos is None:
         raise InputError(f"no base position: {args.base} has none in its header; give --base-pos X,Y,Z")
+    else:
+        base_pos = header_pos
+        try:
+            ecef_position_m(base_pos.tolist(), name=f"{args.base}: header position")
+        except ValueError as exc:
+            raise InputError(f"{exc}; give --base-pos X,Y,Z") from None
     rov_gps = [e for e in rover.epochs if len(e.gps_only())]
     bas_gps = [e for e in base.epochs if len(e.gps_only())]
     if not rov_gps:
@@ -100,8 +160,14 @@ def _run(args: argparse.Namespace) -> int:
     if t1.diff_s(t0) < -30.0:
         raise InputError(f"rover ({rov_gps[0].time}..{rov_gps[-1].time}) and base ({bas_gps[0].time}.."
                          f"{bas_gps[-1].time}) have no common epochs")
-    options = replace(RtkOptions(), elmask_deg=args.elmask, ar_elmask_deg=max(args.elmask, 15.0),
-                      ar_mode=args.ar_mode, static_start=args.static_start or args.init_pos is not None)
+    if not _ephemerides_cover(nav, rov_gps):
+        raise Refused(_no_ephemeris_message(nav, rov_gps))
+    try:
+        options = replace(RtkOptions(), elmask_deg=args.elmask, ar_elmask_deg=max(args.elmask, 15.0),
+                          ar_mode=args.ar_mode, static_start=args.static_start or args.init_pos is not None)
+    except ValueError as exc:  # an option the engine's own checks refuse
+        raise InputError(f"options refused by the engine: {exc}") from None
+    init_pos = np.array(args.init_pos) if args.init_pos is not None else None
     passes = 2 if args.direction == "combined" else 1
     bar = None
     progress = None
@@ -111,13 +177,18 @@ def _run(args: argparse.Namespace) -> int:
         bar = tqdm(total=len(rov_gps) * passes, unit="epoch", desc="rtk")
         progress = bar.update
     try:
-        sols, stats = postprocess(rov_gps, bas_gps, nav, base_pos, options, args.direction, args.init_pos,
-                                  progress)
+        sols, stats = postprocess(rov_gps, bas_gps, nav, base_pos, options, args.direction, init_pos, progress)
+    except ValueError as exc:  # the engine's data rules (e.g. a base position its own data contradicts)
+        raise Refused(str(exc)) from exc
     finally:
         if bar is not None:
             bar.close()
-    from onboard.formats.pos import write_pos
+    from onboard.formats.pos import is_position, write_pos
 
+    solved = [s for s in sols if is_position(s)]
+    if not solved:
+        raise Refused(f"no epoch has a solution ({len(sols)} rover epochs): check that the base position "
+                      f"and the navigation files belong to these observations; nothing written")
     bx, by, bz = base_pos
     info = [
         "program   : directgeo onboard rtk (GPS L1)",
@@ -133,21 +204,41 @@ def _run(args: argparse.Namespace) -> int:
         "(x/y/z-ecef=WGS84,Q=1:fix,2:float,5:single,sdx/sdy/sdz=std(m))",
         "",
     ]
-    write_pos(args.output, sols, info, llh=args.llh, velocity=args.velocity, calendar=args.calendar)
-    q = np.array([s.q for s in sols])
+    write_pos(args.output, solved, info, llh=args.llh, velocity=args.velocity, calendar=args.calendar)
+    q = np.array([s.q for s in solved])
     n = max(len(sols), 1)
+    unsolved = len(sols) - len(solved)
+    if unsolved:
+        print(f"{unsolved} of {len(sols)} epochs have no solution: not written", file=sys.stderr)
     print(f"{len(sols)} epochs: fix {np.sum(q == Q_FIX)} ({100 * np.sum(q == Q_FIX) / n:.1f} %), "
           f"float {np.sum(q == Q_FLOAT)}, single {np.sum(q == Q_SINGLE)}; slips {sum(s.slips for s in stats)}; "
           f"written {args.output}")
-    return 0
+    return EXIT_OK
+
+
+def _ephemerides_cover(nav: Nav, epochs: Sequence[ObsEpoch]) -> bool:
+    """True when some GPS ephemeris is valid (|t − toe| within the engine's limit) at the first, middle or last
+    observation time."""
+    times = [epochs[0].time, epochs[len(epochs) // 2].time, epochs[-1].time]
+    return any(nav.store.select(prn, t) is not None for t in times for prn in nav.store.prns())
+
+
+def _no_ephemeris_message(nav: Nav, epochs: Sequence[ObsEpoch]) -> str:
+    first, last = epochs[0].time, epochs[-1].time
+    return (f"no GPS ephemeris valid at the observations' time ({first.to_gpst_datetime():%Y-%m-%d %H:%M} to "
+            f"{last.to_gpst_datetime():%H:%M} GPST; {len(nav.store)} ephemerides, none within "
+            f"{MAX_EPH_AGE_S / 3600:.0f} h): is the navigation file of another day? nothing written")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Stand-alone entry (`python -m onboard.postpro.rtk_cli ...`), same arguments as `onboard rtk`."""
-    parser = argparse.ArgumentParser(prog="onboard")
+    """Stand-alone entry (`python -m onboard.postpro.rtk_cli rtk ...`), same arguments as `onboard rtk`."""
+    parser = CommandParser(prog="onboard", command="onboard")
     sub = parser.add_subparsers(dest="command", required=True)
     add_rtk_parser(sub)
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
     logging.basicConfig(level=logging.WARNING)
     return int(args.func(args))
 

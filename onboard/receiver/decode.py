@@ -29,7 +29,6 @@ Representation
 
 from __future__ import annotations
 
-import gzip
 import logging
 import math
 import struct
@@ -633,35 +632,92 @@ def decode_frame(frame: Frame, stats: DecodeStats | None = None) -> Decoded | No
 CHUNK_BYTES = 1 << 20
 
 
-def iter_file_bytes(path: str | Path, chunk_bytes: int = CHUNK_BYTES) -> Iterator[bytes]:
+GZIP_PIECE_BYTES = 16 * 1024
+"""Compressed bytes fed to the decompressor at a time (a damaged piece is re-fed byte by byte to salvage it)."""
+
+
+def iter_file_bytes(path: str | Path, chunk_bytes: int = CHUNK_BYTES,
+                    warn: Callable[[str], None] | None = None) -> Iterator[bytes]:
     """The bytes of a UBX log, decompressing gzip (detected by its magic bytes, not the name).
 
-    Raises InputError for an unreadable file and for gzip data that is corrupt or cut short (after yielding
-    everything that decompressed).
+    A gzip file damaged or cut short is salvaged: everything that decompresses before the damage is noticed is
+    yielded, then `warn` (default: a logged warning) gets one message naming the compressed byte offset where
+    it was noticed and the bytes recovered (deflate may notice only at the end, by the CRC: the frames' own
+    checksums then sort the good bytes from the garbage). Raises InputError for an unreadable file, and for gzip data damaged before any
+    byte decompressed.
     """
     path = Path(path)
+    report = warn if warn is not None else log.warning
     try:
         f = open(path, "rb")  # noqa: SIM115  (closed by the `with` below; open errors need their own message)
     except OSError as exc:
         raise InputError(f"cannot read {path}: {exc.strerror or exc}") from exc
     with f:
-        magic = f.read(2)
-        f.seek(0)
-        if magic == b"\x1f\x8b":
-            gz = gzip.GzipFile(fileobj=f)
-            try:
-                while chunk := gz.read(chunk_bytes):
-                    yield chunk
-            except EOFError as exc:
-                raise InputError(f"{path}: gzip data is truncated ({exc})") from exc
-            except (OSError, zlib.error) as exc:
-                raise InputError(f"{path}: gzip data is corrupt ({exc})") from exc
-        else:
-            try:
+        try:
+            magic = f.read(2)
+            f.seek(0)
+            if magic == b"\x1f\x8b":
+                yield from _iter_gzip(f, path, report)
+            else:
                 while chunk := f.read(chunk_bytes):
                     yield chunk
-            except OSError as exc:
-                raise InputError(f"cannot read {path}: {exc.strerror or exc}") from exc
+        except OSError as exc:
+            raise InputError(f"cannot read {path}: {exc.strerror or exc}") from exc
+
+
+def _iter_gzip(f: Any, path: Path, warn: Callable[[str], None]) -> Iterator[bytes]:
+    """Decompress gzip members one after the other (RFC 1952 allows several), salvaging up to any damage."""
+    d = zlib.decompressobj(wbits=31)
+    consumed = 0  # compressed bytes fed so far
+    produced = 0
+    pending = b""
+    started = False  # inside a member (some of its bytes fed)
+    while True:
+        piece = pending or f.read(GZIP_PIECE_BYTES)
+        pending = b""
+        if not piece:
+            break
+        saved = d.copy()
+        try:
+            out = d.decompress(piece)
+        except zlib.error as exc:
+            d = saved
+            for i in range(len(piece)):  # again byte by byte: keep what decodes before the damaged byte
+                try:
+                    out = d.decompress(piece[i : i + 1])
+                except zlib.error:
+                    at = consumed + i
+                    break
+                if out:
+                    produced += len(out)
+                    yield out
+            else:
+                at = consumed + len(piece)
+            if not produced:
+                raise InputError(f"{path}: gzip data is corrupt from compressed byte {at} ({exc}); nothing "
+                                 "decompressed") from None
+            warn(f"{path}: gzip data is corrupt ({exc}), noticed at compressed byte {at}: kept the {produced} "
+                 "bytes decompressed before it (those after a damaged spot are garbage: a frame counts only "
+                 "when its checksum holds), the rest of the file is lost")
+            return
+        started = True
+        if out:
+            produced += len(out)
+            yield out
+        if d.eof:
+            rest = d.unused_data
+            consumed += len(piece) - len(rest)
+            d = zlib.decompressobj(wbits=31)
+            started = False
+            if rest.strip(b"\x00"):
+                pending = rest  # the next gzip member
+            continue
+        consumed += len(piece)
+    if started:
+        if not produced:
+            raise InputError(f"{path}: gzip data is truncated at compressed byte {consumed}; nothing decompressed")
+        warn(f"{path}: gzip data is cut short at compressed byte {consumed}: kept the {produced} bytes "
+             "decompressed before the end")
 
 
 def iter_decoded(chunks: Iterable[bytes], stats: DecodeStats | None = None,

@@ -4,13 +4,10 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 from pathlib import Path
 
+from onboard.cmdline import EXIT_USAGE, report_error
 from onboard.errors import ConfigFileError
-
-EXIT_USAGE = 2
-PREFIX = "directgeo: run: error:"
 
 
 def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:  # type: ignore[type-arg]
@@ -37,8 +34,7 @@ def _run(args: argparse.Namespace) -> int:
         settings = load_settings(args.config, overrides=recorder_overrides(args))
         check_recording_paths(settings)  # before the flight opens: a bad path is a configuration error (exit 2)
     except ConfigFileError as exc:
-        print(f"{PREFIX} {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        return report_error("run", str(exc), EXIT_USAGE)
     # Test hook: a file layer that logs every fsync'd length, so a power-cut test can cut files back to it.
     sync_log = os.environ.get("ONBOARD_TEST_SYNC_LOG")
     files: FileLayer = SyncLogFileLayer(Path(sync_log)) if sync_log else OsFileLayer()
@@ -46,6 +42,6 @@ def _run(args: argparse.Namespace) -> int:
                         edge_sources=gpio_edge_sources(settings))
     code = run_recorder(settings, deps)
     if code == EXIT_DISK_FULL:
-        print(f"{PREFIX} free disk space is below journal.disk_floor_mb: recording stopped (see the status "
-              "snapshot); free space, then start the recorder again", file=sys.stderr)
+        report_error("run", "free disk space is below journal.disk_floor_mb: recording stopped (see the status "
+                     "snapshot); free space, then start the recorder again", code)
     return code

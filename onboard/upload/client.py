@@ -13,7 +13,6 @@ $DIRECTGEO_TOKEN).
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import logging
 import os
@@ -22,7 +21,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 from urllib.parse import quote
 
 import httpx
@@ -237,26 +236,10 @@ class Uploader:
 
 
 EXIT_FAILURE = 1
-EXIT_USAGE = 2
 CHUNK_MIB_MIN = 0.01
 """Smallest chunk (MiB, ~10 KiB): each chunk costs a request and a SHA-256 round trip."""
 CHUNK_MIB_MAX = 1024.0
 """Largest chunk (MiB): held in memory twice (read + request body) on a Pi with 1–8 GiB."""
-
-
-def _error(message: str) -> str:
-    return f"directgeo: upload: error: {message}"
-
-
-class _Parser(argparse.ArgumentParser):
-    """Usage errors in the common format, exit 2. (When onboard.cmdline.CommandParser lands, it replaces this:
-    `CommandParser(prog=..., command="upload")`.)"""
-
-    def error(self, message: str) -> NoReturn:
-        if message.startswith("argument ") and ": must be" in message:  # "argument --x: v: must be" → "--x v: must be"
-            option, _, rest = message[len("argument "):].partition(": ")
-            message = f"{option.split('/')[-1]} {rest}"
-        self.exit(EXIT_USAGE, f"{_error(message)}\n(usage: {self.prog} --help)\n")
 
 
 def ground_url(text: str, *, name: str | None = None) -> str:
@@ -299,10 +282,11 @@ def _read_token(token_file: Path | None) -> str:
 def main(argv: list[str] | None = None) -> int:
     """`python -m onboard.upload`: upload one or more flight folders; exit 0 when all are complete, 1 when one
     could not be, 2 on a usage error."""
+    from onboard.cmdline import EXIT_USAGE, CommandParser, error_line, report_error
     from onboard.validate import arg_type, number
 
-    p = _Parser(
-        prog="python -m onboard.upload",
+    p = CommandParser(
+        prog="python -m onboard.upload", command="upload",
         description="Upload recorded flight folders to the ground app: resumable (a second run sends only what "
                     "the server lacks), every chunk and every file checked by SHA-256.",
         epilog="example: python -m onboard.upload --url http://ground:8600 --token-file /etc/directgeo/token "
@@ -321,8 +305,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         token = _read_token(args.token_file)
     except ValueError as exc:
-        print(_error(str(exc)), file=sys.stderr)
-        return EXIT_USAGE
+        return report_error("upload", str(exc), EXIT_USAGE)
     roles = dict(args.role)
     up = Uploader(args.url, token, UploaderOptions(chunk_bytes=max(1024, int(args.chunk_mib * 1024 * 1024))))
     rc = 0
@@ -332,7 +315,7 @@ def main(argv: list[str] | None = None) -> int:
                 rep = up.upload_flight(d, roles)
                 print(f"{d}: flight {rep.flight_id} complete, {rep.bytes_sent} bytes sent, {rep.retries} retries")
             except (UploadError, InputError, OSError) as exc:
-                print(_error(f"{d}: {exc}"), file=sys.stderr)
+                print(error_line("upload", f"{d}: {exc}"), file=sys.stderr)
                 rc = EXIT_FAILURE
     finally:
         up.close()

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from onboard.recorder.status import DEFAULT_STATUS_PATH
+from onboard.validate import arg_type, tcp_port
 
 
 def add_web_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -13,7 +14,8 @@ def add_web_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ign
     p = subparsers.add_parser("web", help="serve the pre-flight check page (reads the recorder's status snapshot)")
     p.add_argument("--status", type=Path, default=DEFAULT_STATUS_PATH, help="status snapshot path")
     p.add_argument("--host", default="0.0.0.0", help="listen address (default all: the field laptop joins the Pi's Wi-Fi)")
-    p.add_argument("--port", type=int, default=8080)
+    p.add_argument("--port", type=arg_type(tcp_port), default=8080, metavar="PORT",
+                   help="TCP port to listen on, 1–65535 (default 8080)")
     p.set_defaults(func=_serve)
 
 

@@ -135,25 +135,53 @@ def test_cli_prints_what_it_wrote(tmp_path: Path, capsys: pytest.CaptureFixture[
 
 # ----------------------------------------------------------------------------------------------- failure paths
 
-def test_truncated_gzip_is_a_clear_error_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    blob = shared_file(f"{M8P}/raw/rover-20181004-1237.ubx.gz").read_bytes()
+def test_truncated_gzip_is_salvaged_with_a_warning(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A gzip log cut short converts up to the cut; the warning names the compressed offset (was: refused)."""
+    src = shared_file(f"{M8P}/raw/rover-20181004-1237.ubx.gz")
+    blob = src.read_bytes()
     cut = tmp_path / "cut.ubx.gz"
     cut.write_bytes(blob[: len(blob) // 2])
+    whole = convert_one(src, tmp_path / "whole")
+    capsys.readouterr()
     code = convert_main([str(cut), "-o", str(tmp_path / "out"), "--no-progress"])
     err = capsys.readouterr().err
-    assert code == 2 and "cut.ubx.gz: gzip data is truncated" in err
-    assert not (tmp_path / "out" / "cut.obs").exists()
+    assert code == 0
+    assert f"directgeo: convert: warning: {cut}: gzip data is cut short at compressed byte {len(blob) // 2}" in err
+    obs = read_rinex_obs(tmp_path / "out" / "cut.obs")
+    assert 0.3 * whole.obs.epochs < len(obs.epochs) < whole.obs.epochs
 
 
-def test_corrupt_gzip_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    blob = bytearray(shared_file(f"{M8P}/raw/rover-20181004-1237.ubx.gz").read_bytes())
-    for k in range(1000, 1200):
+def test_corrupt_gzip_is_salvaged_up_to_the_damage(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    src = shared_file(f"{M8P}/raw/rover-20181004-1237.ubx.gz")
+    blob = bytearray(src.read_bytes())
+    damage = len(blob) // 3
+    for k in range(damage, damage + 200):
         blob[k] ^= 0x5A
     bad = tmp_path / "bad.ubx.gz"
     bad.write_bytes(bytes(blob))
+    whole = convert_one(src, tmp_path / "whole")
+    capsys.readouterr()
     code = convert_main([str(bad), "-o", str(tmp_path), "--no-progress"])
     err = capsys.readouterr().err
-    assert code == 2 and "bad.ubx.gz: gzip data is corrupt" in err
+    assert code == 0
+    line = next(ln for ln in err.splitlines() if "gzip data is corrupt" in ln)
+    assert line.startswith(f"directgeo: convert: warning: {bad}: gzip data is corrupt")
+    at = int(line.split("noticed at compressed byte ")[1].split(":")[0])
+    assert at >= damage  # deflate notices the damage at or after it (here only at the end, by the CRC)
+    corrupt = next(ln for ln in err.splitlines() if "hold no valid frame (corrupt, skipped)" in ln)
+    first = int(corrupt.split(f"{bad} byte ")[1].split()[0])  # decompressed offset of the first garbage
+    assert 0.25 * 2549319 < first < 0.45 * 2549319
+    obs = read_rinex_obs(tmp_path / "bad.obs")
+    assert 0.25 * whole.obs.epochs < len(obs.epochs) < 0.45 * whole.obs.epochs
+
+
+def test_gzip_damaged_from_the_start_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.ubx.gz"
+    bad.write_bytes(b"\x1f\x8b\x08\x00" + bytes(range(256)) * 8)
+    code = convert_main([str(bad), "-o", str(tmp_path / "out"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and "bad.ubx.gz: gzip data is corrupt" in err and "nothing decompressed" in err
+    assert not (tmp_path / "out" / "bad.obs").exists()
 
 
 def test_missing_empty_and_foreign_inputs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -231,3 +259,86 @@ def test_header_names_the_receiver_from_mon_ver() -> None:
     assert info.receiver_type == "U-BLOX NEO-M8T" and info.receiver_version == "ROM CORE 3.01 (107888)"
     assert info.approx_pos_ecef_m == (1.2, 2.0, 3.0)  # median: one wild fix does not move it
     assert info.marker_name == "DRONE" and info.date_utc == "20240501 120000 UTC"
+
+
+# ----------------------------------------------------------------------------------------------- what was skipped
+
+def _flight_from_log(log: Path, flight: Path, segment_bytes: int) -> None:
+    """A recorded flight (journal, index, manifest) holding the bytes of `log`, in segments of ~segment_bytes."""
+    from onboard.hw.fake import ManualClock
+    from onboard.logger.journal import Journal, JournalOptions
+
+    data = gzip.decompress(log.read_bytes()) if log.suffix == ".gz" else log.read_bytes()
+    clock = ManualClock()
+    journal = Journal(flight, clock, JournalOptions(segment_max_bytes=segment_bytes))
+    for k in range(0, len(data), 4096):
+        journal.append(data[k : k + 4096], clock.monotonic_ns(), clock.wall_ns())
+        clock.advance_s(0.1)
+    journal.close()
+
+
+def test_journal_with_a_middle_segment_deleted_says_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 14 case 7: 374 of 554 epochs came back with exit 0 and no word."""
+    flight = tmp_path / "flight-20181004T123700Z"
+    _flight_from_log(shared_file(f"{M8P}/raw/rover-20181004-1237.ubx.gz"), flight, 600_000)
+    assert [p.name for p in sorted(flight.glob("*.ubx"))] == [f"00000{k}.ubx" for k in range(5)]
+    (flight / "000002.ubx").unlink()
+    code = convert_main([str(flight), "-o", str(tmp_path / "out"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 0
+    assert (f"directgeo: convert: warning: {flight}: segment 000002.ubx missing between 000001.ubx and "
+            "000003.ubx") in err
+    assert "hold no valid frame (corrupt, skipped): at " + str(flight / "000001.ubx") + " byte " in err
+    assert len(read_rinex_obs(tmp_path / "out" / f"{flight.name}.obs").epochs) < 1000
+
+
+def _frames_only(log: Path) -> bytes:
+    """The valid frames of a capture, without its text header and torn tail: a clean stream."""
+    from onboard.receiver.framing import iter_frames
+
+    return b"".join(f.raw for f in iter_frames(log.read_bytes()))
+
+
+def test_corrupted_region_is_reported_with_its_offset(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    data = bytearray(_frames_only(shared_file("ubx/gpsd_ublox-neo-m8t.log")))
+    data[5000:5400] = bytes(range(100, 200)) * 4
+    bad = tmp_path / "damaged.ubx"
+    bad.write_bytes(bytes(data))
+    code = convert_main([str(bad), "-o", str(tmp_path / "out"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 0
+    line = next(ln for ln in err.splitlines() if "hold no valid frame" in ln)
+    assert line.startswith("directgeo: convert: warning: ")
+    start = int(line.split(f"{bad} byte ")[1].split()[0])
+    length = int(line.split(f"{bad} byte {start} (")[1].split(" B)")[0])
+    assert start <= 5000 and start + length >= 5400 and length < 5400 - 5000 + 2 * 1100
+
+
+def test_clean_input_reports_nothing_and_a_real_capture_its_header_and_torn_tail(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    log = shared_file("ubx/gpsd_ublox-neo-m8t.log")
+    clean = tmp_path / "clean.ubx"
+    clean.write_bytes(_frames_only(log))
+    assert convert_main([str(clean), "-o", str(tmp_path), "--no-progress"]) == 0
+    assert capsys.readouterr().err == ""
+    assert convert_main([str(log), "-o", str(tmp_path), "--no-progress"]) == 0
+    assert capsys.readouterr().err.splitlines() == [  # gpsd's 314-byte comment header, a frame cut at the end
+        f"directgeo: convert: warning: torn tail: 314 bytes at {log} byte 25904 are not a complete frame (skipped)",
+        (f"directgeo: convert: warning: 314 bytes in 1 region hold no valid frame (corrupt, skipped): at {log} "
+         "byte 0 (314 B)")]
+
+
+def test_two_inputs_of_one_stem_are_refused_before_writing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 14 case 6: the second silently overwrote the first."""
+    log = shared_file("ubx/gpsd_ublox-neo-m8t.log").read_bytes()
+    for d in ("a", "b"):
+        (tmp_path / d).mkdir()
+        (tmp_path / d / "rover.ubx").write_bytes(log)
+    code = convert_main([str(tmp_path / "a" / "rover.ubx"), str(tmp_path / "b" / "rover.ubx"),
+                         "-o", str(tmp_path / "out"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.strip() == (f"directgeo: convert: error: {tmp_path / 'a' / 'rover.ubx'} and "
+                           f"{tmp_path / 'b' / 'rover.ubx'} would both write rover.obs/.nav: convert them into "
+                           "different -o directories (nothing written)")
+    assert not (tmp_path / "out").exists()

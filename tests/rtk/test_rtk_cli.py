@@ -121,19 +121,28 @@ def test_unreadable_rover_and_bad_coordinates(tmp_path, capsys):
     assert "no such file" in err
 
 
-def test_one_xyz_parser_behind_the_positions_of_the_command_lines_and_settings():
-    """`onboard rtk --base-pos/--init-pos`, `onboard base --position` and `rtk.takeoff_position` read X,Y,Z
-    through onboard.rtk.geodesy.parse_xyz_m; the base command also takes spaces; a bad triple is a clear error."""
-    from onboard.base.cli import _xyz as base_xyz
-    from onboard.rtk.geodesy import parse_xyz_m
+def test_one_xyz_check_behind_the_positions_of_the_command_lines(capsys):
+    """`onboard rtk --base-pos/--init-pos` and `onboard base --position` check X,Y,Z with
+    onboard.validate.ecef_position_m: commas or spaces, negative values first, a bad triple a usage error."""
+    from onboard.__main__ import build_parser
 
-    assert parse_xyz_m("3774085.6456,-601662.5769,5089316.3970") == (3774085.6456, -601662.5769, 5089316.397)
-    for bad in ("1,2", "1,2,3,4", "a,b,c", "", "1;2;3"):
-        with pytest.raises(ValueError, match="expected X,Y,Z"):
-            parse_xyz_m(bad)
-    assert base_xyz("3774085.6 -601662.5  5089316.3") == (3774085.6, -601662.5, 5089316.3)
-    with pytest.raises(argparse.ArgumentTypeError, match="got '1 2'"):
-        base_xyz("1 2")
+    rtk = build_parser(["rtk"])
+    args = rtk.parse_args(["rtk", "--rover", "r", "--base", "b", "-o", "x.pos",
+                           "--base-pos", "3774085.6456,-601662.5769,5089316.3970",
+                           "--init-pos", "-3976219.1", "3382371.6", "3652511.1"])
+    assert args.base_pos == (3774085.6456, -601662.5769, 5089316.397)
+    assert args.init_pos == (-3976219.1, 3382371.6, 3652511.1)
+    base = build_parser(["base"])
+    for text in ("3774085.6 -601662.5  5089316.3", "3774085.6,-601662.5,5089316.3"):
+        args = base.parse_args(["base", "--port", "p", "--radio", "r", "--position", text])
+        assert args.position == (3774085.6, -601662.5, 5089316.3)
+    args = base.parse_args(["base", "--port", "p", "--radio", "r", "--position", "-3976219.1,3382371.6,3652511.1"])
+    assert args.position == (-3976219.1, 3382371.6, 3652511.1)
+    for bad in ("1 2", "1,2,3,4", "a,b,c", "1;2;3", "nan,0,0"):
+        with pytest.raises(SystemExit) as exc:
+            base.parse_args(["base", "--port", "p", "--radio", "r", f"--position={bad}"])
+        assert exc.value.code == 2
+        assert capsys.readouterr().err.startswith(f"directgeo: base: error: --position {bad}: must be ")
 
 
 def test_ubx_rover_log_with_its_own_ephemerides(tmp_path, capsys):
@@ -174,3 +183,15 @@ def test_rinex_run_imports_only_what_rinex_needs(tmp_path):
     unneeded = {"pyubx2", "pyrtcm", "scipy", "pyproj", "tqdm", "fastapi", "serial", "tomllib", "onboard.recorder.settings",
                 "onboard.postpro.convert", "onboard.receiver.decode", "onboard.base.cli", "onboard.web", "onboard.recorder.daemon"}
     assert not loaded & unneeded, sorted(loaded & unneeded)
+
+
+def test_rtk_says_what_its_ubx_reader_skipped(tmp_path, caplog):
+    """A corrupted region of a UBX rover log is reported with its byte offset (it was skipped without a word)."""
+    data = bytearray(shared_file("ubx/gpsd_ublox-neo-m8t.log").read_bytes())
+    data[5000:5400] = bytes(400)
+    rover = tmp_path / "damaged.ubx"
+    rover.write_bytes(bytes(data))
+    with caplog.at_level("WARNING"):
+        main(["rtk", "--rover", str(rover), "--base", str(rover), "-o", str(tmp_path / "x.pos")])
+    corrupt = [r.getMessage() for r in caplog.records if "hold no valid frame" in r.getMessage()]
+    assert corrupt and f"{rover} byte 4996 (492 B)" in corrupt[0]
