@@ -235,7 +235,6 @@ class Uploader:
         log.info("%s uploaded (%d bytes)", entry.name, entry.size)
 
 
-EXIT_FAILURE = 1
 CHUNK_MIB_MIN = 0.01
 """Smallest chunk (MiB, ~10 KiB): each chunk costs a request and a SHA-256 round trip."""
 CHUNK_MIB_MAX = 1024.0
@@ -282,7 +281,7 @@ def _read_token(token_file: Path | None) -> str:
 def main(argv: list[str] | None = None) -> int:
     """`python -m onboard.upload`: upload one or more flight folders; exit 0 when all are complete, 1 when one
     could not be, 2 on a usage error."""
-    from onboard.cmdline import EXIT_USAGE, CommandParser, error_line, report_error
+    from onboard.cmdline import EXIT_FAILURE, EXIT_USAGE, CommandParser, error_line, report_error
     from onboard.validate import arg_type, number
 
     p = CommandParser(
