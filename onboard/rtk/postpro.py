@@ -18,7 +18,7 @@ import numpy.typing as npt
 from onboard.gnsstime import GpsTime
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.rtkpos import NavData, epoch_receivers, epoch_spp, rtk_init, rtk_pos
-from onboard.rtk.types import LLI_SLIP, Q_FIX, Q_FLOAT, Q_NONE, ObsEpoch, Solution
+from onboard.rtk.types import LLI_SLIP, Q_FIX, Q_FLOAT, Q_NONE, BasePositionRejected, ObsEpoch, Solution
 
 log = logging.getLogger(__name__)
 
@@ -27,6 +27,53 @@ DIRECTIONS = ("forward", "backward", "combined")
 COMBINE_FIX_AGREEMENT_M = 0.05
 """Forward and backward fixes further apart than this (3D, m) are not reported as fixed. A float whose 3D σ
 is below it (a state just released from a hold) takes part in the test as a fix would."""
+
+
+BASE_CHECK_EPOCHS = 60
+"""Base epochs (spread over the data) whose single-point solutions test the given base position: their median
+is good to about a metre, and 60 single points cost a few milliseconds."""
+
+
+def _finite_position(name: str, pos_ecef_m: Arr | None) -> Arr | None:
+    """`pos_ecef_m` as a (3,) float array; ValueError when it is not three finite ECEF coordinates (m)."""
+    if pos_ecef_m is None:
+        return None
+    pos = np.asarray(pos_ecef_m, float)
+    if pos.shape != (3,) or not np.all(np.isfinite(pos)):
+        raise ValueError(f"{name} {pos_ecef_m!r}: must be three finite ECEF coordinates in metres")
+    return pos
+
+
+def base_spp_offset_m(base: Sequence[ObsEpoch], nav: NavData, base_pos_ecef_m: Arr, options: RtkOptions
+                      ) -> tuple[float, int] | None:
+    """(3D distance in m between `base_pos_ecef_m` and the median single-point position of up to
+    BASE_CHECK_EPOCHS base epochs spread over the data, how many epochs solved); None when none solves (no
+    ephemerides for them: nothing contradicts the position)."""
+    gps = sorted((b for b in base if len(b.gps_only()) > 0), key=lambda e: e.time)
+    if not gps:
+        return None
+    sample = gps[:: max(1, len(gps) // BASE_CHECK_EPOCHS)][:BASE_CHECK_EPOCHS]
+    spps = epoch_spp(sample, epoch_receivers(sample, nav.store), nav, options)
+    pos = np.array([s.pos_ecef_m for s in spps if s.ok])
+    if pos.size == 0:
+        return None
+    return float(np.linalg.norm(np.median(pos, axis=0) - base_pos_ecef_m)), int(pos.shape[0])
+
+
+def check_base_position(base: Sequence[ObsEpoch], nav: NavData, base_pos_ecef_m: Arr, options: RtkOptions
+                        ) -> None:
+    """Refuse (BasePositionRejected) a base position the base's own single-point solution contradicts by more
+    than options.max_base_spp_offset_m (see base_spp_offset_m; 0 disables the test)."""
+    if options.max_base_spp_offset_m <= 0.0:
+        return
+    found = base_spp_offset_m(base, nav, base_pos_ecef_m, options)
+    if found is None:
+        log.warning("base position not checked: no single-point solution of the base")
+        return
+    offset_m, n = found
+    if offset_m > options.max_base_spp_offset_m:
+        raise BasePositionRejected(offset_m, options.max_base_spp_offset_m, n)
+    log.debug("base position %.1f m from the base's single-point position (%d epochs)", offset_m, n)
 
 
 def pair_epochs(rover: Sequence[ObsEpoch], base: Sequence[ObsEpoch], tolerance_s: float = 0.025,
@@ -60,6 +107,8 @@ class RunStats:
     slips: int = 0
     float_restarts: int = 0
     """Float ambiguities restarted for fitting no integer set while determined (RtkOptions.stuck_float_s)."""
+    rejected_updates: int = 0
+    """Epochs without a measurement update because every outlier pass found an outlier (RtkState.rejected_updates)."""
 
 
 def reverse_slip_flags(epochs: Sequence[ObsEpoch]) -> list[ObsEpoch]:
@@ -124,6 +173,7 @@ def run_filter(rover: Sequence[ObsEpoch], paired_base: Sequence[ObsEpoch | None]
             progress(1)
     stats.slips = st.slips
     stats.float_restarts = st.float_restarts
+    stats.rejected_updates = st.rejected_updates
     return [s for s in sols if s is not None], stats
 
 
@@ -185,9 +235,17 @@ def combine(fwd: Solution, bwd: Solution) -> Solution:
 def postprocess(rover: Sequence[ObsEpoch], base: Sequence[ObsEpoch], nav: NavData, base_pos_ecef_m: Arr | None,
                 options: RtkOptions, direction: str = "forward", init_pos_ecef_m: Arr | None = None,
                 progress: Callable[[int], None] | None = None) -> tuple[list[Solution], list[RunStats]]:
-    """Pair, then run forward, backward or both and combine. Rover epochs are processed in time order."""
+    """Pair, then run forward, backward or both and combine. Rover epochs are processed in time order.
+
+    Raises ValueError for a direction not in DIRECTIONS or a base/take-off position that is not three finite
+    ECEF coordinates (m), and BasePositionRejected (a ValueError) for a base position the base's own
+    single-point solution contradicts (check_base_position)."""
     if direction not in DIRECTIONS:
         raise ValueError(f"direction must be one of {DIRECTIONS}, not {direction!r}")
+    base_pos_ecef_m = _finite_position("base position", base_pos_ecef_m)
+    init_pos_ecef_m = _finite_position("take-off position", init_pos_ecef_m)
+    if base_pos_ecef_m is not None:
+        check_base_position(base, nav, base_pos_ecef_m, options)
     rov = sorted(rover, key=lambda e: e.time)
     paired = pair_epochs(rov, base, options.pair_tolerance_s, options.max_age_s)
     if direction == "forward":

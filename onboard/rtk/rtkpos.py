@@ -6,7 +6,7 @@ differences with an elevation-weighted covariance (ddres), integer resolution wi
 fixing (resamb_lambda), validation of the fix (valpos) and hold (holdamb). Additions over RTKLIB:
 between-satellite Doppler differences constrain the velocity; every fix is checked against the float
 solution (Mahalanobis distance) and post-fit residuals; a held fix that stops fitting is released; a fix
-must rest on at least `min_amb_dd` + 1 double differences when not held; known-point initialisation
+must rest on at least `min_fix_sats` satellites; known-point initialisation
 (Daakir et al. 2015 eq. 2) and a static mode until take-off.
 
 State vector: x[0:3] rover position (ECEF m), x[3:6] velocity (m/s), x[6+prn-1] SD ambiguity of GPS `prn`
@@ -20,7 +20,7 @@ import functools
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -55,6 +55,57 @@ _PRNS.flags.writeable = False  # shared by every epoch's SatState
 _ROWS = np.arange(3 * NSAT)  # row indices of the DD system (phase + code + Doppler rows at most)
 _ROWS.flags.writeable = False
 
+SPP_SIGMA_PER_GDOP_M = 1.5
+"""σ (m per axis) of a single-point solution per unit of GDOP: a user range error of 1.5 m, u-blox L1 code in
+the open (RTKLIB reports SPP covariances from its own weighted fit; this is the .pos σ of Q=5 rows)."""
+SPP_VEL_VAR_M2_S2 = 0.01
+"""Variance (m²/s²) per axis reported with a single-point Doppler velocity: 0.1 m/s, the order of an L1 Doppler
+velocity's error."""
+MIN_PHASE_DD_TO_ISOLATE = 5
+"""Fewest phase double differences among which one outlier can be told from the rest: with fewer (or with
+several rows out) every ambiguity restarts instead of the worst one (a single bad row shifts the others)."""
+MIN_DD_REFERENCE_SLIP = 3
+"""Fewest phase double differences that must all misfit at once, under a hold, for the reference satellite to be
+taken as the one that slipped (with two, either satellite could be the one)."""
+RELEASE_AMB_SIGMA_CYC = 0.5
+"""σ (cycles) added to every ambiguity when a held set is released: half a cycle, enough to let them move to
+another integer, small enough to keep what the float knows."""
+FIX_TRIES = 2
+"""Integer searches per epoch: the first, and one retry on a reduced set after a rejected fix (see _resolve)."""
+SLIP_TEST_MAX_GAP_S = 30.0
+"""Longest gap (s) across which a phase is compared with its previous one for a slip (the rover's Doppler
+prediction, the base's phase − range): beyond it the atmosphere and the clocks move too much for a cycle to be
+told apart, and the satellite counts as not bridged."""
+DOPPLER_MIN_ELEVATION_RAD = 0.1
+"""Elevation floor (rad, ~5.7°) of the Doppler σ / sin(el) weighting: bounded near the horizon, below any mask."""
+BASE_SLIP_CYC = 0.5
+"""Base geometry-residual slip threshold (cycles) between consecutive base epochs, plus BASE_SLIP_CYC_PER_S per
+second of gap: half a cycle, since a 1-cycle base slip reads 1.0 ± millimetres and slipped under 1.0."""
+BASE_HISTORY_JUMP_CYC = 1.0
+"""A jump of the base's phase − range beyond this (cycles, plus BASE_SLIP_CYC_PER_S per second) voids the
+slot's correction history (the rate fit must not straddle a slip; looser than the slip test it follows)."""
+BASE_SLIP_CYC_PER_S = 0.05
+"""Growth (cycles/s) of the base thresholds with the gap: atmosphere and orbit changes grow with it."""
+HALF_CYCLE_STEP_CYC = 0.25
+"""A half-cycle flag clearing with a phase step beyond this (cycles, Doppler-predicted, clock removed) is a slip:
+a ½-cycle correction reads 0.5, noise a few hundredths."""
+HALF_CYCLE_MAX_GAP_S = 2.0
+"""Longest epoch interval (s) over which that step is judged (the Doppler prediction degrades with the gap)."""
+KNOWN_AMB_SIGMA_CYC = 0.05
+"""σ (cycles) of an ambiguity seeded from a known rover position besides the position's own σ/λ: the phase noise
+and residual models of one epoch."""
+SPP_RESET_DISTANCE_M = 100.0
+"""A filter position this far (m) from the single-point solution is restarted on it (RTKLIB udpos's reset)."""
+SPP_RESET_VAR_M2 = 1e4
+"""Likewise a position variance above this (m², a 100 m σ): the filter no longer knows where it is."""
+KNOWN_VEL_VAR_M2_S2 = 1e-8
+"""Variance (m²/s²) of a velocity known to be zero (static start, zero-velocity update at a standstill)."""
+GEODETIC_CODE_SCALE = 0.5
+"""Code variance scale (code_variance_scale) under which the code counts as geodetic rather than u-blox-like: the
+per-km confirmation span and the ionosphere states' per-km walk depend on it."""
+MAD_TO_SIGMA = 1.4826
+"""Median absolute deviation to standard deviation of a normal distribution."""
+
 
 class NavData(Protocol):
     """What the engine needs from navigation data: an ephemeris store and Klobuchar coefficients."""
@@ -85,6 +136,124 @@ class _Receiver:
     """What was already computed for this epoch, by (what, its inputs): geometry by receiver position bytes (the
     base epoch serves several rover epochs from the same known position, and the rover's is asked for again at
     the same predicted position), the base's correction rate by history (_extrapolated_base). Read-only."""
+
+
+class PendingFix(NamedTuple):
+    """A first-fix candidate under confirmation: the integer set that has won the ratio test at consecutive
+    epochs without a held set to lean on (see RtkOptions.confirm_fix_span_s, settled_fix_span_s)."""
+
+    key: tuple[int, tuple[int, ...], tuple[int, ...]]
+    """(reference slot, other slots, their DD integers in cycles): the set's identity."""
+    since: GpsTime
+    """Its first win of the current run."""
+    wins: int
+    """Consecutive epochs it has won."""
+    last_win: GpsTime
+    """Its latest win."""
+    settled_fraction: float
+    """How far it has settled: wins weighted by time over settled_fix_span_s (static) or settled_fix_span_moving_s
+    (moving); 1 = settled."""
+
+
+_NO_F: Arr = np.zeros(0)
+_NO_F.flags.writeable = False
+_NO_B: npt.NDArray[np.bool_] = np.zeros(0, bool)
+_NO_B.flags.writeable = False
+
+
+class EpochContext:
+    """Per-epoch scratch of rtk_pos (what RTKLIB relpos() keeps on its stack), filled by its stages in order and
+    dropped with the epoch; RtkState keeps what persists. Slot arrays are (32,), one entry per GPS PRN."""
+
+    time: GpsTime
+    """The rover epoch's time tag (receiver time)."""
+    rov: _Receiver
+    spp: SppSolution
+    """The rover's single-point solution at this epoch."""
+    t_sol: GpsTime
+    """Solution time: the time tag minus the receiver clock bias (as RTKLIB)."""
+    moving: bool
+    """The rover's Doppler speed exceeds takeoff_speed_m_s (its code multipath decorrelates)."""
+    bas: _Receiver | None
+    """The base epoch's slot data, carried forward along the correction rate once aged (see _extrapolated_base)."""
+    base_pos: Arr
+    """Base antenna position (ECEF m)."""
+    age_s: float
+    """Age of the base data (rover − base time, s)."""
+    dt_s: float
+    """Time since the previous processed epoch (s, negative processed backward)."""
+    baseline_m: float
+    """Rover–base distance (m) at the previous epoch's position (the partial-fix confirmation grows with it)."""
+    base_age_var_m2: float
+    """Variance (m²) of the carried-forward base phase (atmosphere/clock drift the correction rate does not
+    follow): (base_age_sigma_m_s · age)², added to every single difference; 0 for raw base data."""
+    static_code_factor: float
+    """Factor on the code variance while the rover is held static (see static_code_factor)."""
+    rng_b: Arr
+    """Base modelled range per slot (m): geometric + Sagnac − satellite clock + troposphere."""
+    rng_r: Arr
+    """Rover modelled range per slot at the predicted position (m)."""
+    los_r: Arr
+    """Rover line-of-sight unit vectors (32, 3)."""
+    el: Arr
+    """Rover elevation per slot (rad)."""
+    trop_r: Arr
+    """Rover troposphere delay per slot (m), evaluated once per epoch."""
+    base_zb_cyc: Arr
+    """Base phase − modelled range per slot (cycles): the base-side slip test and correction history."""
+    common: npt.NDArray[np.bool_]
+    """Slots seen by both receivers above the mask and used by the single-point solution (their code is used)."""
+    half: npt.NDArray[np.bool_]
+    """Slots with an unresolved half cycle on either receiver (never used for AR)."""
+    phase_ok: npt.NDArray[np.bool_]
+    """Common slots with phase on both receivers (the satellite selection of the phase)."""
+    code_ok: npt.NDArray[np.bool_]
+    """Slots whose code enters the update (common minus code outliers)."""
+    use_phase: npt.NDArray[np.bool_]
+    """Slots whose phase enters the update (phase_ok minus outliers and misfits)."""
+    x_prior: Arr
+    p_prior: Arr
+    """The state before the accepted measurement update (fault exclusion re-runs the update from it)."""
+    dd: _DD | None
+    """The double-difference system of the last outlier pass."""
+    ns: int
+    """Satellites whose phase is used."""
+
+    __slots__ = (  # noqa: RUF023 (in the order of the stages that fill them)
+        "time", "rov", "spp", "t_sol", "moving", "bas", "base_pos", "age_s", "dt_s", "baseline_m",
+        "base_age_var_m2", "static_code_factor", "rng_b", "rng_r", "los_r", "el", "trop_r",
+        "base_zb_cyc", "common", "half", "phase_ok", "code_ok", "use_phase", "x_prior", "p_prior", "dd",
+        "ns",
+    )
+
+    def __init__(self, time: GpsTime, rov: _Receiver, spp: SppSolution, t_sol: GpsTime) -> None:
+        self.time = time
+        self.rov = rov
+        self.spp = spp
+        self.t_sol = t_sol
+        self.moving = False
+        self.bas = None
+        self.base_pos = _NO_F
+        self.age_s = 0.0
+        self.dt_s = 0.0
+        self.baseline_m = 0.0
+        self.base_age_var_m2 = 0.0
+        self.static_code_factor = 1.0
+        self.rng_b = _NO_F
+        self.rng_r = _NO_F
+        self.los_r = _NO_F
+        self.el = _NO_F
+        self.trop_r = _NO_F
+        self.base_zb_cyc = _NO_F
+        self.common = _NO_B
+        self.half = _NO_B
+        self.phase_ok = _NO_B
+        self.code_ok = _NO_B
+        self.use_phase = _NO_B
+        self.x_prior = _NO_F
+        self.p_prior = _NO_F
+        self.dd = None
+        self.ns = 0
 
 
 @dataclass
@@ -121,40 +290,40 @@ class RtkState:
     fail_count: int = 0
     slips: int = 0
     base_cache: tuple[GpsTime, _Receiver] | None = None
-    baseline_m: float = 0.0
-    """Rover–base distance (m) at the previous epoch's position (the partial-fix confirmation grows with it)."""
-    base_age_var_m2: float = 0.0
-    """Variance (m²) of this epoch's carried-forward base phase (atmosphere/clock drift the correction rate
-    does not follow): (base_age_sigma_m_s · age)², added to every single difference; 0 for raw base data."""
     base_hist: list[tuple[GpsTime, Arr]] = field(default_factory=list)
     """Recent base epochs (time, phase − modelled range in cycles per slot, NaN after a base slip), oldest
     first: the per-satellite correction rate that bridges a radio gap (see _extrapolated_base)."""
     last_ratio: float = 0.0
     clock_bias_m: float = 0.0
-    pending_fix: tuple[tuple, GpsTime, int, GpsTime, float] | None = None
-    """Integer set (ref, slots, DD integers) winning the ratio test without a held set to lean on, since when,
-    at how many consecutive epochs, its last win, and how far it has settled (1 = settled_fix_span_s static)."""
+    pending_fix: PendingFix | None = None
+    """The first-fix candidate under confirmation (an integer set winning the ratio test without a held set to
+    lean on), None without one."""
     stuck_since: GpsTime | None = None
     """Start of the current run of epochs whose float ambiguities were determined yet near no integer set
     (see the option stuck_float_s), None outside one."""
     float_restarts: int = 0
     """Times the float ambiguities were restarted for that (stuck_float_s)."""
-    moving: bool = False
-    """The rover's Doppler speed exceeds takeoff_speed_m_s at this epoch (its code multipath decorrelates)."""
     pending_slip: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
     """Rover slips detected while no base data was usable, applied at the next relative epoch."""
     code_scatter: CodeScatter = field(default_factory=CodeScatter)
     code_var_scale: float = 1.0
     """Factor on the modelled code variance from the measured code scatter (see code_variance_scale)."""
-    static_code_factor: float = 1.0
-    """Factor on this epoch's code variance while the rover is held static (see static_code_factor)."""
     standstill: StandstillMonitor = field(default_factory=StandstillMonitor)
     iono_on: bool = False
     """The per-satellite ionosphere states are in use (see _udion)."""
+    rejected_updates: int = 0
+    """Epochs whose every outlier pass found an outlier, so that they had no measurement update (their solution
+    is the time update's: see _float_update)."""
 
 
 def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkState:
-    """A fresh engine state. `init_pos_ecef_m` = surveyed take-off antenna position (known-point start)."""
+    """A fresh engine state. `init_pos_ecef_m` = surveyed take-off antenna position (known-point start, ECEF
+    m); ValueError when it is not three finite coordinates."""
+    if init_pos_ecef_m is not None:
+        init = np.asarray(init_pos_ecef_m, float)
+        if init.shape != (3,) or not np.all(np.isfinite(init)):
+            raise ValueError(f"take-off position {init_pos_ecef_m!r}: must be three finite ECEF coordinates in "
+                             "metres")
     st = RtkState(options=options, standstill=StandstillMonitor(window_s=options.standstill_window_s))
     st.static = options.static_start
     st.init_pos_ecef_m = None if init_pos_ecef_m is None else np.asarray(init_pos_ecef_m, float)
@@ -376,7 +545,7 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
         if st.static:
             vel = np.zeros(3)
         st.x[3:6] = vel
-        st.p[3:6, 3:6] = np.eye(3) * (1e-8 if st.static else o.initial_vel_sigma_m_s**2)
+        st.p[3:6, 3:6] = np.eye(3) * (KNOWN_VEL_VAR_M2_S2 if st.static else o.initial_vel_sigma_m_s**2)
         st.initialized = True
         return
     f = _transition(dt)
@@ -386,7 +555,7 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
     if not st.static:
         st.p[:NX0, :NX0] += _process_noise(st, dt, st.x[:3])
     # a filter that drifted far from the SPP solution is restarted on it (RTKLIB udpos's reset)
-    if _norm(st.x[:3] - spp_pos) > 100.0 or st.p[0, 0] > 1e4:
+    if _norm(st.x[:3] - spp_pos) > SPP_RESET_DISTANCE_M or st.p[0, 0] > SPP_RESET_VAR_M2:
         log.info("position state reset to SPP (%.1f m off)", np.linalg.norm(st.x[:3] - spp_pos))
         st.x[:3] = spp_pos
         st.p[:3, :] = 0.0
@@ -400,19 +569,20 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
     amb_var[amb_var > 0] += bias_process_noise_cyc2_s(o, st.x[:3], per_km) * abs(dt)
 
 
-def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, rng_b: Arr, los_r: Arr, el: Arr,
-                      valid: npt.NDArray[np.bool_], t: GpsTime, dt: float) -> int:
+def _watch_standstill(st: RtkState, ctx: EpochContext, valid: npt.NDArray[np.bool_]) -> int:
     """Start or end the static hold from the time-differenced phase displacement (see onboard.rtk.standstill),
     after this epoch's time update: motion re-opens the position at once, before the measurement update.
     Held static and not moving by Doppler, a failed test that one satellite's slip explains restarts that
     satellite's ambiguity instead (a slip too small for the Doppler test before a fix is held, e.g. 1 cycle
     against its 2): the slot is returned, −1 for none."""
     o = st.options
-    sd = _sd_obs_m(rov, bas)[0] - (rng_r - rng_b)
-    var = _var_sd_m2(o, rov, el)
+    rov, bas, t, dt = ctx.rov, ctx.bas, ctx.time, ctx.dt_s
+    assert bas is not None
+    sd = _sd_obs_m(rov, bas)[0] - (ctx.rng_r - ctx.rng_b)
+    var = _var_sd_m2(o, rov, ctx.el)
     t_ns = t.total_ns
-    disp = st.standstill.update(t_ns, sd, st.x[:3], los_r, var, st.lock, valid,
-                                exclude_one=st.static and not st.moving)
+    disp = st.standstill.update(t_ns, sd, st.x[:3], ctx.los_r, var, st.lock, valid,
+                                exclude_one=st.static and not ctx.moving)
     slipped = st.standstill.slipped_slot
     if slipped >= 0:
         log.info("%s: PRN %d slipped while standing (%.2f m over %.0f s without it): its ambiguity restarts", t,
@@ -432,7 +602,7 @@ def _watch_standstill(st: RtkState, rov: _Receiver, bas: _Receiver, rng_r: Arr, 
         # zero-velocity update: the velocity is known now, and stays so without process noise
         h = np.zeros((3, st.x.size))
         h[:, 3:6] = np.eye(3)
-        st.x, st.p = _kf_update(st.x, st.p, -st.x[3:6], h, np.eye(3) * 1e-8)
+        st.x, st.p = _kf_update(st.x, st.p, -st.x[3:6], h, np.eye(3) * KNOWN_VEL_VAR_M2_S2)
     return slipped
 
 
@@ -467,15 +637,13 @@ def _detect_slips(st: RtkState, rov: _Receiver, base: _Receiver, base_zb: Arr, t
     # base: phase − geometric range (known static base), differenced in time
     if st.prev_time_b is not None and t_b != st.prev_time_b:
         dtb = abs(t_b.diff_s(st.prev_time_b))
-        if dtb <= 30.0:
+        if dtb <= SLIP_TEST_MAX_GAP_S:
             d = base_zb - st.prev_zb
             ok = np.isfinite(d) & common
             if np.count_nonzero(ok) >= 3:
                 d = d - median_of_few(d[ok])
-                # cycles: atmosphere/orbit changes grow with the gap. Half a cycle, not one: a 1-cycle base
-                # slip reads 1.0 ± millimetres and slipped under a 1.0 threshold (hil_sim seed 3, undetected
-                # slips: two 1-cycle base slips at 257-261 s held 21 cm off to the end, 338 wrong epochs)
-                thr = 0.5 + 0.05 * dtb
+                # cycles: atmosphere/orbit changes grow with the gap (see BASE_SLIP_CYC)
+                thr = BASE_SLIP_CYC + BASE_SLIP_CYC_PER_S * dtb
                 slip |= ok & (np.abs(d) > thr)
     return slip
 
@@ -493,7 +661,7 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
         if np.count_nonzero(np.isfinite(dt_all)):
             dop_avg = np.where(np.isfinite(st.prev_dop_r), 0.5 * (rov.dop_hz + st.prev_dop_r), rov.dop_hz)
             d = (rov.cp_cyc - st.prev_cp_r) + dop_avg * dt_all  # RINEX: phase follows range, Doppler = −rate
-            d[~(np.abs(dt_all) <= 30.0)] = np.nan
+            d[~(np.abs(dt_all) <= SLIP_TEST_MAX_GAP_S)] = np.nan
             ok = np.isfinite(d) & common
             if np.count_nonzero(ok) >= 2:
                 # the receiver-clock part is common to all satellites: take it from those not flagged,
@@ -511,7 +679,7 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
                 if held and np.count_nonzero(clean) >= 5 and o.slip_outlier_factor > 0:
                     # a quiet epoch (the Doppler follows every other satellite's phase closely) shows a slip
                     # well under the fixed threshold: a robust spread of the others sets a lower one
-                    spread = 1.4826 * median_of_few(np.abs(d[clean]))
+                    spread = MAD_TO_SIGMA * median_of_few(np.abs(d[clean]))
                     thr_cyc = min(thr_cyc, max(o.slip_threshold_min_cyc, o.slip_outlier_factor * spread))
                 thr = thr_cyc * np.maximum(1.0, np.abs(dt_all))  # NaN (never seen) only where not ok
                 slip |= ok & (np.abs(d) > thr)
@@ -540,7 +708,7 @@ def _remember_base(st: RtkState, base: _Receiver, t_b: GpsTime, base_zb_cyc: Arr
         jump = ((base.lli & LLI_SLIP) != 0) & np.isfinite(zb)
         if np.count_nonzero(ok) >= 3:
             d = d - median_of_few(d[ok])  # the base clock is common to every satellite
-            jump |= ok & (np.abs(d) > 1.0 + 0.05 * dtb)  # as _detect_slips' base test
+            jump |= ok & (np.abs(d) > BASE_HISTORY_JUMP_CYC + BASE_SLIP_CYC_PER_S * dtb)
         for _t, z in hist:
             z[jump] = np.nan
     hist.append((t_b, zb))
@@ -554,7 +722,7 @@ def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver
     During a radio gap the rover's epochs are differenced with the last base epoch: the geometry is evaluated
     at each receiver's own time and the base clock cancels, but what the base observes and the model does
     not (ionosphere, satellite clock and orbit errors) changes with the age: centimetres to decimetres over
-    20 s at low elevation (hil_sim: up to 5 cm). Its rate, measured on the base's own phase − modelled range over
+    20 s at low elevation. Its rate, measured on the base's own phase − modelled range over
     the last `base_rate_window_s` (the common base-clock drift removed), carries it forward as RTCM 2's
     range-rate corrections did. Slots without a clean history keep the raw phase.
     """
@@ -598,8 +766,7 @@ def _correction_rate(o: RtkOptions, hist: list[tuple[GpsTime, Arr]], base_cp_cyc
     ok = np.all(np.isfinite(z), axis=0) & np.isfinite(base_cp_cyc)
     if np.count_nonzero(ok) < 2:
         return ()
-    # least-squares slope over the window (a quadratic over 30 s followed the curvature better on hil_sim but
-    # amplified the real M8P base's noise: 94.2 → 91.4 % fixed)
+    # least-squares slope over the window (a quadratic amplifies a u-blox base's noise: docs/rtk-defaults.md)
     tc = tk - tk.mean()
     slope = tc @ (z[:, ok] - z[:, ok].mean(axis=0)) / (tc @ tc)
     ok.flags.writeable = False
@@ -631,11 +798,10 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
         st.outage[~valid_phase] += 1
         # the half-cycle (parity unknown) flag clearing on the rover: a receiver that resolves the half cycle by
         # moving the phase ½ cycle and reports no slip (RXM-RAW has no half-cycle-subtracted bit; RAWX data
-        # carry one, which the decoder turns into a slip as RTKLIB does) corrupts the held set with that step
-        # (hil_sim LEA-6T seed 2: a slip at 511 s, parity fixed at 513 s, the wrong satellite excluded, 22
-        # wrong fixes 8-16 cm off). RTKLIB detslp_ll declares a slip at every change of the flag; here only a
-        # step the Doppler sees (phase change minus the Doppler-predicted one, receiver clock removed, over a
-        # quarter cycle) is one: M8P static clears flags without a step (a reset there cost a fixed epoch).
+        # carry one, which the decoder turns into a slip as RTKLIB does) corrupts the held set with that step.
+        # RTKLIB detslp_ll declares a slip at every change of the flag; here only a step the Doppler sees (phase
+        # change minus the Doppler-predicted one, receiver clock removed, over HALF_CYCLE_STEP_CYC) is one:
+        # receivers also clear the flag without a step (docs/rtk-defaults.md).
         half = (rov.lli & LLI_HALF_CYCLE) != 0
         cleared = valid_phase & st.half_cycle & ~half
         st.half_cycle = half & valid_phase
@@ -643,9 +809,9 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
             dt_r = t_r.diff_s(st.prev_time_r)
             step = (rov.cp_cyc - st.prev_cp_r) + 0.5 * (rov.dop_hz + st.prev_dop_r) * dt_r
             ok = np.isfinite(step) & valid_phase
-            if ok.sum() >= 3 and 0.0 < dt_r <= 2.0:
+            if ok.sum() >= 3 and 0.0 < dt_r <= HALF_CYCLE_MAX_GAP_S:
                 step = step - median_of_few(step[ok & ~cleared] if (ok & ~cleared).sum() >= 2 else step[ok])
-                slip = slip | (cleared & ok & (np.abs(step) > 0.25))
+                slip = slip | (cleared & ok & (np.abs(step) > HALF_CYCLE_STEP_CYC))
     lost = (st.outage > o.max_outage_epochs) & _in_use(st)
     reset = (lost | (slip & valid_phase)).nonzero()[0]
     if reset.size:
@@ -663,7 +829,7 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
             clk = (rov.pr_m - base.pr_m) - (rng_r - rng_b)
             if np.any(new & np.isfinite(clk)):
                 sd = sd - median_of_few(clk[new & np.isfinite(clk)]) / LAMBDA_L1_M
-            var = (0.05 + o.init_pos_sigma_m / LAMBDA_L1_M) ** 2
+            var = (KNOWN_AMB_SIGMA_CYC + o.init_pos_sigma_m / LAMBDA_L1_M) ** 2
             st.known_amb[new] = True
         else:
             sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rov.pr_m - base.pr_m)) / LAMBDA_L1_M
@@ -719,7 +885,7 @@ def _slant_iono_m(st: RtkState, x: Arr, el: Arr) -> tuple[Arr, Arr]:
 def _geodetic_code(st: RtkState) -> bool:
     """The code has been measured far cleaner than u-blox code (code_variance_scale < 0.5, the threshold of
     confirm_fix_span_per_km_s)."""
-    return st.code_scatter.epochs >= st.options.code_scatter_min_epochs and st.code_var_scale < 0.5
+    return st.code_scatter.epochs >= st.options.code_scatter_min_epochs and st.code_var_scale < GEODETIC_CODE_SCALE
 
 
 def _drop_iono(st: RtkState, drop: npt.NDArray[np.bool_], el: Arr) -> None:
@@ -839,15 +1005,14 @@ def _reference_slot(idx: npt.NDArray[np.int64], el: Arr) -> int:
     return int(idx[el[idx].argmax()])
 
 
-def _sd_terms(st: RtkState, x: Arr, rov: _Receiver, rng_b: Arr, el: Arr, trop_r: Arr
-              ) -> tuple[Arr, Arr, Arr, tuple[Arr, Arr] | None]:
+def _sd_terms(st: RtkState, ctx: EpochContext, x: Arr) -> tuple[Arr, Arr, Arr, tuple[Arr, Arr] | None]:
     """Per slot at state `x`: modelled range difference rover − base (m), rover LOS, SD phase variance (m²,
     with this epoch's base-age variance) and the slant ionosphere with its mapping (_slant_iono_m, or None)."""
-    rng_r, e = _range_with_trop_m(rov, x[:3], trop_r)
-    var_sd = _var_sd_m2(st.options, rov, el)
-    if st.base_age_var_m2 > 0.0:
-        var_sd = var_sd + st.base_age_var_m2
-    return rng_r - rng_b, e, var_sd, _slant_iono_m(st, x, el) if st.iono_on else None
+    rng_r, e = _range_with_trop_m(ctx.rov, x[:3], ctx.trop_r)
+    var_sd = _var_sd_m2(st.options, ctx.rov, ctx.el)
+    if ctx.base_age_var_m2 > 0.0:
+        var_sd = var_sd + ctx.base_age_var_m2
+    return rng_r - ctx.rng_b, e, var_sd, _slant_iono_m(st, x, ctx.el) if st.iono_on else None
 
 
 def _phase_z(x: Arr, sd_phase: Arr, drng: Arr, ion: tuple[Arr, Arr] | None) -> Arr:
@@ -856,8 +1021,8 @@ def _phase_z(x: Arr, sd_phase: Arr, drng: Arr, ion: tuple[Arr, Arr] | None) -> A
     return z if ion is None else z + ion[0]  # the ionosphere advances the phase
 
 
-def _phase_fit(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, use: npt.NDArray[np.bool_],
-               el: Arr, trop_r: Arr) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.bool_], int]:
+def _phase_fit(st: RtkState, ctx: EpochContext, x: Arr, use: npt.NDArray[np.bool_]
+               ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.bool_], int]:
     """The phase rows of _ddres(x, use, no code, jacobian=False) and their _valid_residuals test, without the
     DD system around them (R, H): (the rows' non-reference slots, each row's |v| ≤ validation_sigma_factor·σ,
     the reference slot; −1 with fewer than two phases). σ² = the reference's + the slot's SD variance, R's
@@ -865,22 +1030,24 @@ def _phase_fit(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr
     idx = use.nonzero()[0]
     if idx.size < 2:
         return idx[:0], np.zeros(0, bool), -1
-    drng, _, var, ion = _sd_terms(st, x, rov, rng_b, el, trop_r)
-    z = _phase_z(x, _sd_obs_m(rov, base)[0], drng, ion)
-    ref = _reference_slot(idx, el)
+    drng, _, var, ion = _sd_terms(st, ctx, x)
+    assert ctx.bas is not None
+    z = _phase_z(x, _sd_obs_m(ctx.rov, ctx.bas)[0], drng, ion)
+    ref = _reference_slot(idx, ctx.el)
     others = idx[idx != ref]
     v = z[others] - z[ref]
     return others, np.abs(v) <= st.options.validation_sigma_factor * np.sqrt(var[ref] + var[others]), ref
 
 
-def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, phase_ok: npt.NDArray[np.bool_],
-           code_ok: npt.NDArray[np.bool_], el: Arr, with_doppler: bool, trop_r: Arr,
-           jacobian: bool = True) -> tuple[_DD, Arr]:
+def _ddres(st: RtkState, ctx: EpochContext, x: Arr, phase_ok: npt.NDArray[np.bool_], code_ok: npt.NDArray[np.bool_],
+           with_doppler: bool, jacobian: bool = True) -> tuple[_DD, Arr]:
     """Double-difference residuals at state `x` (RTKLIB ddres): phase, code, rover Doppler between satellites.
     `jacobian=False` for a residual test alone (_valid_residuals): the design matrix H is left empty,
     shape (nrow, 0)."""
     o = st.options
-    drng, e, var_sd, ion = _sd_terms(st, x, rov, rng_b, el, trop_r)
+    rov, base, el = ctx.rov, ctx.bas, ctx.el
+    assert base is not None
+    drng, e, var_sd, ion = _sd_terms(st, ctx, x)
     # groups (kind, reference slot, other slots, zero-difference residual z, per-slot variance), rows i − ref
     groups: list[tuple[int, int, npt.NDArray[np.int64], Arr, Arr]] = []
     ref_phase = -1
@@ -898,7 +1065,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
             z = sd_code - drng
             if ion is not None:
                 z = z - ion[0]  # and delays the code
-            var = var_sd * o.code_phase_ratio**2 * st.code_var_scale * st.static_code_factor
+            var = var_sd * o.code_phase_ratio**2 * st.code_var_scale * ctx.static_code_factor
         groups.append((kind, ref, idx[idx != ref], z, var))
     if with_doppler:
         idx = (code_ok & np.isfinite(rov.dop_hz)).nonzero()[0]
@@ -908,7 +1075,7 @@ def _ddres(st: RtkState, x: Arr, rov: _Receiver, base: _Receiver, rng_b: Arr, ph
             sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, 1] * x[0] - vs[:, 0] * x[1])
             rate_model = np.einsum("ij,ij->i", e, vs - x[3:6]) + sag - CLIGHT_M_S * rov.sats.drift_s_s
             z = -LAMBDA_L1_M * rov.dop_hz - rate_model
-            s2 = (o.doppler_sigma_m_s / np.sin(np.maximum(el, 0.1))) ** 2
+            s2 = (o.doppler_sigma_m_s / np.sin(np.maximum(el, DOPPLER_MIN_ELEVATION_RAD))) ** 2
             groups.append((2, ref, idx[idx != ref], z, s2))
     if not groups:
         return _DD(np.zeros(0), np.zeros((0, x.size)), np.zeros((0, 0)), np.zeros(0, np.int8), np.zeros(0, np.int64), -1), e
@@ -969,9 +1136,8 @@ def _kf_update(x: Arr, p: Arr, v: Arr, h: Arr, r: Arr,
     return x, p
 
 
-def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver, bas: _Receiver, rng_b: Arr,
-                       use_phase: npt.NDArray[np.bool_], code_ok: npt.NDArray[np.bool_], el: Arr,
-                       trop_r: Arr, suspects: npt.NDArray[np.int64]) -> tuple[int, tuple[Arr, Arr]]:
+def _exclude_one_phase(st: RtkState, ctx: EpochContext, suspects: npt.NDArray[np.int64]
+                       ) -> tuple[int, tuple[Arr, Arr]]:
     """Fault exclusion under a hold: the one satellite whose phase, left out of the update from the prior
     state, lets every other phase double difference fit (post-fit within validation_sigma_factor·σ).
 
@@ -979,10 +1145,11 @@ def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver,
     too when it is a newcomer not yet held. A lone suspect that is not held and fits is the one. Otherwise the
     exclusion must be unique, or clearly the best: its post-fit phase χ² (vᵀR⁻¹v) at most
     1 / fault_exclusion_margin of the runner-up's. Returns (slot, (x, P) of that update), or (−1, prior) when no
-    single exclusion fits, when several fit alike (ambiguous), or when fewer than `min_amb_dd` + 1 held
+    single exclusion fits, when several fit alike (ambiguous), or when fewer than `min_fix_sats` held
     satellites would remain.
     """
     o = st.options
+    x_prior, p_prior, use_phase, code_ok = ctx.x_prior, ctx.p_prior, ctx.use_phase, ctx.code_ok
     found: list[tuple[float, int, tuple[Arr, Arr]]] = []
     held = (use_phase & st.held_prns).nonzero()[0]
     # a lone suspect may also be a newcomer not yet held (its float ambiguity still off by a fraction of a
@@ -991,13 +1158,13 @@ def _exclude_one_phase(st: RtkState, x_prior: Arr, p_prior: Arr, rov: _Receiver,
     for c in np.concatenate([lone, held[~np.isin(held, lone)]]):
         keep = use_phase.copy()
         keep[c] = False
-        if int(np.count_nonzero(keep & st.held_prns)) < o.min_amb_dd + 1:
+        if int(np.count_nonzero(keep & st.held_prns)) < o.min_fix_sats:
             continue
-        dd, _ = _ddres(st, x_prior, rov, bas, rng_b, keep, code_ok, el, o.use_doppler, trop_r)
+        dd, _ = _ddres(st, ctx, x_prior, keep, code_ok, o.use_doppler)
         if dd.v.size == 0:
             continue
         x_c, p_c = _kf_update(x_prior, p_prior, dd.v, dd.h, dd.r)
-        post, _ = _ddres(st, x_c, rov, bas, rng_b, keep, code_ok, el, False, trop_r, jacobian=False)
+        post, _ = _ddres(st, ctx, x_c, keep, code_ok, False, jacobian=False)
         if np.all(_valid_residuals(post, o.validation_sigma_factor)):
             if lone.size and int(c) == int(lone[0]) and not st.held_prns[c]:
                 return int(c), (x_c, p_c)
@@ -1062,11 +1229,12 @@ def _agrees_with_validated(st: RtkState, ref: int, others: npt.NDArray[np.int64]
     return _same_integers(_slot_integers(ref, others, ints), st.validated_int, min_common)
 
 
-def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el: Arr,
-                   min_dd: int, t: GpsTime) -> _Fix | None:
+def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_]) -> _Fix | None:
     """Integer ambiguity resolution on the DD ambiguities of `cand` slots (RTKLIB resamb_LAMBDA) with
-    partial fixing: drop the lowest satellite and retry while the ratio test fails."""
+    partial fixing: drop the least determined satellite and retry while the ratio test fails; a set needs at
+    least min_fix_sats satellites."""
     o = st.options
+    x, p, el, t = st.x, st.p, ctx.el, ctx.time
     idx = cand.nonzero()[0]
     best_ratio = 0.0
     seen_candidate = False
@@ -1078,7 +1246,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
     """The last try's reference, DD ambiguities (a, Qa, Qba, Qia) and position among its others of the slot
     dropped since."""
     for _drop in range(o.max_partial_drop + 1 if o.partial_ar else 1):
-        if idx.size < min_dd + 1:
+        if idx.size < o.min_fix_sats:
             break
         ref = _reference_slot(idx, el)
         others = idx[idx != ref]
@@ -1105,44 +1273,42 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
                 st.stuck_since = None
         # a fix resting on the bare minimum of double differences (no held set to lean on) must be
         # nearly certain: a stricter success rate and twice the ratio
-        strict = (idx.size - 1 <= o.min_amb_dd or _drop >= o.strict_partial_drop_sats) and not np.count_nonzero(st.held_prns)
+        strict = (idx.size <= o.min_fix_sats or _drop >= o.strict_partial_drop_sats) and not np.count_nonzero(st.held_prns)
         need_ratio = o.ratio_threshold * (2.0 if strict else 1.0)
         need_sr = max(o.min_success_rate, o.min_success_rate_minimal_set) if strict else o.min_success_rate
         accept = False
         if ratio >= need_ratio and not seen_candidate:
             # the integer set winning the ratio test must keep winning for a while before a first fix (nothing
-            # held, no known start): a float biased by correlated code (hil_sim at 2 Hz: 4 m off, ratio 3.0)
-            # gives a wrong set that satellite motion breaks within seconds. Below the success rate, it must
+            # held, no known start): a float biased by correlated code gives a wrong set that satellite motion breaks within seconds. Below the success rate, it must
             # win over consistent_fix_span_s: satellite motion over that span separates position from
             # ambiguities, which a float built on code cannot do in a few epochs.
             #
             # A full set (no satellite dropped) is one ratio test on every ambiguity the float carries, low
             # satellites included; a partial set is the survivor of up to max_partial_drop + 1 tests, which
-            # inflates the chance that a code-biased float passes one of them by luck. On the real sets and the
-            # hil_sim flight every wrong candidate was partial (2 to 4 satellites dropped), no full-set candidate
-            # in 131 was wrong: a full set needs its win confirmed at full_set_confirm_epochs consecutive epochs
-            # (and, below the success rate, over confirm_fix_span_s), a partial one the wall-time spans.
+            # inflates the chance that a code-biased float passes one of them by luck (docs/rtk-defaults.md): a
+            # full set needs its win confirmed at full_set_confirm_epochs consecutive epochs (and, below the
+            # success rate, over confirm_fix_span_s), a partial one the wall-time spans.
             seen_candidate = True
             full = _drop == 0
             key = (ref, tuple(others.tolist()), tuple(np.rint(res.fixed[:, 0]).astype(int).tolist()))
-            if st.pending_fix is None or st.pending_fix[0] != key:
-                st.pending_fix = (key, t, 0, t, 0.0)
+            if st.pending_fix is None or st.pending_fix.key != key:
+                st.pending_fix = PendingFix(key, t, 0, t, 0.0)
             _, since, wins, last, progress = st.pending_fix
             if o.settled_fix_span_s > 0:
                 # the code multipath the float leans on decorrelates within seconds once the rover moves
-                progress += abs(t.diff_s(last)) / (o.settled_fix_span_moving_s if st.moving else o.settled_fix_span_s)
-            st.pending_fix = (key, since, wins + 1, t, progress)
+                progress += abs(t.diff_s(last)) / (o.settled_fix_span_moving_s if ctx.moving else o.settled_fix_span_s)
+            st.pending_fix = PendingFix(key, since, wins + 1, t, progress)
             span = abs(t.diff_s(since))
             settled = o.settled_fix_span_s > 0 and progress >= 1.0 - 1e-9
             # correlated code multipath biases the float for about its correlation time: clean code waits less
             need_span = max(o.confirm_fix_span_min_s, o.confirm_fix_span_s * st.code_var_scale)
             cs = st.code_scatter
-            if cs.epochs >= o.code_scatter_min_epochs and st.code_var_scale >= 0.5:
+            if cs.epochs >= o.code_scatter_min_epochs and st.code_var_scale >= GEODETIC_CODE_SCALE:
                 # measured u-blox-like code: the differential ionosphere biases its float for minutes
-                need_span += o.confirm_fix_span_per_km_s * st.baseline_m / 1000.0
-            wins = st.pending_fix[2]
+                need_span += o.confirm_fix_span_per_km_s * ctx.baseline_m / 1000.0
+            wins = st.pending_fix.wins
             trusted = bool(np.count_nonzero(st.held_prns) or st.known_amb[idx].all()) \
-                or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_amb_dd + 1)
+                or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_fix_sats)
             # a survivor contradicting the full set's best integers on the satellites they share: two rival
             # integer hypotheses, the partial one winning only without the satellites that contradict it
             rival = False
@@ -1150,7 +1316,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
                 full_ref, full_others, full_res = full_set
                 rival = not _same_integers(_slot_integers(ref, others, res.fixed[:, 0]),
                                            _slot_integers(full_ref, full_others, full_res.fixed[:, 0]), 2)
-            far = o.max_first_fix_baseline_km > 0.0 and st.baseline_m > 1000.0 * o.max_first_fix_baseline_km
+            far = o.max_first_fix_baseline_km > 0.0 and ctx.baseline_m > 1000.0 * o.max_first_fix_baseline_km
             if rival or far:
                 # no first fix on such data (see the options): only a set already trusted
                 accept = trusted and res.success_rate >= need_sr
@@ -1161,7 +1327,7 @@ def _resamb_lambda(st: RtkState, x: Arr, p: Arr, cand: npt.NDArray[np.bool_], el
                     full and wins >= o.full_set_confirm_epochs and span >= need_span)
         elif ratio >= need_ratio:
             accept = res.success_rate >= need_sr and (bool(st.held_prns.any() or st.known_amb[idx].all())
-                                                     or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_amb_dd + 1))
+                                                     or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_fix_sats))
         if accept:
             ints = res.fixed[:, 0]
             try:
@@ -1197,22 +1363,35 @@ def _fixed_ambiguity_state(x: Arr, fix: _Fix) -> Arr:
     return xf
 
 
-def _holdamb(st: RtkState, fix: _Fix) -> None:
-    """Constrain the float DD ambiguities to the fixed integers (RTKLIB holdamb)."""
+def _holdamb(st: RtkState, fix: _Fix, el: Arr) -> None:
+    """Constrain the float DD ambiguities to the fixed integers (RTKLIB holdamb), for the fixed satellites at
+    or above hold_elmask_deg (`el` elevations in rad per slot); nothing is held when none is."""
     o = st.options
-    n = fix.slots.size
+    keep = el[fix.slots] >= math.radians(o.hold_elmask_deg)
+    slots, ints = fix.slots[keep], fix.ints[keep]
+    n = slots.size
+    if n == 0:
+        return
     h = np.zeros((n, st.x.size))
-    h[np.arange(n), NX0 + fix.slots] = 1.0
+    h[np.arange(n), NX0 + slots] = 1.0
     h[:, NX0 + fix.ref] = -1.0
-    v = fix.ints - h @ st.x
+    v = ints - h @ st.x
     r = np.eye(n) * o.hold_sigma_cyc**2
     st.x, st.p = _kf_update(st.x, st.p, v, h, r)
     st.held_prns[:] = False
-    st.held_prns[fix.slots] = True
+    st.held_prns[slots] = True
     st.held_prns[fix.ref] = True
     st.validated_int[:] = np.nan
     st.validated_int[fix.ref] = 0.0
-    st.validated_int[fix.slots] = np.rint(fix.ints)
+    st.validated_int[slots] = np.rint(ints)
+
+
+# The stages of rtk_pos, in order (RTKLIB rtkpos() → relpos()): _start_epoch (satposs, pntpos), _detect_motion,
+# _rover_only (no usable base), _select_base, _udstate, _select_satellites (zdres: ranges, elevations, the
+# common set), _udbias_epoch (slips, base history, udbias, udion, code weight, standstill), _remember_epoch,
+# _float_update (ddres + Kalman update with outlier passes), _check_hold (post-fit residuals under a hold,
+# fault exclusion, release), _resolve (resamb_lambda + validation, valpos), _restart_stuck, _epoch_solution
+# (holdamb). Each reads and writes the epoch's EpochContext and the persistent RtkState.
 
 
 def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
@@ -1221,68 +1400,131 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     """Process one rover epoch (RTKLIB rtkpos()/relpos()); returns the epoch's Solution.
 
     `base` is the base epoch paired with this rover epoch (latest at or before it, see postpro.pair_epochs);
-    `base_pos_ecef_m` the base antenna L1 phase centre. Without base data a single-point solution (Q=5).
+    `base_pos_ecef_m` the base antenna L1 phase centre. Without base data a single-point solution (Q=5);
+    without a single-point solution none (Q=0, NaN position: see Solution).
     `receivers`: the rover's and the base epoch's slot data when already built (epoch_receivers), else None
     (built here); `spp` the rover's single-point solution likewise (epoch_spp).
     """
+    ctx = _start_epoch(st, rover, nav, receivers[0], spp)
+    if ctx is None:
+        return _no_solution(rover.time)
+    _detect_motion(st, ctx)
+    if base is None or base_pos_ecef_m is None or abs(rover.time.diff_s(base.time)) > st.options.max_age_s:
+        return _rover_only(st, ctx, base, base_pos_ecef_m)
+    _select_base(st, ctx, base, nav, receivers[1], base_pos_ecef_m)
+    _udstate(st, ctx.dt_s, ctx.spp.pos_ecef_m, ctx.spp.vel_ecef_m_s, ctx.base_pos)
+    _select_satellites(st, ctx)
+    _udbias_epoch(st, ctx, base.time)
+    _remember_epoch(st, ctx, base.time)
+    _float_update(st, ctx)
+    dd = ctx.dd
+    if dd is None or ctx.ns < 2 or not np.count_nonzero(dd.kind == 0):
+        # no phase double differences at all: report the filter position as float only if it is constrained
+        return _solution(ctx.t_sol, st.x[:3], st.x[3:6], Q_FLOAT if ctx.ns >= 2 else Q_SINGLE, ctx.ns,
+                         st.p[:3, :3], st.p[3:6, 3:6], ctx.age_s, 0.0)
+    _check_hold(st, ctx)
+    fix = _resolve(st, ctx) if st.options.ar_mode != "off" else None
+    _restart_stuck(st, ctx, fix)
+    return _epoch_solution(st, ctx, fix)
+
+
+def _no_solution(t: GpsTime) -> Solution:
+    """The epoch without any position (Q_NONE): NaN position, velocity and covariances, no satellite."""
+    nan3, nan33 = np.full(3, np.nan), np.full((3, 3), np.nan)
+    return Solution(time=t, pos_ecef_m=nan3, vel_ecef_m_s=nan3.copy(), q=Q_NONE, ns=0, cov_pos_m2=nan33,
+                    cov_vel_m2_s2=nan33.copy(), age_s=0.0, ratio=0.0)
+
+
+def _start_epoch(st: RtkState, rover: ObsEpoch, nav: NavData, rov: _Receiver | None, spp: SppSolution | None
+                 ) -> EpochContext | None:
+    """Satellite states on the rover's slots (satposs) and its single-point solution (pntpos); the epoch's
+    context, or None without a single-point solution."""
     o = st.options
-    rov = _slots(rover, nav.store) if receivers[0] is None else receivers[0]
+    rov = _slots(rover, nav.store) if rov is None else rov
     if spp is None or not st.initialized:
         # the filter starts on this epoch's own solution from a cold start (precomputed ones start elsewhere)
         spp = pntpos(rov.pr_m, rov.sats, rover.time.tow_s, o.elmask_rad, rov.dop_hz, nav.iono,
                      x0_ecef_m=st.x[:3] if st.initialized else None, outlier_m=o.spp_outlier_m,
                      max_gdop=o.spp_max_gdop, clock0_m=st.clock_bias_m)
-    if spp.ok:
-        st.clock_bias_m = spp.clock_bias_m
     if not spp.ok:
         log.debug("%s: no single-point solution (%s)", rover.time, spp.message)
-        return _solution(rover.time, st.x[:3] if st.initialized else np.zeros(3), np.full(3, np.nan), Q_NONE, 0,
-                         np.zeros((3, 3)), np.zeros((3, 3)), 0.0, 0.0)
-    t_sol = rover.time.add_s(-spp.clock_bias_m / CLIGHT_M_S)
-    ns_spp = int(np.count_nonzero(spp.used))
+        return None
+    st.clock_bias_m = spp.clock_bias_m
+    return EpochContext(rover.time, rov, spp, rover.time.add_s(-spp.clock_bias_m / CLIGHT_M_S))
 
-    def single(age: float) -> Solution:
-        cov = np.eye(3) * (spp.gdop * 1.5) ** 2
-        return _solution(t_sol, spp.pos_ecef_m, spp.vel_ecef_m_s, Q_SINGLE, ns_spp, cov, np.eye(3) * 0.01, age, 0.0)
 
-    speed = _norm(spp.vel_ecef_m_s)  # not finite unless every component is
-    st.moving = math.isfinite(speed) and speed > o.takeoff_speed_m_s
-    if st.static and st.moving:
-        log.info("%s: take-off detected (%.2f m/s), leaving static mode", rover.time, speed)
+def _detect_motion(st: RtkState, ctx: EpochContext) -> None:
+    """Whether the rover moves by its Doppler speed (ctx.moving); the static start ends at take-off."""
+    o = st.options
+    speed = _norm(ctx.spp.vel_ecef_m_s)  # not finite unless every component is
+    ctx.moving = math.isfinite(speed) and speed > o.takeoff_speed_m_s
+    if st.static and ctx.moving:
+        log.info("%s: take-off detected (%.2f m/s), leaving static mode", ctx.time, speed)
         st.static = False
         st.p[3:6, 3:6] = np.eye(3) * o.initial_vel_sigma_m_s**2
-    if base is None or base_pos_ecef_m is None or abs(rover.time.diff_s(base.time)) > o.max_age_s:
-        # no usable base: keep watching the rover's phase, so that a radio gap neither hides a rover slip nor
-        # (judged later over the whole gap by a Doppler integration that ignores the manoeuvres) fakes slips
-        # on every satellite
-        if st.initialized:
-            rover_ok = rov.has & np.isfinite(rov.cp_cyc)
-            st.pending_slip |= _rover_slips(st, rov, rover.time, rover_ok)
-            _remember_rover(st, rov, rover.time)
-        return single(0.0 if base is None or base_pos_ecef_m is None else rover.time.diff_s(base.time))
-    age = rover.time.diff_s(base.time)
+
+
+def _single(ctx: EpochContext, age_s: float) -> Solution:
+    """The epoch's single-point solution (Q_SINGLE), its σ SPP_SIGMA_PER_GDOP_M per unit of GDOP."""
+    spp = ctx.spp
+    cov = np.eye(3) * (spp.gdop * SPP_SIGMA_PER_GDOP_M) ** 2
+    return _solution(ctx.t_sol, spp.pos_ecef_m, spp.vel_ecef_m_s, Q_SINGLE, int(np.count_nonzero(spp.used)), cov,
+                     np.eye(3) * SPP_VEL_VAR_M2_S2, age_s, 0.0)
+
+
+def _rover_only(st: RtkState, ctx: EpochContext, base: ObsEpoch | None, base_pos_ecef_m: Arr | None) -> Solution:
+    """An epoch without usable base data (none, or older than max_age_s): the single-point solution."""
+    # keep watching the rover's phase, so that a radio gap neither hides a rover slip nor (judged later over the
+    # whole gap by a Doppler integration that ignores the manoeuvres) fakes slips on every satellite
+    if st.initialized:
+        rov = ctx.rov
+        rover_ok = rov.has & np.isfinite(rov.cp_cyc)
+        st.pending_slip |= _rover_slips(st, rov, ctx.time, rover_ok)
+        _remember_rover(st, rov, ctx.time)
+    return _single(ctx, 0.0 if base is None or base_pos_ecef_m is None else ctx.time.diff_s(base.time))
+
+
+def _select_base(st: RtkState, ctx: EpochContext, base: ObsEpoch, nav: NavData, bas: _Receiver | None,
+                 base_pos_ecef_m: Arr) -> None:
+    """The base epoch's slot data (kept while later rover epochs pair with it), its age, the baseline at the
+    previous position and the time since the previous epoch."""
+    ctx.age_s = ctx.time.diff_s(base.time)
     if st.base_cache is not None and st.base_cache[0] == base.time:
-        bas = st.base_cache[1]
+        ctx.bas = st.base_cache[1]
     else:
-        bas = _slots(base, nav.store) if receivers[1] is None else receivers[1]
-        st.base_cache = (base.time, bas)
-    base_pos = np.asarray(base_pos_ecef_m, float)
-    st.baseline_m = _norm(st.x[:3] - base_pos) if st.initialized else 0.0
+        ctx.bas = _slots(base, nav.store) if bas is None else bas
+        st.base_cache = (base.time, ctx.bas)
+    ctx.base_pos = base_pos = np.asarray(base_pos_ecef_m, float)
+    ctx.baseline_m = _norm(st.x[:3] - base_pos) if st.initialized else 0.0
+    ctx.dt_s = ctx.time.diff_s(st.time) if st.time is not None else 0.0
 
-    dt = rover.time.diff_s(st.time) if st.time is not None else 0.0
-    _udstate(st, dt, spp.pos_ecef_m, spp.vel_ecef_m_s, base_pos)
 
-    rng_b, _, _, _ = _model_range_m(bas, base_pos)
-    rng_r, los_r, _, el_r = _model_range_m(rov, st.x[:3])
-    trop_r = rng_r - _range_with_trop_m(rov, st.x[:3], np.zeros(NSAT))[0]
-    el = el_r
-    common = rov.has & bas.has & (el >= o.elmask_rad) & spp.used
+def _select_satellites(st: RtkState, ctx: EpochContext) -> None:
+    """Zero-difference models (RTKLIB zdres) at the base's known and the rover's predicted position, and the
+    satellites the epoch may use: both receivers, above the mask, used by the single-point solution; with phase
+    on both (an unresolved half cycle excluded when exclude_half_cycle)."""
+    o = st.options
+    rov, bas = ctx.rov, ctx.bas
+    assert bas is not None
+    ctx.rng_b = _model_range_m(bas, ctx.base_pos)[0]
+    rng_r, ctx.los_r, _, el = _model_range_m(rov, st.x[:3])
+    ctx.rng_r, ctx.el = rng_r, el
+    ctx.trop_r = rng_r - _range_with_trop_m(rov, st.x[:3], np.zeros(NSAT))[0]
+    common = rov.has & bas.has & (el >= o.elmask_rad) & ctx.spp.used
     half = ((rov.lli & LLI_HALF_CYCLE) != 0) | ((bas.lli & LLI_HALF_CYCLE) != 0)
     # phase with an unresolved half cycle may jump by ½ cycle when the receiver resolves it: not used at all
-    phase_ok = common & np.isfinite(rov.cp_cyc) & np.isfinite(bas.cp_cyc) & ~(half & o.exclude_half_cycle)
-    base_zb = LAMBDA_L1_M * bas.cp_cyc - rng_b
-    base_zb_cyc = base_zb / LAMBDA_L1_M
-    slip = _detect_slips(st, rov, bas, base_zb_cyc, rover.time, base.time, phase_ok)
+    ctx.phase_ok = common & np.isfinite(rov.cp_cyc) & np.isfinite(bas.cp_cyc) & ~(half & o.exclude_half_cycle)
+    ctx.common, ctx.half = common, half
+
+
+def _udbias_epoch(st: RtkState, ctx: EpochContext, t_b: GpsTime) -> None:
+    """Slips (LLI, Doppler, base geometry), the base correction history and the carried-forward base, the
+    ambiguities (udbias) and ionosphere states (udion), the code weight (measured scatter, standstill)."""
+    o = st.options
+    rov, bas, phase_ok = ctx.rov, ctx.bas, ctx.phase_ok
+    assert bas is not None
+    base_zb_cyc = (LAMBDA_L1_M * bas.cp_cyc - ctx.rng_b) / LAMBDA_L1_M
+    slip = _detect_slips(st, rov, bas, base_zb_cyc, ctx.time, t_b, phase_ok)
     if np.count_nonzero(st.pending_slip):  # rover slips seen while the base was missing
         gone = (st.pending_slip & ~phase_ok & _in_use(st)).nonzero()[0]
         if gone.size:
@@ -1290,45 +1532,56 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             st.slips += int(gone.size)
         slip |= st.pending_slip & phase_ok
         st.pending_slip[:] = False
-    if st.prev_time_b != base.time:
-        _remember_base(st, bas, base.time, base_zb_cyc)
-    carried = _extrapolated_base(st, bas, age)
+    if st.prev_time_b != t_b:
+        _remember_base(st, bas, t_b, base_zb_cyc)
+    ctx.base_zb_cyc = base_zb_cyc
+    carried = _extrapolated_base(st, bas, ctx.age_s)
     # the variance of what the rate misses; raw base data (young, or no history, e.g. processed backward) as before
-    st.base_age_var_m2 = (o.base_age_sigma_m_s * age) ** 2 if carried is not bas else 0.0
-    bas = carried
-    _udbias(st, rov, bas, rng_r, rng_b, phase_ok, slip, t_r=rover.time)
-    _udion(st, common, base_pos, dt, el)
-    st.code_var_scale = code_variance_scale(st, rov, bas, phase_ok, slip, el, dt)
+    ctx.base_age_var_m2 = (o.base_age_sigma_m_s * ctx.age_s) ** 2 if carried is not bas else 0.0
+    ctx.bas = bas = carried
+    _udbias(st, rov, bas, ctx.rng_r, ctx.rng_b, phase_ok, slip, t_r=ctx.time)
+    _udion(st, ctx.common, ctx.base_pos, ctx.dt_s, ctx.el)
+    st.code_var_scale = code_variance_scale(st, rov, bas, phase_ok, slip, ctx.el, ctx.dt_s)
     if o.standstill or st.static:
-        slipped = _watch_standstill(st, rov, bas, rng_r, rng_b, los_r, el, phase_ok & ~slip & ~half, rover.time, dt)
+        slipped = _watch_standstill(st, ctx, phase_ok & ~slip & ~ctx.half)
         if slipped >= 0:
             phase_ok[slipped] = False  # its ambiguity starts again next epoch
-    st.static_code_factor = static_code_factor(o, st.static, dt)
+    ctx.static_code_factor = static_code_factor(o, st.static, ctx.dt_s)
 
-    # remember raw data for next epoch's slip tests
-    _remember_rover(st, rov, rover.time)
-    if st.prev_time_b != base.time:
-        st.prev_zb = base_zb_cyc
-        st.prev_time_b = base.time
-    st.time = rover.time
 
-    # measurement update (one iteration, outliers removed and re-run)
-    code_ok = common.copy()
-    use_phase = phase_ok.copy()
+def _remember_epoch(st: RtkState, ctx: EpochContext, t_b: GpsTime) -> None:
+    """Keep this epoch's raw rover phase/Doppler and base geometry residual for the next epoch's slip tests."""
+    _remember_rover(st, ctx.rov, ctx.time)
+    if st.prev_time_b != t_b:
+        st.prev_zb = ctx.base_zb_cyc
+        st.prev_time_b = t_b
+    st.time = ctx.time
+
+
+def _float_update(st: RtkState, ctx: EpochContext) -> None:
+    """Measurement update of the float solution (RTKLIB ddres + filter, one iteration): innovations gated at
+    outlier_gate_sigma; the worst outlier is removed (a phase outlier resets its ambiguity) and the update re-run,
+    up to max_outlier_passes passes. When every pass finds an outlier the epoch has no measurement update: the
+    state stays at its time update (with the outliers' ambiguities reset), st.rejected_updates counts it."""
+    o = st.options
+    rov, bas, phase_ok = ctx.rov, ctx.bas, ctx.phase_ok
+    assert bas is not None
+    ctx.code_ok = code_ok = ctx.common.copy()
+    ctx.use_phase = use_phase = phase_ok.copy()
     x_post, p_post = st.x, st.p
-    x_prior, p_prior = st.x, st.p
+    ctx.x_prior, ctx.p_prior = st.x, st.p
     dd = None
-    for _it in range(4):
-        dd, _ = _ddres(st, st.x, rov, bas, rng_b, use_phase, code_ok, el, o.use_doppler, trop_r)
+    for _pass in range(o.max_outlier_passes):
+        dd, _ = _ddres(st, ctx, st.x, use_phase, code_ok, o.use_doppler)
         if dd.v.size == 0:
             break
         # innovation gating with the innovation covariance (the one the update then uses)
         innov = _innovation(st.p, dd.h, dd.r)
         norm = np.abs(dd.v) / np.sqrt(innov[-1].diagonal())
-        bad = norm > 6.0
-        bad &= ~((dd.kind == 0) & (np.abs(dd.v) < o.max_innovation_phase_m * 0.1))
+        bad = norm > o.outlier_gate_sigma
+        bad &= ~((dd.kind == 0) & (np.abs(dd.v) < o.phase_outlier_floor_m))
         if not np.count_nonzero(bad):
-            x_prior, p_prior = st.x, st.p
+            ctx.x_prior, ctx.p_prior = st.x, st.p
             x_post, p_post = _kf_update(st.x, st.p, dd.v, dd.h, dd.r, innov)
             break
         worst = int(np.argmax(np.where(bad, norm, -1)))
@@ -1337,19 +1590,19 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             # a phase outlier: treat as a slip of that satellite (or of the reference when most rows fail)
             phase_bad = bad & (dd.kind == 0)
             n_phase = int((dd.kind == 0).sum())
-            if n_phase <= 4 or phase_bad.sum() > 1:
+            if n_phase < MIN_PHASE_DD_TO_ISOLATE or phase_bad.sum() > 1:
                 # too few double differences (or several bad) to tell which satellite slipped: start the
                 # ambiguities afresh rather than keep a possibly slipped one (and a wrong hold) alive
-                log.debug("%s: phase outliers on %d of %d DDs -> all ambiguities reset", rover.time,
+                log.debug("%s: phase outliers on %d of %d DDs -> all ambiguities reset", ctx.time,
                           int(phase_bad.sum()), n_phase)
                 reset = _in_use(st).nonzero()[0]
                 _reset_amb(st, reset)
                 st.slips += int(reset.size)
-                use_phase = phase_ok & code_ok
+                ctx.use_phase = use_phase = phase_ok & code_ok
                 st.fix_count = 0
-                _udbias(st, rov, bas, rng_r, rng_b, use_phase, np.zeros(NSAT, bool), count_lock=False)
+                _udbias(st, rov, bas, ctx.rng_r, ctx.rng_b, use_phase, np.zeros(NSAT, bool), count_lock=False)
                 continue
-            log.debug("%s: phase outlier PRN %d (%.2f m) -> ambiguity reset", rover.time, slot + 1, dd.v[worst])
+            log.debug("%s: phase outlier PRN %d (%.2f m) -> ambiguity reset", ctx.time, slot + 1, dd.v[worst])
             _reset_amb(st, np.array([slot]))
             use_phase[slot] = False
             st.slips += 1
@@ -1359,28 +1612,34 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             use_phase[slot] = False
         else:
             rov.dop_hz[slot] = np.nan
+    else:
+        if o.max_outlier_passes > 0:
+            st.rejected_updates += 1
+            log.info("%s: an outlier at every one of %d passes: no measurement update this epoch (time update "
+                     "only)", ctx.time, o.max_outlier_passes)
     st.x, st.p = x_post, p_post
-    ns = int(np.count_nonzero(use_phase))
-    if dd is None or ns < 2 or not np.count_nonzero(dd.kind == 0):
-        # no phase double differences at all: report the filter position as float only if it is constrained
-        return _solution(t_sol, st.x[:3], st.x[3:6], Q_FLOAT if ns >= 2 else Q_SINGLE, ns, st.p[:3, :3],
-                         st.p[3:6, 3:6], age, 0.0)
+    ctx.dd = dd
+    ctx.ns = int(np.count_nonzero(use_phase))
 
-    # post-fit residual check of the float solution: it guards a held set (the fault exclusion and the release
-    # below act only on one), so without one it is not computed (a _ddres call per epoch of an unfixed rover)
+
+def _check_hold(st: RtkState, ctx: EpochContext) -> None:
+    """Post-fit phase residuals of the float solution under a held set: one satellite that no longer fits is
+    excluded (fault exclusion), a set that no longer fits is released (wrong-fix protection)."""
+    # it guards a held set (the fault exclusion and the release act only on one), so without one it is not
+    # computed (a residual pass per epoch of an unfixed rover)
+    use_phase = ctx.use_phase
     bad_phase = rows_post = np.zeros(0, np.int64)
     ref_post = -1
     if st.held_prns.any():
         # phase rows alone: only they are judged, each against its own σ (the code rows changed none of them)
-        rows_post, ok_post, ref_post = _phase_fit(st, st.x, rov, bas, rng_b, use_phase, el, trop_r)
+        rows_post, ok_post, ref_post = _phase_fit(st, ctx, st.x, use_phase)
         bad_phase = rows_post[~ok_post]
     if bad_phase.size:  # only ever found under a hold (above)
         # one satellite slipping under a hold spreads its error over every row through the position: find
         # whether leaving out a single satellite makes the rest fit (fault exclusion) before releasing all
-        culprit, fitted = _exclude_one_phase(st, x_prior, p_prior, rov, bas, rng_b, use_phase, code_ok, el, trop_r,
-                                              bad_phase)
+        culprit, fitted = _exclude_one_phase(st, ctx, bad_phase)
         if culprit >= 0:
-            log.info("%s: PRN %d no longer fits the held set: its ambiguity alone restarts", rover.time, culprit + 1)
+            log.info("%s: PRN %d no longer fits the held set: its ambiguity alone restarts", ctx.time, culprit + 1)
             st.x, st.p = fitted
             st.slips += 1
             _reset_amb(st, np.array([culprit]))
@@ -1388,86 +1647,103 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             bad_phase = bad_phase[:0]
     if bad_phase.size:
         # the held integer set no longer fits: release it (wrong-fix protection)
-        log.info("%s: held fix released (%d phase residuals out of bounds)", rover.time, bad_phase.size)
+        log.info("%s: held fix released (%d phase residuals out of bounds)", ctx.time, bad_phase.size)
         st.held_prns[:] = False
         st.fix_count = 0
         if bad_phase.size > 1:
             # several misfits point at the set rather than at one satellite: it no longer vouches for a re-fix
             st.validated_int[:] = np.nan
         amb = NX0 + _in_use(st).nonzero()[0]
-        st.p[amb, amb] += 0.5**2
-        if bad_phase.size >= 3 and bad_phase.size == rows_post.size and ref_post >= 0:
+        st.p[amb, amb] += RELEASE_AMB_SIGMA_CYC**2
+        if bad_phase.size >= MIN_DD_REFERENCE_SLIP and bad_phase.size == rows_post.size and ref_post >= 0:
             # every DD off at once is one satellite, the reference, slipping without LLI: reset it alone
-            # (hil_sim, undetected slips 2/h: 91.1 % airborne fixed, 71.6 % resetting all); the others stay
+            # (the others stay; see docs/rtk-defaults.md)
             bad_phase = np.array([ref_post])
         if bad_phase.size >= 1:
             st.slips += int(bad_phase.size)
             _reset_amb(st, bad_phase)
             use_phase[bad_phase] = False
 
-    # ambiguity resolution
-    fix = None
-    if o.ar_mode != "off":
-        amb_var = st.p.diagonal()[NX0:NX0 + NSAT]
-        # ambiguities seeded from a surveyed take-off point are known, not guessed from the code: no lock wait
-        locked = (st.lock > o.min_lock_epochs) | st.known_amb
-        cand = use_phase & (el >= math.radians(o.ar_elmask_deg)) & ~half & locked & (amb_var > 0)
-        fix = _resamb_lambda(st, st.x, st.p, cand, el, o.min_amb_dd, rover.time)
-        for _retry in range(2):
-            if fix is None:
-                break
-            # validate: float-fix consistency and post-fit residuals of the fixed solution
-            dpos = fix.pos - st.x[:3]
-            try:
-                maha = float(dpos @ solve(st.p[:3, :3], dpos))
-            except LinAlgError:
-                maha = np.inf
-            xf = _fixed_ambiguity_state(st.x, fix)
-            use_fix = np.zeros(NSAT, bool)
-            use_fix[fix.slots] = True
-            use_fix[fix.ref] = True
-            fix_rows, valid, _ = _phase_fit(st, xf, rov, bas, rng_b, use_fix, el, trop_r)
-            if (maha <= _CHI2_3DOF_999 or fix.settled) and np.count_nonzero(valid) == valid.size:
-                break
-            log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", rover.time, maha, bool(valid.all()))
-            # a second look at this epoch: without the one satellite whose phase does not fit the fixed solution
-            # (multipath, a half cycle) while the float agrees with the fix, or, with a set held, on the held
-            # satellites alone (a newcomer, e.g. G23 on M8P a 0.4 cycle off, pulls a full set away from the held
-            # float); RTKLIB only rejects the epoch. A fix that fits nowhere is not retried. The retry is no
-            # confirmation: it can only fix a set trusted without one (held or validated), and the first-fix
-            # confirmation under way is left as it was.
-            fix = None
-            retry = None
-            if _retry == 0 and maha <= _CHI2_3DOF_999 and int((~valid).sum()) == 1 and valid.sum() >= o.min_amb_dd:
-                retry = cand.copy()
-                retry[fix_rows[~valid]] = False
-            elif _retry == 0 and st.held_prns.any() and np.any(cand & ~st.held_prns):
-                retry = cand & st.held_prns
-            if retry is not None:
-                pending = st.pending_fix
-                st.pending_fix = None
-                fix = _resamb_lambda(st, st.x, st.p, retry, el, o.min_amb_dd, rover.time)
-                st.pending_fix = pending
-    if fix is None and st.stuck_since is not None and abs(rover.time.diff_s(st.stuck_since)) >= o.stuck_float_s:
-        log.info("%s: float ambiguities determined yet fitting no integer set for %.0f s: restarted", rover.time,
-                 abs(rover.time.diff_s(st.stuck_since)))
+
+def _resolve(st: RtkState, ctx: EpochContext) -> _Fix | None:
+    """Integer ambiguity resolution (RTKLIB resamb_LAMBDA) and validation of the fix (valpos): float-fix
+    consistency (Mahalanobis distance of the positions) and post-fit phase residuals of the fixed solution;
+    a rejected fix gets one more try on a reduced set (FIX_TRIES)."""
+    o = st.options
+    el, use_phase = ctx.el, ctx.use_phase
+    amb_var = st.p.diagonal()[NX0:NX0 + NSAT]
+    # ambiguities seeded from a surveyed take-off point are known, not guessed from the code: no lock wait
+    locked = (st.lock > o.min_lock_epochs) | st.known_amb
+    cand = use_phase & (el >= math.radians(o.ar_elmask_deg)) & ~ctx.half & locked & (amb_var > 0)
+    fix = _resamb_lambda(st, ctx, cand)
+    for _try in range(FIX_TRIES):
+        if fix is None:
+            break
+        # validate: float-fix consistency and post-fit residuals of the fixed solution
+        dpos = fix.pos - st.x[:3]
+        try:
+            maha = float(dpos @ solve(st.p[:3, :3], dpos))
+        except LinAlgError:
+            maha = np.inf
+        xf = _fixed_ambiguity_state(st.x, fix)
+        use_fix = np.zeros(NSAT, bool)
+        use_fix[fix.slots] = True
+        use_fix[fix.ref] = True
+        fix_rows, valid, _ = _phase_fit(st, ctx, xf, use_fix)
+        if (maha <= _CHI2_3DOF_999 or fix.settled) and np.count_nonzero(valid) == valid.size:
+            break
+        log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", ctx.time, maha, bool(valid.all()))
+        # a second look at this epoch: without the one satellite whose phase does not fit the fixed solution
+        # (multipath, a half cycle) while the float agrees with the fix, or, with a set held, on the held
+        # satellites alone (a newcomer, e.g. G23 on M8P a 0.4 cycle off, pulls a full set away from the held
+        # float); RTKLIB only rejects the epoch. A fix that fits nowhere is not retried. The retry is no
+        # confirmation: it can only fix a set trusted without one (held or validated), and the first-fix
+        # confirmation under way is left as it was.
+        fix = None
+        retry = None
+        if _try == 0 and maha <= _CHI2_3DOF_999 and int((~valid).sum()) == 1 and valid.sum() >= o.min_fix_sats - 1:
+            retry = cand.copy()
+            retry[fix_rows[~valid]] = False
+        elif _try == 0 and st.held_prns.any() and np.any(cand & ~st.held_prns):
+            retry = cand & st.held_prns
+        if retry is not None:
+            pending = st.pending_fix
+            st.pending_fix = None
+            fix = _resamb_lambda(st, ctx, retry)
+            st.pending_fix = pending
+    return fix
+
+
+def _restart_stuck(st: RtkState, ctx: EpochContext, fix: _Fix | None) -> None:
+    """Restart the float ambiguities when they have been determined yet near no integer set for
+    stuck_float_s (see the option)."""
+    if fix is None and st.stuck_since is not None and abs(ctx.time.diff_s(st.stuck_since)) >= st.options.stuck_float_s:
+        log.info("%s: float ambiguities determined yet fitting no integer set for %.0f s: restarted", ctx.time,
+                 abs(ctx.time.diff_s(st.stuck_since)))
         _reset_amb(st, _in_use(st).nonzero()[0])
         st.stuck_since = None
         st.pending_fix = None
         st.float_restarts += 1
+
+
+def _epoch_solution(st: RtkState, ctx: EpochContext, fix: _Fix | None) -> Solution:
+    """The epoch's solution: the float one without a fix; else the fixed one (reported float when its σ exceeds
+    max_fix_sigma_m), then the hold (holdamb) or, instantaneous AR, the ambiguities forgotten."""
+    o = st.options
     if fix is None:
         st.fix_count = 0
         st.fail_count += 1
-        return _solution(t_sol, st.x[:3], st.x[3:6], Q_FLOAT, ns, st.p[:3, :3], st.p[3:6, 3:6], age, st.last_ratio)
+        return _solution(ctx.t_sol, st.x[:3], st.x[3:6], Q_FLOAT, ctx.ns, st.p[:3, :3], st.p[3:6, 3:6], ctx.age_s,
+                         st.last_ratio)
     st.fix_count += 1
     st.fail_count = 0
     if st.init_pos_ecef_m is not None:
         st.init_pos_ecef_m = None  # the known point only seeds the first fix
     weak = math.sqrt(max(float(fix.cov.trace()), 0.0)) > o.max_fix_sigma_m
-    sol = _solution(t_sol, fix.pos, st.x[3:6], Q_FLOAT if weak else Q_FIX, ns, fix.cov, st.p[3:6, 3:6], age,
-                    fix.ratio)
+    sol = _solution(ctx.t_sol, fix.pos, st.x[3:6], Q_FLOAT if weak else Q_FIX, ctx.ns, fix.cov, st.p[3:6, 3:6],
+                    ctx.age_s, fix.ratio)
     if o.ar_mode == "fix-and-hold" and st.fix_count >= o.min_hold_epochs:
-        _holdamb(st, fix)
+        _holdamb(st, fix, ctx.el)
     elif o.ar_mode == "instantaneous":
         _reset_amb(st, np.arange(NSAT))
     return sol

@@ -164,7 +164,21 @@ Q_NONE = 0
 Q_FIX = 1
 Q_FLOAT = 2
 Q_SINGLE = 5
-"""Solution quality flags, RTKLIB's .pos `Q` column (1 fixed, 2 float, 5 single point, 0 none)."""
+"""Solution quality flags, RTKLIB's .pos `Q` column (1 fixed, 2 float, 5 single point, 0 none: no position)."""
+
+
+class BasePositionRejected(ValueError):
+    """The given base position is contradicted by the base's own single-point solution by more than the
+    bound (RtkOptions.max_base_spp_offset_m): every output position would carry the error. A data rule: the
+    command lines answer it with exit 3."""
+
+    def __init__(self, offset_m: float, bound_m: float, epochs: int) -> None:
+        super().__init__(f"base position {offset_m:.1f} m from the base's own single-point position (median of "
+                         f"{epochs} epochs): more than {bound_m:g} m; check the base position")
+        self.offset_m = offset_m
+        """3D distance (m) between the given position and the median single-point position."""
+        self.bound_m = bound_m
+        self.epochs = epochs
 
 
 @dataclass(frozen=True)
@@ -173,7 +187,8 @@ class Solution:
 
     `time` GPS time of the solution (receiver time tag minus the estimated receiver clock bias, as RTKLIB),
     `pos_ecef_m` (3,) rover antenna L1 phase centre, `vel_ecef_m_s` (3,) (NaN when not estimated),
-    `q` Q_FIX/Q_FLOAT/Q_SINGLE/Q_NONE, `ns` satellites used, `cov_pos_m2` (3,3) ECEF position covariance,
+    `q` Q_FIX/Q_FLOAT/Q_SINGLE/Q_NONE, `ns` satellites used (a Q_NONE solution has no position: NaN position,
+    velocity and covariances, ns 0; never read it as a position), `cov_pos_m2` (3,3) ECEF position covariance,
     `cov_vel_m2_s2` (3,3) velocity covariance, `age_s` age of the base data (rover − base time, s),
     `ratio` the ambiguity ratio-test value (0 when no search ran).
     """
