@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ground.cli import AdjustRequest, main, parameter_specs
+from ground.cli import main
+from ground.pipeline import AdjustJobOptions, parameter_specs
 from ground.io import crs as crsmod
 from ground.io.orientations import read_micmac_folder, read_opk_csv
 from onboard.errors import InputError
@@ -28,19 +29,18 @@ def _args(d: Path, *extra: str) -> list[str]:
 
 def test_parameter_rules() -> None:
     """Value alone → fixed; value + σ → prior; nothing → free; --estimate with a value but no σ → error."""
-    base = AdjustRequest(Path("t"), Path("e"), Path("o"))
-    lever, delay = parameter_specs(base)
+    lever, delay = parameter_specs(AdjustJobOptions())
     assert lever.mode == "free" and delay.mode == "free"
-    r = AdjustRequest(Path("t"), Path("e"), Path("o"), lever_arm_m=(0.1, 0.0, -0.1), delay_s=0.06, delay_sigma_s=0.002)
+    r = AdjustJobOptions(lever_arm_m=(0.1, 0.0, -0.1), delay_s=0.06, delay_sigma_s=0.002)
     lever, delay = parameter_specs(r)
     assert lever.mode == "fixed" and lever.value_m == (0.1, 0.0, -0.1)
     assert delay.mode == "prior" and delay.sigma_s == 0.002
     with pytest.raises(InputError, match="lever-arm-sigma"):
-        parameter_specs(AdjustRequest(Path("t"), Path("e"), Path("o"), lever_arm_m=(0, 0, 0), estimate=("lever-arm",)))
-    with pytest.raises(InputError, match="--estimate"):
-        parameter_specs(AdjustRequest(Path("t"), Path("e"), Path("o"), estimate=("scale",)))
+        parameter_specs(AdjustJobOptions(lever_arm_m=(0, 0, 0), estimate=("lever-arm",)))
+    with pytest.raises(ValueError, match="estimate 'scale': must be one of lever-arm, delay"):
+        AdjustJobOptions(estimate=("scale",))
     with pytest.raises(InputError, match="needs --delay"):
-        parameter_specs(AdjustRequest(Path("t"), Path("e"), Path("o"), delay_sigma_s=0.001))
+        parameter_specs(AdjustJobOptions(delay_sigma_s=0.001))
 
 
 def test_adjust_free_recovers_truth_and_exports_utm(tmp_path: Path) -> None:
