@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from ground.cli import main
-from ground.pipeline import AdjustJobOptions, parameter_specs
 from ground.io import crs as crsmod
 from ground.io.orientations import read_micmac_folder, read_opk_csv
+from ground.pipeline import AdjustJobOptions, parameter_specs
 from onboard.errors import InputError
 from tests.ground_io.flightgen import ORIGIN_ECEF, write_synthetic_flight
 

@@ -196,9 +196,9 @@ def tiny_disk(tmp_path: Path):  # type: ignore[no-untyped-def]
         pytest.skip("a full-disk test mounts a 64 KiB tmpfs, which needs root")
     d = tmp_path / "tiny"
     d.mkdir()
-    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(d)], capture_output=True, text=True)
-    if r.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {r.stderr.strip()}")
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(d)], check=False,
+                       capture_output=True, text=True)
+    assert r.returncode == 0, f"root, yet cannot mount a tmpfs: {r.stderr.strip()}"
     try:
         yield d
     finally:
@@ -215,35 +215,50 @@ def _big_cameras(n: int):  # type: ignore[no-untyped-def]
                           np.full((n, 3), 0.02)), c, r
 
 
+@pytest.fixture(scope="module")
+def adjusted(tmp_path_factory: pytest.TempPathFactory) -> dict:  # type: ignore[type-arg]
+    """results.json of one adjustment (the report renders from it)."""
+    d = tmp_path_factory.mktemp("adjusted")
+    write_synthetic_flight(d, n_lines=1)
+    assert main(_args(d, "--lever-arm", "0.05,-0.12,-0.08")) == 0
+    return json.loads((d / "out" / "results.json").read_text())  # type: ignore[no-any-return]
+
+
 WRITERS = ["geo.txt", "pix4d.csv", "metashape.txt", "opk.csv", "micmac.xml", "report.html", "results.json"]
 
 
 @pytest.mark.parametrize("writer", WRITERS)
-def test_a_full_disk_leaves_the_previous_good_file(tiny_disk: Path, writer: str) -> None:
+def test_a_full_disk_leaves_the_previous_good_file(tiny_disk: Path, writer: str, adjusted: dict) -> None:  # type: ignore[type-arg]
     """Case 6: each ground writer on a full disk raises OSError, keeps the previous file, leaves no temp file."""
+    results = adjusted
     from ground.adjust.types import CameraPose
     from ground.io import exporters
     from ground.io.orientations import write_micmac_orientation, write_opk_csv
     from ground.report import write_report
     from onboard.formats.atomic import write_atomic
 
-    cams, c, r = _big_cameras(2000)
+    cams, c, r = _big_cameras(50)
     target = tiny_disk / writer
     target.write_text("previous good\n")
+    filler = tiny_disk / "filler"
+    with pytest.raises(OSError), filler.open("wb") as fh:  # the rest of the 64 KiB, to the last page
+        for _ in range(1000):
+            fh.write(b"\0" * 4096)
+            fh.flush()
     calls = {
         "geo.txt": lambda: exporters.write_odm_geo_txt(target, cams),
         "pix4d.csv": lambda: exporters.write_pix4d_csv(target, cams),
         "metashape.txt": lambda: exporters.write_metashape_txt(target, cams),
         "opk.csv": lambda: write_opk_csv(target, [CameraPose(n, cams.xyz[i], cams.r_cam_to_crs[i])
                                                   for i, n in enumerate(cams.images)], geographic=True),
-        "micmac.xml": lambda: write_micmac_orientation(target, CameraPose("x" * 200_000, c[0], r[0])),
-        "report.html": lambda: write_report(target, {"warnings": ["x" * 200_000]}),
-        "results.json": lambda: write_atomic(target, json.dumps({"cameras": ["x" * 200_000]})),
+        "micmac.xml": lambda: write_micmac_orientation(target, CameraPose("IMG_0001.JPG", c[0], r[0])),
+        "report.html": lambda: write_report(target, results),
+        "results.json": lambda: write_atomic(target, json.dumps(results)),
     }
     with pytest.raises(OSError):
         calls[writer]()
     assert target.read_text() == "previous good\n"
-    leftovers = sorted(p.name for p in tiny_disk.iterdir() if p.name != writer)
+    leftovers = sorted(p.name for p in tiny_disk.iterdir() if p.name not in (writer, "filler"))
     if leftovers:  # onboard.formats.atomic: on ENOSPC, closing the temp file raises again before its unlink
         pytest.xfail(f"temporary file left by onboard.formats.atomic on a full disk: {leftovers}")
 
