@@ -108,3 +108,44 @@ def test_fuzz_job_route(client: TestClient, kind: str, params: dict) -> None:  #
                     headers={"content-type": "application/json"})
     assert r.status_code == 422, r.text
     assert "Traceback" not in r.text
+
+
+def test_the_api_adjusts_an_events_jsonl_flight_with_capture_times(live, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """Case 5: the API could not pass capture times, so it could not adjust the demo's kind of flight (onboard
+    events.jsonl + camera capture times, lever-arm prior, delay estimated); now the job params carry them."""
+    import datetime as dt
+
+    import httpx
+
+    from onboard.gnsstime import GpsTime
+    from onboard.upload.client import Uploader, UploaderOptions
+    from tests.ground_io.flightgen import write_synthetic_flight
+    from tests.ground_io.test_adjust_cli import _events_jsonl_from_csv
+
+    folder = tmp_path / "flight-jsonl"
+    truth = write_synthetic_flight(folder, n_lines=2)
+    names = _events_jsonl_from_csv(folder, drop=5)
+    rows = [line.split(",") for line in (folder / "events.csv").read_text().splitlines()[1:]]
+    (folder / "events.csv").unlink()
+    caps = {}
+    for name, (_, week, tow) in zip(names, rows):
+        t = GpsTime.from_week_tow_s(int(week), float(tow)).to_gpst_datetime().replace(tzinfo=None)
+        caps[name] = (t.replace(microsecond=0) + dt.timedelta(hours=1, seconds=12.3)).isoformat()
+    roles = {"SOL.pos": "raw", "events.jsonl": "raw", "poses.csv": "raw", "gcp.csv": "raw"}
+    rep = Uploader(live.url, TOKEN, UploaderOptions(chunk_bytes=60_000), sleep=lambda s: None).upload_flight(
+        folder, roles)
+    params = {"trajectory": "SOL.pos", "events": "events.jsonl", "orientations": "poses.csv", "gcp": "gcp.csv",
+              "capture_times": caps, "lever_arm": list(truth.lever_arm_m), "lever_arm_sigma": 0.005,
+              "estimate": ["delay"]}
+    with httpx.Client(base_url=live.url, headers={"Authorization": f"Bearer {TOKEN}"}, timeout=30) as c:
+        r = c.post(f"/flights/{rep.flight_id}/jobs", json={"kind": "adjust", "params": params})
+        assert r.status_code == 202, r.text
+        job_id = r.json()["id"]
+        deadline = time.monotonic() + 120
+        while (job := c.get(f"/flights/{rep.flight_id}/jobs/{job_id}").json())["status"] not in ("done", "failed"):
+            assert time.monotonic() < deadline, "job did not finish"
+            time.sleep(0.3)
+        assert job["status"] == "done", job["message"]
+        res = c.get(f"/flights/{rep.flight_id}/results").json()
+    assert res["matching"]["method"] == "capture_time" and res["matching"]["missing_marks"] == [names[5]]
+    assert res["delay_s"] == pytest.approx(truth.delay_s, abs=0.005)
