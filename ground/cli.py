@@ -102,45 +102,48 @@ def build_parser() -> argparse.ArgumentParser:
                "the value);\n--estimate without a value leaves it free; with neither, both are free (a free lever "
                "arm needs ≥ 1 GCP).\n\nexample:\n  python -m ground adjust --trajectory SOL.pos --events "
                "events.jsonl --images photos/ \\\n    --orientations reconstruction.json --gcp gcp.csv "
-               "--lever-arm 0.04,-0.11,-0.09 --lever-arm-sigma 0.005 \\\n    --estimate delay --crs EPSG:2154 "
+               "--lever-arm 0.04,-0.11,-0.09 --lever-arm-sigma 0.005 \\\n    --estimate delay --crs EPSG:32632 "
                "-o out/\n\nwrites out/results.json, out/report.html and out/exports/ (geo.txt, Pix4D, Metashape, "
-               "OPK CSV, MicMac).\nexit codes: 0 done, 2 bad input, 3 refused (the message says what to add)")
-    a.add_argument("--trajectory", required=True, type=Path, help="antenna trajectory: RTKLIB .pos (xyz or llh, GPST week/tow or calendar, "
+               "OPK CSV, MicMac).\nexit codes: 0 done, 1 failure (e.g. disk full: the previous outputs are kept), 2 bad input, "
+               "3 refused (the data cannot support an answer; the message says what to add)")
+    a.add_argument("--trajectory", required=True, type=Path, metavar="FILE", help="antenna trajectory: RTKLIB .pos (xyz or llh, GPST week/tow or calendar, "
                    "velocity columns optional)")
-    a.add_argument("--events", required=True, type=Path, help="camera events: the onboard events.jsonl, or a CSV "
+    a.add_argument("--events", required=True, type=Path, metavar="FILE", help="camera events: the onboard events.jsonl, or a CSV "
                    "image,week,tow (GPS week, seconds of week)")
     a.add_argument("--events-kind", choices=("trigger", "flash"), default="trigger",
                    help="what the CSV times are: trigger pulses (t_d ≈ shutter lag) or flash marks "
                    "(t_d ≈ 0) (default: %(default)s)")
-    a.add_argument("--capture-times", type=Path, help="CSV image,capture_time or JSON {image: time} (camera clock, "
+    a.add_argument("--capture-times", type=Path, metavar="FILE", help="CSV image,capture_time or JSON {image: time} (camera clock, "
                    "EXIF 'YYYY:MM:DD HH:MM:SS' or ISO 8601) to match events.jsonl to the images")
-    a.add_argument("--images", type=Path, help="folder of the photos: EXIF capture times to match events.jsonl")
-    a.add_argument("--orientations", required=True, type=Path,
+    a.add_argument("--images", type=Path, metavar="DIR", help="folder of the photos: EXIF capture times to match events.jsonl")
+    a.add_argument("--orientations", required=True, type=Path, metavar="FILE|DIR",
                    help="bundle adjustment: OpenSfM/ODM reconstruction.json, COLMAP images.txt, MicMac "
                    "Ori-* folder, Metashape camera .xml or OPK .csv (image,X,Y,Z,omega,phi,kappa; degrees)")
-    a.add_argument("--gcp", type=Path, help="GCP CSV name,role,x_rel,y_rel,z_rel,X,Y,Z, ODM gcp_list.txt or "
+    a.add_argument("--gcp", type=Path, metavar="FILE", help="GCP CSV name,role,x_rel,y_rel,z_rel,X,Y,Z, ODM gcp_list.txt or "
                    "MicMac XML (then --gcp-rel)")
-    a.add_argument("--gcp-rel", type=Path, help="CSV name,x_rel,y_rel,z_rel[,role] for ODM/MicMac GCP files")
-    a.add_argument("--gcp-crs", default=crsmod.WGS84_ECEF, type=_crs_text, help="CRS of the GCP ground coordinates, EPSG:n or EPSG:h+v "
+    a.add_argument("--gcp-rel", type=Path, metavar="FILE", help="CSV name,x_rel,y_rel,z_rel[,role] for ODM/MicMac GCP files")
+    a.add_argument("--gcp-crs", default=crsmod.WGS84_ECEF, type=_crs_text, metavar="CRS", help="CRS of the GCP ground coordinates, EPSG:n or EPSG:h+v "
                    "(default: %(default)s, ECEF metres)")
-    a.add_argument("--lever-arm", type=validate.arg_type(validate.lever_arm_m), metavar="DX,DY,DZ", help="lever arm X,Y,Z (m): antenna phase centre − optical "
-                   "centre in the camera frame (x right, y down, z forward), e.g. from `calibrate`")
+    a.add_argument("--lever-arm", type=validate.arg_type(validate.lever_arm_m), metavar="DX,DY,DZ", help="lever arm dx,dy,dz (m, each within ±5 m): antenna phase "
+                   "centre − optical centre in the camera frame (x right, y down, z forward), e.g. from `calibrate`; "
+                   "negative values as they are: --lever-arm -0.04,0.11,0.09")
     a.add_argument("--lever-arm-sigma", metavar="M",
-                   type=validate.arg_type(validate.positive, unit=" m", maximum=MAX_SIGMA_M), help="σ (m, each axis) making --lever-arm a prior")
+                   type=validate.arg_type(validate.positive, unit=" m", maximum=MAX_SIGMA_M), help="σ (m, each axis, > 0) making --lever-arm a prior, e.g. 0.005")
     a.add_argument("--delay", metavar="S",
                    type=validate.arg_type(validate.number, unit=" s", minimum=-MAX_DELAY_S, maximum=MAX_DELAY_S), help="shutter delay t_d (s): event time → exposure, e.g. 0.064")
     a.add_argument("--delay-sigma", metavar="S",
-                   type=validate.arg_type(validate.positive, unit=" s", maximum=MAX_DELAY_S), help="σ (s) making --delay a prior")
-    a.add_argument("--estimate", default=(), type=_estimate_list, help="leave these free: lever-arm, delay or "
+                   type=validate.arg_type(validate.positive, unit=" s", maximum=MAX_DELAY_S), help="σ (s, > 0) making --delay a prior, e.g. 0.002")
+    a.add_argument("--estimate", default=(), type=_estimate_list, metavar="LIST", help="leave these free: lever-arm, delay or "
                    "lever-arm,delay")
     a.add_argument("--relative-control", action="store_true", help="differenced aerial control between consecutive "
                    "images (float RTK or a GNSS bias; needs ≥ 1 GCP)")
-    a.add_argument("--crs", default="EPSG:4979", type=_crs_text, help="CRS of the exports, EPSG:n or EPSG:h+v with "
+    a.add_argument("--crs", default="EPSG:4979", type=_crs_text, metavar="CRS", help="CRS of the exports, EPSG:n or EPSG:h+v with "
                    "a geoid (its grid must be installed) (default: %(default)s, WGS 84 lat/lon/ellipsoidal h)")
     a.add_argument("--datum-tolerance-m", metavar="M",
-                   type=validate.arg_type(validate.positive, unit=" m", maximum=1000.0), default=crsmod.MAX_DATUM_ERROR_M,
+                   type=validate.arg_type(validate.positive, unit=" m", maximum=1000.0),
+                   default=crsmod.MAX_DATUM_ERROR_M,
                    help="largest accepted error of a datum change (PROJ null shifts such as WGS 84 → RGF93 state "
-                   "1 m and are refused by default)")
+                   "1 m and are refused by default) (default: %(default)s m)")
     a.add_argument("--accept-single", action="store_true", help="also use single-point trajectory rows (Q=5, "
                    "metre-level); by default only fix (1) and float (2) rows are antenna positions")
     a.add_argument("--accept-blunder", action="store_true", help="write the exports even when σ̂₀ shows a blunder "
@@ -157,7 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("targets", type=Path, help="CSV target,group,x,y,z (m); group is camera_frame (camera "
                    "target in the calibrated camera frame), camera_acq / box_acq (the same targets in this "
                    "acquisition), box_frame (box targets, and one row named phase_centre)")
-    k.add_argument("--compare", type=Path, help="a second acquisition (e.g. after landing) to check stability")
+    k.add_argument("--compare", type=Path, metavar="FILE", help="a second acquisition (e.g. after landing) to check stability")
     k.add_argument("-o", "--out", type=Path, metavar="FILE", help="write the JSON result to this file (atomically)")
     s = sub.add_parser(
         "serve", help="run the ground API (FastAPI + uvicorn)",
@@ -165,12 +168,12 @@ def build_parser() -> argparse.ArgumentParser:
                     "adjustment jobs, reports. Every flight route needs 'Authorization: Bearer TOKEN'; OpenAPI "
                     "at /docs and /openapi.json. Example: DIRECTGEO_TOKEN=... python -m ground serve --port 8600 "
                     "--data-dir /srv/directgeo")
-    s.add_argument("--host", default="127.0.0.1", help="address to listen on (default: %(default)s)")
-    s.add_argument("--port", type=validate.arg_type(validate.tcp_port), default=8600, help="TCP port (default: %(default)s)")
-    s.add_argument("--data-dir", type=Path, default=Path("ground-data"),
+    s.add_argument("--host", default="127.0.0.1", help="address to listen on, e.g. 0.0.0.0 for every interface (default: %(default)s)")
+    s.add_argument("--port", type=validate.arg_type(validate.tcp_port), default=8600, help="TCP port, 1–65535 (default: %(default)s)")
+    s.add_argument("--data-dir", type=Path, metavar="DIR", default=Path("ground-data"),
                    help="raw flight files and the default SQLite store (default: %(default)s)")
-    s.add_argument("--token-file", type=Path, help="file holding the API token (else $DIRECTGEO_TOKEN)")
-    s.add_argument("--database-url", help="SQLAlchemy URL (else $DATABASE_URL, else SQLite in the data dir)")
+    s.add_argument("--token-file", type=Path, metavar="FILE", help="file holding the API token (else $DIRECTGEO_TOKEN)")
+    s.add_argument("--database-url", metavar="URL", help="SQLAlchemy URL (else $DATABASE_URL, else SQLite in the data dir)")
     s.add_argument("--max-chunk-mib", type=validate.arg_type(validate.positive, unit=" MiB", maximum=1024.0),
                    default=16.0, help="largest upload chunk (default: %(default)s MiB)")
     s.add_argument("--max-file-gib", type=validate.arg_type(validate.positive, unit=" GiB", maximum=1024.0),
