@@ -110,6 +110,7 @@ def test_fuzz_job_route(client: TestClient, kind: str, params: dict) -> None:  #
     assert "Traceback" not in r.text
 
 
+@pytest.mark.slow
 def test_the_api_adjusts_an_events_jsonl_flight_with_capture_times(live, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """Case 5: the API could not pass capture times, so it could not adjust the demo's kind of flight (onboard
     events.jsonl + camera capture times, lever-arm prior, delay estimated); now the job params carry them."""

@@ -161,6 +161,7 @@ def test_events_jsonl_matched_by_exif_capture_times(tmp_path: Path) -> None:
     assert res["delay_s"] == pytest.approx(truth.delay_s, abs=0.005)
 
 
+@pytest.mark.slow
 def test_gcp_in_projected_crs_and_odm_list_with_relative_file(tmp_path: Path) -> None:
     """GCP ground coordinates given in UTM 30N (--gcp-crs) or as an ODM gcp_list.txt + --gcp-rel give the same
     adjustment as the ECEF CSV."""
@@ -259,6 +260,7 @@ def test_report_shows_undetermined_parameters(tmp_path: Path) -> None:
     assert html.count("undetermined") >= 2 and 'id="parameters"' in html
 
 
+@pytest.mark.slow
 def test_report_says_how_each_parameter_entered_and_what_went_in(tmp_path: Path) -> None:
     """The report's summary names the GCP and check-point counts and the check-point RMS; each parameter row says
     whether it was free, a prior (with its value ± σ) or fixed; a correlation that has its own named warning is

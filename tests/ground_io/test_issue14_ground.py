@@ -85,6 +85,7 @@ def test_a_gcp_moved_10_km_is_excluded_by_leave_one_out(tmp_path: Path, capsys: 
     assert "excluded by the leave-one-out test" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_an_untestable_blunder_is_refused_and_accepted_only_with_its_true_accuracy(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Case 2: the only GCP (free lever arm needs it, so leave-one-out cannot test it) moved 10 km: σ̂₀ shows
@@ -129,6 +130,7 @@ def test_non_finite_values_are_usage_errors(tmp_path: Path, capsys: pytest.Captu
     assert "directgeo: ground adjust: error: " in err and message in err and "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_negative_lever_arm_and_delay_work_without_equals(tmp_path: Path) -> None:
     truth = write_synthetic_flight(tmp_path, n_lines=1)
     lever = ",".join(f"{v:g}" for v in truth.lever_arm_m)  # starts with 0.05; the y, z are negative
@@ -136,6 +138,7 @@ def test_negative_lever_arm_and_delay_work_without_equals(tmp_path: Path) -> Non
     assert main(_args(tmp_path, "--lever-arm", "-0.05,-0.12,-0.08")) == 0
 
 
+@pytest.mark.slow
 def test_rows_without_solution_are_never_antenna_positions(tmp_path: Path) -> None:
     """Case 4: three leading Q=0 rows of 0,0,0 moved the ENU origin to the Earth's centre; now they are left
     out (and Q=5 rows unless asked), the origin is on the surface and the adjustment is the clean one."""
@@ -277,6 +280,7 @@ def fuzz_flight(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return d
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(option=st.sampled_from(["--lever-arm", "--lever-arm-sigma", "--delay", "--delay-sigma",
                                "--datum-tolerance-m", "--crs", "--gcp-crs", "--estimate", "--events-kind"]),
@@ -299,10 +303,14 @@ def test_fuzz_adjust_option_values(fuzz_flight: Path, capsys: pytest.CaptureFixt
         assert not (fuzz_flight / out / "results.json").exists()
 
 
+@pytest.mark.slow
 @settings(max_examples=30, deadline=None)
-@given(kind=st.sampled_from(["dir", "file", "missing", "unwritable", "unicode"]))
-def test_fuzz_adjust_paths(tmp_path_factory: pytest.TempPathFactory, kind: str) -> None:
-    """30 drawn path kinds as inputs and output: a clean exit (2 bad input, 0 done), no partial file."""
+@given(kind=st.sampled_from(["dir", "file", "missing", "unwritable", "unicode"]),
+       name=st.text(st.characters(blacklist_categories=("Cs", "Cc"), blacklist_characters="/\\"), min_size=1,
+                    max_size=12).filter(lambda t: t not in (".", "..") and len(t.encode()) < 200))
+def test_fuzz_adjust_paths(tmp_path_factory: pytest.TempPathFactory, kind: str, name: str) -> None:
+    """30 drawn (path kind, unicode name) pairs as inputs and output: a clean exit (2 bad input, 1 unwritable,
+    0 done), no partial file."""
     d = tmp_path_factory.mktemp("fp")
     write_synthetic_flight(d, n_lines=1)
     args = _args(d, "--lever-arm", "0.05,-0.12,-0.08")
@@ -311,9 +319,9 @@ def test_fuzz_adjust_paths(tmp_path_factory: pytest.TempPathFactory, kind: str) 
     elif kind == "file":
         args[args.index("-o") + 1] = str(d / "SOL.pos")
     elif kind == "missing":
-        args[args.index("--events") + 1] = str(d / "nope.csv")
+        args[args.index("--events") + 1] = str(d / f"{name}.csv")
     elif kind == "unicode":
-        args[args.index("-o") + 1] = str(d / "sortie-é-日本")
+        args[args.index("-o") + 1] = str(d / f"sortie-é-日本-{name}")
     else:
         args[args.index("-o") + 1] = "/proc/directgeo-out"
     rc = main(args)
