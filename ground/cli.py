@@ -19,7 +19,14 @@ from typing import Any, NoReturn
 
 from ground.adjust.model import AdjustmentRefused
 from ground.io import crs as crsmod
-from ground.pipeline import MAX_DELAY_S, MAX_SIGMA_M, AdjustInputs, AdjustJobOptions, run_adjust
+from ground.pipeline import (
+    MAX_DELAY_S,
+    MAX_SIGMA_M,
+    AdjustInputs,
+    AdjustJobOptions,
+    result_number,
+    run_adjust,
+)
 from onboard import validate
 from onboard.errors import ConfigFileError, InputError
 from onboard.formats.atomic import write_atomic
@@ -227,12 +234,12 @@ def _adjust(args: argparse.Namespace) -> int:
     except ValueError as exc:  # a value refused by the options' checks (onboard.validate's words)
         raise InputError(str(exc)) from exc
     res = run_adjust(inputs, options, args.out).results
-    from ground.pipeline import _num
-
     lv, lvs = res["lever_arm_m"], res["lever_arm_sigma_m"]
-    print(f"{res['n_images']} images, sigma0 {_num(res['sigma0'], 1, '.3f')}")
-    print("lever arm (m): " + ", ".join(f"{_num(v, 1, '+.4f')} ± {_num(s, 1, '.4f')}" for v, s in zip(lv, lvs)))
-    print(f"delay: {_num(res['delay_s'], 1e3, '+.2f')} ± {_num(res['delay_sigma_s'], 1e3, '.2f')} ms")
+    print(f"{res['n_images']} images, sigma0 {result_number(res['sigma0'], 1, '.3f')}")
+    print("lever arm (m): " + ", ".join(f"{result_number(v, 1, '+.4f')} ± {result_number(s, 1, '.4f')}"
+                                        for v, s in zip(lv, lvs)))
+    print(f"delay: {result_number(res['delay_s'], 1e3, '+.2f')} ± "
+          f"{result_number(res['delay_sigma_s'], 1e3, '.2f')} ms")
     for w in res["warnings"]:
         print(f"warning: {w}")
     print(f"wrote {args.out / 'results.json'}, {args.out / 'report.html'}, {args.out / 'exports'}")

@@ -149,12 +149,13 @@ class AdjustOutcome:
     def summary(self) -> str:
         """One line for a job's message."""
         res = self.results
-        lever_txt = ", ".join(_num(v, 1, ".4f") for v in res["lever_arm_m"])
+        lever_txt = ", ".join(result_number(v, 1, ".4f") for v in res["lever_arm_m"])
         return (f"adjusted {res['n_images']} images: lever arm ({lever_txt}) m, "
-                f"delay {_num(res['delay_s'], 1e3, '.1f')} ms, sigma0 {_num(res['sigma0'], 1, '.2f')}")
+                f"delay {result_number(res['delay_s'], 1e3, '.1f')} ms, "
+                f"sigma0 {result_number(res['sigma0'], 1, '.2f')}")
 
 
-def _num(value: float | None, scale: float = 1.0, fmt: str = ".3f") -> str:
+def result_number(value: float | None, scale: float = 1.0, fmt: str = ".3f") -> str:
     """A result number for printing; None (σ of an undeterminable parameter in to_dict) prints as such."""
     return "undetermined" if value is None else format(value * scale, fmt)
 
