@@ -1,8 +1,9 @@
-"""`python -m ground adjust|calibrate|serve`: the thin shell around the importers, the adjustment core and the API.
+"""`python -m ground adjust|calibrate|serve`: the command line of the ground app (a thin shell over
+`ground.pipeline`, the calibration core and the API).
 
-`adjust` semantics for lever arm and delay: a value alone is fixed, a value with σ is a prior, `--estimate
-lever-arm,delay` without a value leaves the parameter free. Outputs in OUTDIR: `results.json` (the core's
-`to_dict()` plus inputs/matching/exports), the geotag exports and `report.html`.
+Every value is checked by a type function (`onboard.validate`), errors read `directgeo: ground <command>:
+error: <message>`; exit codes: 0 done, 1 failure (disk full, a bug: logged, traceback with -v), 2 bad input or
+usage, 3 refused by a data rule (the data cannot support an answer). No traceback reaches a user.
 """
 
 from __future__ import annotations
@@ -10,282 +11,93 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import sys
-from dataclasses import dataclass, field
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
-import numpy as np
-
-from ground.adjust.model import AdjustmentOptions, AdjustmentRefused, DelaySpec, LeverArmSpec
-from ground.adjust.types import ImageEvent
+from ground.adjust.model import AdjustmentRefused
 from ground.io import crs as crsmod
-from ground.io.errors import FormatError
+from ground.pipeline import (
+    MAX_DELAY_S,
+    MAX_SIGMA_M,
+    AdjustInputs,
+    AdjustJobOptions,
+    result_number,
+    run_adjust,
+)
+from onboard import validate
 from onboard.errors import ConfigFileError, InputError
+from onboard.formats.atomic import write_atomic
 
 log = logging.getLogger(__name__)
 
-ESTIMABLE = ("lever-arm", "delay")
+PROG = "python -m ground"
+ERROR_PREFIX = "directgeo"
+#: options whose value may start with "-" (a negative X or dx): "--opt -1,2,3" is joined into "--opt=-1,2,3"
+#: before argparse, which would otherwise take "-1,2,3" for an unknown option
+NEGATIVE_VALUE_OPTIONS = ("--lever-arm", "--delay")
+
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_REFUSED = 0, 1, 2, 3
 
 
-@dataclass(frozen=True)
-class AdjustRequest:
-    """Inputs of one adjustment run (paths and the parameter choices of the command line)."""
+class _Parser(argparse.ArgumentParser):
+    """argparse with the product's error line (`directgeo: ground <command>: error: ...`, exit 2)."""
 
-    trajectory: Path
-    events: Path
-    orientations: Path
-    gcp: Path | None = None
-    gcp_rel: Path | None = None
-    gcp_crs: str = crsmod.WGS84_ECEF
-    capture_times: Path | None = None
-    images_dir: Path | None = None
-    lever_arm_m: tuple[float, float, float] | None = None
-    lever_arm_sigma_m: float | None = None
-    delay_s: float | None = None
-    delay_sigma_s: float | None = None
-    estimate: tuple[str, ...] = ()
-    crs: str = "EPSG:4979"
-    relative_control: bool = False
-    events_kind: str = "trigger"
-    datum_tolerance_m: float = crsmod.MAX_DATUM_ERROR_M
-    extra: dict[str, Any] = field(default_factory=dict)
+    def error(self, message: str) -> NoReturn:
+        self.print_usage(sys.stderr)
+        _error(self.prog.replace(PROG, "ground").strip(), message)
+        raise SystemExit(EXIT_USAGE)
 
 
-def parameter_specs(req: AdjustRequest) -> tuple[LeverArmSpec, DelaySpec]:
-    """Lever-arm and delay specs from the command-line rules (value → fixed, value + σ → prior, estimate → free)."""
-    for e in req.estimate:
+def _error(command: str, message: str) -> None:
+    print(f"{ERROR_PREFIX}: {command}: error: {message}", file=sys.stderr)
+
+
+def _estimate_list(text: str) -> tuple[str, ...]:
+    """`--estimate` value: a comma list of lever-arm, delay (or empty)."""
+    from ground.pipeline import ESTIMABLE
+
+    items = tuple(e.strip() for e in text.split(",") if e.strip())
+    for e in items:
         if e not in ESTIMABLE:
-            raise InputError(f"--estimate takes {','.join(ESTIMABLE)}, got {e!r}")
-    if req.lever_arm_m is None:
-        if req.lever_arm_sigma_m is not None:
-            raise InputError("--lever-arm-sigma needs --lever-arm")
-        lever = LeverArmSpec(mode="free")
-        if "lever-arm" not in req.estimate:
-            log.info("no --lever-arm given: the lever arm is estimated freely")
-    elif req.lever_arm_sigma_m is not None:
-        if req.lever_arm_sigma_m <= 0:
-            raise InputError("--lever-arm-sigma must be positive")
-        lever = LeverArmSpec(mode="prior", value_m=req.lever_arm_m, sigma_m=(req.lever_arm_sigma_m,) * 3)
-    elif "lever-arm" in req.estimate:
-        raise InputError("--estimate lever-arm with a --lever-arm value needs --lever-arm-sigma (a prior) "
-                         "or drop the value to leave it free")
-    else:
-        lever = LeverArmSpec(mode="fixed", value_m=req.lever_arm_m)
-    if req.delay_s is None:
-        if req.delay_sigma_s is not None:
-            raise InputError("--delay-sigma needs --delay")
-        delay = DelaySpec(mode="free")
-    elif req.delay_sigma_s is not None:
-        if req.delay_sigma_s <= 0:
-            raise InputError("--delay-sigma must be positive")
-        delay = DelaySpec(mode="prior", value_s=req.delay_s, sigma_s=req.delay_sigma_s)
-    elif "delay" in req.estimate:
-        raise InputError("--estimate delay with a --delay value needs --delay-sigma (a prior) or drop the value")
-    else:
-        delay = DelaySpec(mode="fixed", value_s=req.delay_s)
-    return lever, delay
+            raise argparse.ArgumentTypeError(f"{e!r}: must be {', '.join(ESTIMABLE)} or lever-arm,delay")
+    return items
 
 
-def _read_events(req: AdjustRequest, images: list[str]) -> tuple[list[ImageEvent], dict[str, Any]]:
-    from ground.io.events import (
-        exif_capture_time,
-        match_marks_to_images,
-        read_capture_times,
-        read_events_csv,
-        read_marks_jsonl,
-    )
-
-    if req.events.suffix.lower() == ".jsonl":
-        marks = read_marks_jsonl(req.events)
-        caps = read_capture_times(req.capture_times) if req.capture_times else None
-        if caps is None and req.images_dir is not None:
-            found = {n: exif_capture_time(req.images_dir / n) for n in images}
-            caps = {n: t for n, t in found.items() if t is not None}
-            log.info("EXIF capture times read for %d of %d images in %s", len(caps), len(images), req.images_dir)
-        try:
-            rep = match_marks_to_images(marks, images, caps)
-        except ValueError as exc:
-            raise InputError(str(exc)) from exc
-        return rep.events, rep.to_dict()
-    events = read_events_csv(req.events, default_kind=req.events_kind)
-    return events, {"method": "csv image names", "matched": len(events)}
+def _crs_text(text: str) -> str:
+    """A CRS as EPSG:n / EPSG:h+v / PROJ / WKT: refused now when unknown."""
+    try:
+        crsmod.parse_crs(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
 
 
-def run_adjust(req: AdjustRequest, out_dir: Path) -> dict[str, Any]:
-    """Read everything, adjust, write results.json, the exports and report.html into `out_dir`.
-
-    Raises `InputError` (bad files/arguments), `AdjustmentRefused` (not solvable as posed) or `CrsError`.
-    """
-    from ground.adjust.solve import adjust, build_problem
-    from ground.io.exporters import cameras_to_crs, write_all
-    from ground.io.gcp import (
-        merge_ground_and_relative,
-        read_gcp_csv,
-        read_micmac_gcp,
-        read_odm_gcp_list,
-        read_relative_csv,
-        to_control_points,
-    )
-    from ground.io.orientations import read_orientations
-    from ground.io.trajectory import read_trajectory
-    from ground.report import write_report
-
-    lever, delay = parameter_specs(req)
-    crsmod.parse_crs(req.crs)  # fail before the work on an unknown CRS
-    traj = read_trajectory(str(req.trajectory))
-    oset = read_orientations(req.orientations)
-    events, matching = _read_events(req, [p.image for p in oset.poses])
-    origin = np.asarray(traj.pos_ecef_m[0], dtype=float)
-    tol = req.datum_tolerance_m
-    crsmod.ecef_to_crs(origin, req.crs, max_datum_error_m=tol)  # missing geoid grid / datum mix: fail now
-    control = []
-    if req.gcp is not None:
-        suffix = req.gcp.suffix.lower()
-        if suffix == ".csv":
-            pts = read_gcp_csv(req.gcp, crs=req.gcp_crs)
+def _join_negative_values(argv: Sequence[str]) -> list[str]:
+    out: list[str] = []
+    it = iter(range(len(argv)))
+    for i in it:
+        a = argv[i]
+        if a in NEGATIVE_VALUE_OPTIONS and i + 1 < len(argv) and argv[i + 1].startswith("-") \
+                and len(argv[i + 1]) > 1 and (argv[i + 1][1].isdigit() or argv[i + 1][1] in ".in"):
+            out.append(f"{a}={argv[i + 1]}")
+            next(it, None)
         else:
-            ground = read_micmac_gcp(req.gcp, req.gcp_crs) if suffix == ".xml" else read_odm_gcp_list(req.gcp)
-            if req.gcp_rel is None:
-                raise InputError(f"{req.gcp} has ground coordinates only: give --gcp-rel name,x_rel,y_rel,z_rel")
-            pts = merge_ground_and_relative(ground, read_relative_csv(req.gcp_rel))
-        control = to_control_points(pts, origin, max_datum_error_m=tol)
-    problem = build_problem(oset.poses, events, traj, control, origin_ecef_m=origin)
-    options = AdjustmentOptions(lever_arm=lever, delay=delay, relative_control=req.relative_control)
-    result = adjust(problem, options)
-
-    out_dir.mkdir(parents=True, exist_ok=True)
-    centres_enu = result.corrected_positions_enu_m(problem.centre_rel)
-    r_enu = np.einsum("ij,njk->nik", result.rotation, problem.r_cam_to_rel)
-    sigma = np.sqrt(problem.antenna_sigma_enu_m**2 + options.camera_centre_sigma_m**2)
-    cams = cameras_to_crs(problem.images, centres_enu, r_enu, origin, req.crs, sigma, max_datum_error_m=tol)
-    exports = write_all(out_dir / "exports", cams, centres_enu, r_enu)
-    results = result.to_dict()
-    results["inputs"] = {
-        "trajectory": str(req.trajectory), "events": str(req.events), "orientations": str(req.orientations),
-        "orientation_format": oset.format, "gcp": str(req.gcp) if req.gcp else None, "gcp_crs": req.gcp_crs,
-        "lever_arm": {"mode": lever.mode, "value_m": list(lever.value_m), "sigma_m": list(lever.sigma_m)},
-        "delay": {"mode": delay.mode, "value_s": delay.value_s, "sigma_s": delay.sigma_s},
-        "origin_ecef_m": [float(v) for v in origin], "export_crs": req.crs,
-    }
-    results["matching"] = matching
-    results["skipped"] = [{"image": n, "reason": r} for n, r in problem.skipped]
-    results["exports"] = {k: f"exports/{v}" if k != "micmac_frame" else v for k, v in exports.items()}
-    results["cameras"] = [
-        {"image": n, "x": float(p[0]), "y": float(p[1]), "z": float(p[2])} for n, p in zip(cams.images, cams.xyz)
-    ]
-    (out_dir / "results.json").write_text(json.dumps(results, indent=2), encoding="utf-8")
-    write_report(out_dir / "report.html", results, problem=problem, trajectory=traj, origin_ecef_m=origin)
-    return results
-
-
-# ------------------------------------------------------------------------------------------------ API jobs
-
-
-def _pick(files: dict[str, str | None], params: dict[str, Any], role: str) -> str | None:
-    name = params.get(role)
-    if name is not None:
-        if name not in files:
-            raise InputError(f"{role} file {name!r} is not a completely uploaded file of this flight")
-        return str(name)
-    named = sorted(n for n, r in files.items() if r == role)
-    if len(named) > 1:
-        raise InputError(f"several files have role {role!r} ({', '.join(named)}): name one in the job params")
-    return named[0] if named else None
-
-
-def adjust_job(settings: Any, params: dict[str, Any], files: dict[str, str | None], flight_dir: Path,
-               out_dir: Path) -> str:
-    """API job: the adjustment on a flight's uploaded files (params as `python -m ground adjust` options)."""
-    chosen = {role: _pick(files, params, role) for role in ("trajectory", "events", "orientations", "gcp")}
-    trajectory = flight_dir / str(chosen["trajectory"]) if chosen["trajectory"] else _reprocessed(out_dir)
-    missing = [r for r in ("events", "orientations") if chosen[r] is None] + ([] if trajectory else ["trajectory"])
-    if missing:
-        raise InputError(f"missing uploaded {', '.join(missing)} (set roles in the manifest or name the files)")
-    assert trajectory is not None
-    lever = params.get("lever_arm")
-    req = AdjustRequest(
-        trajectory=trajectory,
-        events=flight_dir / str(chosen["events"]),
-        orientations=flight_dir / str(chosen["orientations"]),
-        gcp=flight_dir / str(chosen["gcp"]) if chosen["gcp"] else None,
-        gcp_crs=str(params.get("gcp_crs", crsmod.WGS84_ECEF)),
-        lever_arm_m=tuple(float(v) for v in lever) if lever is not None else None,  # type: ignore[arg-type]
-        lever_arm_sigma_m=_opt_float(params.get("lever_arm_sigma")),
-        delay_s=_opt_float(params.get("delay")),
-        delay_sigma_s=_opt_float(params.get("delay_sigma")),
-        estimate=tuple(params.get("estimate", ())),
-        crs=str(params.get("crs", "EPSG:4979")),
-        datum_tolerance_m=float(params.get("datum_tolerance_m", crsmod.MAX_DATUM_ERROR_M)),
-    )
-    res = run_adjust(req, out_dir)
-    lever_txt = ", ".join(_num(v, 1, ".4f") for v in res["lever_arm_m"])
-    return (f"adjusted {res['n_images']} images: lever arm ({lever_txt}) m, "
-            f"delay {_num(res['delay_s'], 1e3, '.1f')} ms, sigma0 {_num(res['sigma0'], 1, '.2f')}")
-
-
-def _reprocessed(out_dir: Path) -> Path | None:
-    """The newest `SOL.pos` written by an RTK job of the same flight (sibling job folders), if any."""
-    sols = sorted(out_dir.parent.glob("*/SOL.pos"), key=lambda p: p.stat().st_mtime)
-    return sols[-1] if sols else None
-
-
-def _num(value: float | None, scale: float = 1.0, fmt: str = ".3f") -> str:
-    """A result number for printing; None (σ of an undeterminable parameter in to_dict) prints as such."""
-    return "undetermined" if value is None else format(value * scale, fmt)
-
-
-def _opt_float(v: Any) -> float | None:
-    return None if v is None else float(v)
-
-
-def rtk_job(settings: Any, params: dict[str, Any], files: dict[str, str | None], flight_dir: Path,
-            out_dir: Path) -> str:
-    """API job: RTK re-processing of the uploaded rover/base observations with the onboard `rtk` command.
-
-    Needs files with roles `rover_obs` and `base_obs` (RINEX obs or UBX logs) and optionally `nav` (RINEX nav);
-    `params` may give `base_pos` "X,Y,Z" and `direction`. Writes `SOL.pos` (with velocities) in the job folder.
-    """
-    import contextlib
-    import io
-
-    from onboard.postpro.rtk_cli import add_rtk_parser, rtk_main
-
-    chosen = {role: _pick(files, params, role) for role in ("rover_obs", "base_obs", "nav")}
-    missing = [r for r in ("rover_obs", "base_obs") if chosen[r] is None]
-    if missing:
-        raise InputError(f"RTK re-processing needs uploaded {', '.join(missing)} (no base data: nothing to do)")
-    argv = ["rtk", "--rover", str(flight_dir / str(chosen["rover_obs"])),
-            "--base", str(flight_dir / str(chosen["base_obs"])), "--velocity", "--no-progress",
-            "--direction", str(params.get("direction", "forward")), "-o", str(out_dir / "SOL.pos")]
-    if chosen["nav"]:
-        argv += ["--nav", str(flight_dir / str(chosen["nav"]))]
-    if params.get("base_pos"):
-        argv += [f"--base-pos={params['base_pos']}"]
-    parser = argparse.ArgumentParser(prog="rtk-job")
-    add_rtk_parser(parser.add_subparsers(dest="command", required=True))
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = rtk_main(parser.parse_args(argv))
-    if rc != 0:
-        raise InputError(err.getvalue().strip() or f"rtk exited with {rc}")
-    return out.getvalue().strip()
-
-
-# ------------------------------------------------------------------------------------------------ CLI
-
-
-def _triple(text: str) -> tuple[float, float, float]:
-    parts = [float(v) for v in text.split(",")]
-    if len(parts) != 3:
-        raise argparse.ArgumentTypeError("expected X,Y,Z")
-    return parts[0], parts[1], parts[2]
+            out.append(a)
+    return out
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The `python -m ground` argument parser."""
-    p = argparse.ArgumentParser(prog="python -m ground", description="directgeo ground app")
-    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    p = _Parser(prog=PROG, description="directgeo ground app: camera positions in your CRS from an RTK trajectory, "
+                "camera events and a bundle adjustment (adjust), the lever arm from a ground acquisition "
+                "(calibrate), and the flight store / processing server (serve). Run a command with --help for "
+                "its options, units and an example.",
+                epilog="example: python -m ground adjust --trajectory SOL.pos --events events.csv "
+                "--orientations poses.csv --gcp gcp.csv -o out/")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging (and the traceback of an internal error)")
     sub = p.add_subparsers(dest="command", required=True)
     a = sub.add_parser(
         "adjust", help="final adjustment: similarity + lever arm + shutter delay",
@@ -297,65 +109,82 @@ def build_parser() -> argparse.ArgumentParser:
                "the value);\n--estimate without a value leaves it free; with neither, both are free (a free lever "
                "arm needs ≥ 1 GCP).\n\nexample:\n  python -m ground adjust --trajectory SOL.pos --events "
                "events.jsonl --images photos/ \\\n    --orientations reconstruction.json --gcp gcp.csv "
-               "--lever-arm 0.04,-0.11,-0.09 --lever-arm-sigma 0.005 \\\n    --estimate delay --crs EPSG:2154 "
+               "--lever-arm 0.04,-0.11,-0.09 --lever-arm-sigma 0.005 \\\n    --estimate delay --crs EPSG:32632 "
                "-o out/\n\nwrites out/results.json, out/report.html and out/exports/ (geo.txt, Pix4D, Metashape, "
-               "OPK CSV, MicMac).\nexit codes: 0 done, 2 bad input, 3 refused (the message says what to add)")
-    a.add_argument("--trajectory", required=True, type=Path, help="antenna trajectory: RTKLIB .pos (xyz or llh, GPST week/tow or calendar, "
+               "OPK CSV, MicMac).\nexit codes: 0 done, 1 failure (e.g. disk full: the previous outputs are kept), 2 bad input, "
+               "3 refused (the data cannot support an answer; the message says what to add)")
+    a.add_argument("--trajectory", required=True, type=Path, metavar="FILE", help="antenna trajectory: RTKLIB .pos (xyz or llh, GPST week/tow or calendar, "
                    "velocity columns optional)")
-    a.add_argument("--events", required=True, type=Path, help="camera events: the onboard events.jsonl, or a CSV "
+    a.add_argument("--events", required=True, type=Path, metavar="FILE", help="camera events: the onboard events.jsonl, or a CSV "
                    "image,week,tow (GPS week, seconds of week)")
     a.add_argument("--events-kind", choices=("trigger", "flash"), default="trigger",
                    help="what the CSV times are: trigger pulses (t_d ≈ shutter lag) or flash marks "
                    "(t_d ≈ 0) (default: %(default)s)")
-    a.add_argument("--capture-times", type=Path, help="CSV/JSON image→capture time (to match events.jsonl)")
-    a.add_argument("--images", type=Path, help="folder of the photos: EXIF capture times to match events.jsonl")
-    a.add_argument("--orientations", required=True, type=Path,
+    a.add_argument("--capture-times", type=Path, metavar="FILE", help="CSV image,capture_time or JSON {image: time} (camera clock, "
+                   "EXIF 'YYYY:MM:DD HH:MM:SS' or ISO 8601) to match events.jsonl to the images")
+    a.add_argument("--images", type=Path, metavar="DIR", help="folder of the photos: EXIF capture times to match events.jsonl")
+    a.add_argument("--orientations", required=True, type=Path, metavar="FILE|DIR",
                    help="bundle adjustment: OpenSfM/ODM reconstruction.json, COLMAP images.txt, MicMac "
                    "Ori-* folder, Metashape camera .xml or OPK .csv (image,X,Y,Z,omega,phi,kappa; degrees)")
-    a.add_argument("--gcp", type=Path, help="GCP CSV name,role,x_rel,y_rel,z_rel,X,Y,Z, ODM gcp_list.txt or "
+    a.add_argument("--gcp", type=Path, metavar="FILE", help="GCP CSV name,role,x_rel,y_rel,z_rel,X,Y,Z, ODM gcp_list.txt or "
                    "MicMac XML (then --gcp-rel)")
-    a.add_argument("--gcp-rel", type=Path, help="CSV name,x_rel,y_rel,z_rel[,role] for ODM/MicMac GCP files")
-    a.add_argument("--gcp-crs", default=crsmod.WGS84_ECEF, help="CRS of the GCP ground coordinates, EPSG:n or EPSG:h+v "
+    a.add_argument("--gcp-rel", type=Path, metavar="FILE", help="CSV name,x_rel,y_rel,z_rel[,role] for ODM/MicMac GCP files")
+    a.add_argument("--gcp-crs", default=crsmod.WGS84_ECEF, type=_crs_text, metavar="CRS", help="CRS of the GCP ground coordinates, EPSG:n or EPSG:h+v "
                    "(default: %(default)s, ECEF metres)")
-    a.add_argument("--lever-arm", type=_triple, help="lever arm X,Y,Z (m): antenna phase centre − optical "
-                   "centre in the camera frame (x right, y down, z forward), e.g. from `calibrate`")
-    a.add_argument("--lever-arm-sigma", type=float, help="σ (m, each axis) making --lever-arm a prior")
-    a.add_argument("--delay", type=float, help="shutter delay t_d (s): event time → exposure, e.g. 0.064")
-    a.add_argument("--delay-sigma", type=float, help="σ (s) making --delay a prior")
-    a.add_argument("--estimate", default="", help="leave these free: lever-arm, delay or "
+    a.add_argument("--lever-arm", type=validate.arg_type(validate.lever_arm_m), metavar="DX,DY,DZ", help="lever arm dx,dy,dz (m, each within ±5 m): antenna phase "
+                   "centre − optical centre in the camera frame (x right, y down, z forward), e.g. from `calibrate`; "
+                   "negative values as they are: --lever-arm -0.04,0.11,0.09")
+    a.add_argument("--lever-arm-sigma", metavar="M",
+                   type=validate.arg_type(validate.positive, unit=" m", maximum=MAX_SIGMA_M), help="σ (m, each axis, > 0) making --lever-arm a prior, e.g. 0.005")
+    a.add_argument("--delay", metavar="S",
+                   type=validate.arg_type(validate.number, unit=" s", minimum=-MAX_DELAY_S, maximum=MAX_DELAY_S), help="shutter delay t_d (s): event time → exposure, e.g. 0.064")
+    a.add_argument("--delay-sigma", metavar="S",
+                   type=validate.arg_type(validate.positive, unit=" s", maximum=MAX_DELAY_S), help="σ (s, > 0) making --delay a prior, e.g. 0.002")
+    a.add_argument("--estimate", default=(), type=_estimate_list, metavar="LIST", help="leave these free: lever-arm, delay or "
                    "lever-arm,delay")
     a.add_argument("--relative-control", action="store_true", help="differenced aerial control between consecutive "
                    "images (float RTK or a GNSS bias; needs ≥ 1 GCP)")
-    a.add_argument("--crs", default="EPSG:4979", help="CRS of the exports, EPSG:n or EPSG:h+v with "
+    a.add_argument("--crs", default="EPSG:4979", type=_crs_text, metavar="CRS", help="CRS of the exports, EPSG:n or EPSG:h+v with "
                    "a geoid (its grid must be installed) (default: %(default)s, WGS 84 lat/lon/ellipsoidal h)")
-    a.add_argument("--datum-tolerance-m", type=float, default=crsmod.MAX_DATUM_ERROR_M,
+    a.add_argument("--datum-tolerance-m", metavar="M",
+                   type=validate.arg_type(validate.positive, unit=" m", maximum=1000.0),
+                   default=crsmod.MAX_DATUM_ERROR_M,
                    help="largest accepted error of a datum change (PROJ null shifts such as WGS 84 → RGF93 state "
-                   "1 m and are refused by default)")
-    a.add_argument("-o", "--out", required=True, type=Path, help="output folder (created)")
+                   "1 m and are refused by default) (default: %(default)s m)")
+    a.add_argument("--accept-single", action="store_true", help="also use single-point trajectory rows (Q=5, "
+                   "metre-level); by default only fix (1) and float (2) rows are antenna positions")
+    a.add_argument("--accept-blunder", action="store_true", help="write the exports even when σ̂₀ shows a blunder "
+                   "(residuals > 10× their σ); by default such a result is refused (exit 3)")
+    a.add_argument("-o", "--out", required=True, type=Path, metavar="DIR",
+                   help="output folder (created; results.json, report.html, exports/ replaced atomically)")
     k = sub.add_parser(
         "calibrate", help="lever arm from a ground (pseudo-materialization) acquisition",
         description="Lever arm O (antenna phase centre − optical centre, camera frame) with σ from targets on "
                     "the camera and on the receiver box measured in one photogrammetric acquisition of the "
                     "drone (Daakir 2016); prints the --lever-arm/--lever-arm-sigma options for `adjust`. "
-                    "Exit codes: 0 done (stable), 1 the second acquisition differs beyond 3σ, 2 bad input.")
+                    "Exit codes: 0 done (stable), 1 the second acquisition differs beyond 3σ, 2 bad input. "
+                    "Example: python -m ground calibrate targets.csv --compare after_landing.csv -o lever.json")
     k.add_argument("targets", type=Path, help="CSV target,group,x,y,z (m); group is camera_frame (camera "
                    "target in the calibrated camera frame), camera_acq / box_acq (the same targets in this "
                    "acquisition), box_frame (box targets, and one row named phase_centre)")
-    k.add_argument("--compare", type=Path, help="a second acquisition (e.g. after landing) to check stability")
-    k.add_argument("-o", "--out", type=Path, help="write the JSON result here")
+    k.add_argument("--compare", type=Path, metavar="FILE", help="a second acquisition (e.g. after landing) to check stability")
+    k.add_argument("-o", "--out", type=Path, metavar="FILE", help="write the JSON result to this file (atomically)")
     s = sub.add_parser(
         "serve", help="run the ground API (FastAPI + uvicorn)",
         description="Flight store and processing server: resumable checksummed uploads, RTK re-processing and "
                     "adjustment jobs, reports. Every flight route needs 'Authorization: Bearer TOKEN'; OpenAPI "
-                    "at /docs and /openapi.json.")
-    s.add_argument("--host", default="127.0.0.1", help="address to listen on (default: %(default)s)")
-    s.add_argument("--port", type=int, default=8600, help="TCP port (default: %(default)s)")
-    s.add_argument("--data-dir", type=Path, default=Path("ground-data"),
+                    "at /docs and /openapi.json. Example: DIRECTGEO_TOKEN=... python -m ground serve --port 8600 "
+                    "--data-dir /srv/directgeo")
+    s.add_argument("--host", default="127.0.0.1", help="address to listen on, e.g. 0.0.0.0 for every interface (default: %(default)s)")
+    s.add_argument("--port", type=validate.arg_type(validate.tcp_port), default=8600, help="TCP port, 1–65535 (default: %(default)s)")
+    s.add_argument("--data-dir", type=Path, metavar="DIR", default=Path("ground-data"),
                    help="raw flight files and the default SQLite store (default: %(default)s)")
-    s.add_argument("--token-file", type=Path, help="file holding the API token (else $DIRECTGEO_TOKEN)")
-    s.add_argument("--database-url", help="SQLAlchemy URL (else $DATABASE_URL, else SQLite in the data dir)")
-    s.add_argument("--max-chunk-mib", type=float, default=16.0, help="largest upload chunk (default: %(default)s MiB)")
-    s.add_argument("--max-file-gib", type=float, default=8.0, help="largest uploaded file (default: %(default)s GiB)")
+    s.add_argument("--token-file", type=Path, metavar="FILE", help="file holding the API token (else $DIRECTGEO_TOKEN)")
+    s.add_argument("--database-url", metavar="URL", help="SQLAlchemy URL (else $DATABASE_URL, else SQLite in the data dir)")
+    s.add_argument("--max-chunk-mib", type=validate.arg_type(validate.positive, unit=" MiB", maximum=1024.0),
+                   default=16.0, help="largest upload chunk (default: %(default)s MiB)")
+    s.add_argument("--max-file-gib", type=validate.arg_type(validate.positive, unit=" GiB", maximum=1024.0),
+                   default=8.0, help="largest uploaded file (default: %(default)s GiB)")
     return p
 
 
@@ -368,8 +197,8 @@ def _calibrate(args: argparse.Namespace) -> int:
         first = calibrate_lever_arm(read_calibration_csv(args.targets))
         second = calibrate_lever_arm(read_calibration_csv(args.compare)) if args.compare else None
     except (InputError, CalibrationError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        _error("ground calibrate", str(exc))
+        return EXIT_USAGE
     out: dict[str, Any] = {"calibration": first.to_dict()}
     o, sd = first.lever_arm_m, first.sigma_m
     print("lever arm O (camera frame, antenna − optical centre): "
@@ -382,69 +211,87 @@ def _calibrate(args: argparse.Namespace) -> int:
         print(f"second acquisition differs by {cmp.abs_m * 1000:.1f} mm "
               f"({'stable' if cmp.stable else 'NOT stable'} within 3σ), box rotated {cmp.box_rotation_change_deg:.3f}°")
     if args.out is not None:
-        args.out.write_text(json.dumps(out, indent=2), encoding="utf-8")
+        if args.out.is_dir():
+            _error("ground calibrate", f"-o {args.out}: is a folder, give a file name")
+            return EXIT_USAGE
+        write_atomic(args.out, json.dumps(out, indent=2, allow_nan=False) + "\n")
     return 0 if second is None or out["comparison"]["stable"] else 1
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the process exit code (2 bad input, 3 refused, 0 ok)."""
-    import os
+def _adjust(args: argparse.Namespace) -> int:
+    """`adjust`: the pipeline's adjustment on the command line's files and options; prints a summary."""
+    inputs = AdjustInputs(trajectory=args.trajectory, events=args.events, orientations=args.orientations,
+                          gcp=args.gcp, gcp_rel=args.gcp_rel, capture_times=args.capture_times,
+                          images_dir=args.images)
+    try:
+        options = AdjustJobOptions(
+            lever_arm_m=args.lever_arm, lever_arm_sigma_m=args.lever_arm_sigma, delay_s=args.delay,
+            delay_sigma_s=args.delay_sigma, estimate=args.estimate, crs=args.crs, gcp_crs=args.gcp_crs,
+            relative_control=args.relative_control, events_kind=args.events_kind,
+            datum_tolerance_m=args.datum_tolerance_m, accept_single=args.accept_single,
+            accept_blunder=args.accept_blunder,
+        )
+    except ValueError as exc:  # a value refused by the options' checks (onboard.validate's words)
+        raise InputError(str(exc)) from exc
+    res = run_adjust(inputs, options, args.out).results
+    lv, lvs = res["lever_arm_m"], res["lever_arm_sigma_m"]
+    print(f"{res['n_images']} images, sigma0 {result_number(res['sigma0'], 1, '.3f')}")
+    print("lever arm (m): " + ", ".join(f"{result_number(v, 1, '+.4f')} ± {result_number(s, 1, '.4f')}"
+                                        for v, s in zip(lv, lvs)))
+    print(f"delay: {result_number(res['delay_s'], 1e3, '+.2f')} ± "
+          f"{result_number(res['delay_sigma_s'], 1e3, '.2f')} ms")
+    for w in res["warnings"]:
+        print(f"warning: {w}")
+    print(f"wrote {args.out / 'results.json'}, {args.out / 'report.html'}, {args.out / 'exports'}")
+    return EXIT_OK
 
-    args = build_parser().parse_args(argv)
+
+def _serve(args: argparse.Namespace) -> int:
+    """`serve`: settings checked, the store opened once (a clear error here, not in the server), then uvicorn."""
+    import uvicorn
+    from sqlalchemy.exc import SQLAlchemyError
+
+    from ground.api.app import create_app
+    from ground.api.settings import ApiSettings, load_token
+    from ground.store import Store
+
+    settings = ApiSettings(
+        data_dir=args.data_dir, token=load_token(args.token_file),
+        database_url=args.database_url or os.environ.get("DATABASE_URL"),
+        max_chunk_bytes=int(args.max_chunk_mib * 1024**2), max_file_bytes=int(args.max_file_gib * 1024**3),
+    )
+    try:  # fail here, clearly, rather than inside the server's start-up
+        settings.data_dir.mkdir(parents=True, exist_ok=True)
+        Store(settings.db_url).close()
+    except (SQLAlchemyError, ImportError, OSError) as exc:
+        raise ConfigFileError(f"cannot open the flight store {settings.db_url.split('@')[-1]}: {exc}") from exc
+    uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level="info")
+    return EXIT_OK
+
+
+COMMANDS = {"adjust": _adjust, "calibrate": _calibrate, "serve": _serve}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the process exit code (0 ok, 1 failure, 2 bad input/usage, 3 refused)."""
+    raw = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(_join_negative_values(raw))
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(levelname)s %(name)s: %(message)s")
-    if args.command == "adjust":
-        req = AdjustRequest(
-            trajectory=args.trajectory, events=args.events, orientations=args.orientations, gcp=args.gcp,
-            gcp_rel=args.gcp_rel, gcp_crs=args.gcp_crs, capture_times=args.capture_times, images_dir=args.images,
-            lever_arm_m=args.lever_arm, lever_arm_sigma_m=args.lever_arm_sigma, delay_s=args.delay,
-            delay_sigma_s=args.delay_sigma, estimate=tuple(e for e in args.estimate.split(",") if e),
-            crs=args.crs, relative_control=args.relative_control, events_kind=args.events_kind,
-            datum_tolerance_m=args.datum_tolerance_m,
-        )
-        try:
-            res = run_adjust(req, args.out)
-        except (InputError, FormatError) as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
-        except AdjustmentRefused as exc:
-            print(f"refused: {exc}", file=sys.stderr)
-            return 3
-        lv, lvs = res["lever_arm_m"], res["lever_arm_sigma_m"]
-        print(f"{res['n_images']} images, sigma0 {_num(res['sigma0'], 1, '.3f')}")
-        print("lever arm (m): " + ", ".join(f"{_num(v, 1, '+.4f')} ± {_num(s, 1, '.4f')}" for v, s in zip(lv, lvs)))
-        print(f"delay: {_num(res['delay_s'], 1e3, '+.2f')} ± {_num(res['delay_sigma_s'], 1e3, '.2f')} ms")
-        for w in res["warnings"]:
-            print(f"warning: {w}")
-        print(f"wrote {args.out / 'results.json'}, {args.out / 'report.html'}, {args.out / 'exports'}")
-        return 0
-    if args.command == "calibrate":
-        return _calibrate(args)
-    if args.command == "serve":
-        import uvicorn
-
-        from ground.api.app import create_app
-        from ground.api.settings import ApiSettings, load_token
-
-        try:
-            settings = ApiSettings(
-                data_dir=args.data_dir, token=load_token(args.token_file),
-                database_url=args.database_url or os.environ.get("DATABASE_URL"),
-                max_chunk_bytes=int(args.max_chunk_mib * 1024**2), max_file_bytes=int(args.max_file_gib * 1024**3),
-            )
-        except (InputError, ConfigFileError) as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
-        from sqlalchemy.exc import SQLAlchemyError
-
-        from ground.store import Store
-
-        try:  # fail here, clearly, rather than inside the server's start-up
-            settings.data_dir.mkdir(parents=True, exist_ok=True)
-            Store(settings.db_url).close()
-        except (SQLAlchemyError, ImportError, OSError) as exc:
-            print(f"error: cannot open the flight store {settings.db_url.split('@')[-1]}: {exc}", file=sys.stderr)
-            return 2
-        uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level="info")
-        return 0
-    return 2
+    command = f"ground {args.command}"
+    try:
+        return COMMANDS[args.command](args)
+    except AdjustmentRefused as exc:
+        _error(command, f"refused: {exc}")
+        return EXIT_REFUSED
+    except (InputError, ConfigFileError) as exc:
+        _error(command, str(exc))
+        return EXIT_USAGE
+    except OSError as exc:
+        _error(command, f"{exc.strerror or exc}{f': {exc.filename}' if exc.filename else ''} (nothing half-written "
+                        "was left under a final name)")
+        return EXIT_FAILURE
+    except Exception as exc:  # a bug: logged with its traceback (shown with -v), one line here
+        log.debug("internal error", exc_info=True)
+        _error(command, f"internal error ({type(exc).__name__}: {exc}); run with -v for the traceback")
+        return EXIT_FAILURE

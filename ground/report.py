@@ -16,6 +16,7 @@ from matplotlib.figure import Figure
 
 from ground.adjust.model import AdjustmentProblem
 from ground.adjust.types import Trajectory
+from onboard.formats.atomic import write_atomic
 from onboard.rtk.geodesy import ecef_to_enu
 
 Q_COLOURS = {1: ("fix", "#2ca02c"), 2: ("float", "#ff7f0e"), 5: ("single", "#d62728")}
@@ -263,5 +264,5 @@ def render_report(res: dict[str, Any], problem: AdjustmentProblem | None = None,
 
 def write_report(path: str | Path, res: dict[str, Any], problem: AdjustmentProblem | None = None,
                  trajectory: Trajectory | None = None, origin_ecef_m: np.ndarray | None = None) -> None:
-    """Write the self-contained HTML report."""
-    Path(path).write_text(render_report(res, problem, trajectory, origin_ecef_m), encoding="utf-8")
+    """Write the self-contained HTML report (atomically: a failure leaves the previous report)."""
+    write_atomic(path, render_report(res, problem, trajectory, origin_ecef_m))

@@ -41,6 +41,10 @@ CHI2_3DOF_95 = 7.815
 #: perfectly good images by construction (15 of a 300-image block), more with time-correlated GNSS errors;
 #: at 99.9 % a good block loses ~0.1 % while a 5σ gross error is still caught.
 CHI2_3DOF_999 = 16.266
+#: σ̂₀ above which a solution is flagged as holding a blunder: residuals ten times the σ the inputs state. A
+#: receiver that misstates its σ does so by ×2–3 (time-correlated RTK errors); float RTK states its own larger
+#: σ; a GCP or base position metres to kilometres off, or inputs of another flight, give σ̂₀ of 10²–10⁵.
+BLUNDER_SIGMA0 = 10.0
 
 
 def _num(x: Any) -> float | None:
@@ -124,6 +128,14 @@ class AdjustmentOptions:
     segment_gap_s: float = 3.0
     #: largest fraction of images that may be flagged before the adjustment gives up
     max_outlier_fraction: float = 0.3
+    #: leave-one-out test of every GCP: each is predicted by the adjustment without it; a GCP whose χ²₃
+    #: (residual over its propagated σ) exceeds `gcp_chi2_threshold` is excluded, the worst first, one at a time
+    gcp_blunder_test: bool = True
+    gcp_chi2_threshold: float = CHI2_3DOF_999
+    #: largest fraction of the GCPs that may be excluded before the adjustment gives up
+    max_excluded_gcp_fraction: float = 0.5
+    #: σ̂₀ above which the result is flagged `blunder_suspected` (see BLUNDER_SIGMA0)
+    blunder_sigma0: float = BLUNDER_SIGMA0
 
 
 @dataclass(frozen=True)
@@ -213,6 +225,15 @@ class AdjustmentProblem:
 
 
 @dataclass(frozen=True)
+class ExcludedGcp:
+    """A GCP the leave-one-out test excluded: its residual predicted without it (ENU m) and its χ²₃."""
+
+    name: str
+    residual_enu_m: tuple[float, float, float]
+    chi2: float
+
+
+@dataclass(frozen=True)
 class CheckPointResidual:
     """One check point: S(P_rel) − P_ground in ENU (m), its length, and its propagated 3D σ (m)."""
 
@@ -262,6 +283,12 @@ class AdjustmentResult:
     n_observations: int
     relative_control: bool
     variance_inflation: float = 1.0  # factor applied to Σ for time-correlated residuals (1 = none)
+    #: (n,3) σ of each corrected camera centre, ENU m: the parameters' covariance propagated to it ⊕ the bundle
+    #: adjustment's own camera-centre σ scaled by max(1, σ̂₀·√inflation): the accuracy the adjustment reached
+    camera_sigma_enu_m: npt.NDArray[np.float64] | None = None
+    excluded_gcps: tuple[ExcludedGcp, ...] = ()
+    #: σ̂₀ > options.blunder_sigma0: the residuals show a blunder; no deliverable should be made from it
+    blunder_suspected: bool = False
 
     def corrected_positions_enu_m(self, centre_rel: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Map relative-frame points (…,3) into ENU with the estimated similarity."""
@@ -323,4 +350,10 @@ class AdjustmentResult:
             "n_observations": int(self.n_observations),
             "variance_inflation": _num(self.variance_inflation),
             "relative_control": bool(self.relative_control),
+            "excluded_gcps": [
+                {"name": g.name, "de_m": _num(g.residual_enu_m[0]), "dn_m": _num(g.residual_enu_m[1]),
+                 "du_m": _num(g.residual_enu_m[2]), "chi2": _num(g.chi2)}
+                for g in self.excluded_gcps
+            ],
+            "blunder_suspected": bool(self.blunder_suspected),
         }

@@ -6,7 +6,10 @@ Steps (shared/docs/adjustment.md § Solving):
 3. `scipy.optimize.least_squares` on whitened residuals (analytic Jacobian: 3 rows per image × ≤ 11 columns, so
    the cost is linear in the number of images), priors as extra whitened rows, robust loss;
 4. outliers: per-image χ²₃ / σ̂₀²(robust) > threshold (99.9 %), dropped; 5. a clean pass with a linear loss;
-6. Σ = σ̂₀²(JᵀJ)⁻¹, σ̂₀² = Σr²/(m − n), correlations, condition number, the weakest combination, warnings.
+6. Σ = σ̂₀²(JᵀJ)⁻¹, σ̂₀² = Σr²/(m − n), correlations, condition number, the weakest combination, warnings;
+7. GCP blunders: each GCP in turn is left out and predicted by the others (as a check point, with its propagated
+   σ); the worst one whose χ²₃ exceeds the threshold is excluded and the test repeated (data snooping, one at a
+   time); a σ̂₀ far above 1 afterwards flags the result (`blunder_suspected`).
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from ground.adjust.model import (
     AdjustmentRefused,
     AdjustmentResult,
     CheckPointResidual,
+    ExcludedGcp,
 )
 from ground.adjust.relative import RelativePairs, consecutive_pairs
 from ground.adjust.similarity import (
@@ -406,10 +410,87 @@ def _along_track_axis(problem_r: Arr, rot: Arr, v: Arr) -> int | None:
 def adjust(problem: AdjustmentProblem, options: AdjustmentOptions | None = None) -> AdjustmentResult:
     """Estimate the similarity, lever arm and delay of `problem` (see the module docstring for the steps).
 
+    GCPs that fail the leave-one-out test are excluded (listed in `excluded_gcps`, with a warning); a result
+    whose σ̂₀ exceeds `options.blunder_sigma0` comes back with `blunder_suspected` set and a warning.
     Raises AdjustmentRefused with a clear message when the problem is not solvable as posed (free lever arm
-    with no GCP and no prior; relative control without GCP; collinear geometry; too many outliers).
+    with no GCP and no prior; relative control without GCP; collinear geometry; too many outliers; more GCPs
+    contradicting the others than `max_excluded_gcp_fraction`).
     """
     opt = options or AdjustmentOptions()
+    excluded: list[ExcludedGcp] = []
+    n_gcp = len(problem.gcps)
+    current = problem
+    untestable: list[str] = []
+    while opt.gcp_blunder_test and current.gcps:
+        worst, untestable = _worst_gcp(current, opt)
+        if worst is None or worst.chi2 <= opt.gcp_chi2_threshold:
+            break
+        excluded.append(worst)
+        if len(excluded) > opt.max_excluded_gcp_fraction * n_gcp:
+            raise AdjustmentRefused(
+                f"{len(excluded)} of {n_gcp} GCPs contradict the others ({_gcp_list(excluded)}): check their "
+                "coordinates, CRS and names, that the GCP file belongs to this flight, and the base position "
+                "(a GNSS bias moves every image against every GCP; relative control cancels it)"
+            )
+        current = replace(current, control=tuple(c for c in current.control if c.name != worst.name or
+                                                 c.role != "gcp"))
+    try:
+        result = _adjust_once(current, opt)
+    except AdjustmentRefused as exc:
+        if not excluded:
+            raise
+        raise AdjustmentRefused(f"after excluding the GCP blunder(s) {_gcp_list(excluded)}: {exc}") from exc
+    added: list[str] = []
+    if blunder := bool(np.isfinite(result.sigma0) and result.sigma0 > opt.blunder_sigma0):
+        added.append(f"blunder suspected: σ̂₀ = {result.sigma0:.3g} > {opt.blunder_sigma0:g} (the residuals are "
+                     f"{result.sigma0:.3g}× the stated σ): a GCP, the base position or an input of another "
+                     "flight is wrong")
+    if excluded:
+        added.append(f"{len(excluded)} GCP(s) excluded by the leave-one-out test (χ²₃ > "
+                     f"{opt.gcp_chi2_threshold:.1f}): {_gcp_list(excluded)}")
+    if untestable:
+        added.append(f"GCP(s) {', '.join(untestable)} could not be checked by leave-one-out (the adjustment "
+                     "needs them); their residuals rest on σ̂₀ alone")
+    for w in added:
+        log.warning("adjust: %s", w)
+    return replace(result, warnings=tuple(added) + result.warnings, excluded_gcps=tuple(excluded),
+                   blunder_suspected=blunder)
+
+
+def _gcp_list(excluded: list[ExcludedGcp]) -> str:
+    return ", ".join(f"{g.name} (off by {float(np.linalg.norm(g.residual_enu_m)):.3g} m, χ²₃ {g.chi2:.3g})"
+                     for g in excluded)
+
+
+def _worst_gcp(problem: AdjustmentProblem, opt: AdjustmentOptions) -> tuple[ExcludedGcp | None, list[str]]:
+    """Leave-one-out over the GCPs: each is made a check point, predicted by the adjustment of the others with
+    its propagated σ; returns the one of largest χ²₃ (None when none could be tested) and the untestable ones."""
+    worst: ExcludedGcp | None = None
+    untestable: list[str] = []
+    quiet = replace(opt, gcp_blunder_test=False)
+    for gcp in problem.gcps:
+        control = tuple(replace(c, role="check") if c.role == "gcp" and c.name == gcp.name else c
+                        for c in problem.control if c.role == "gcp" or c.name != gcp.name)
+        try:
+            loo = _adjust_once(replace(problem, control=control), quiet, log_warnings=False)
+        except AdjustmentRefused:
+            untestable.append(gcp.name)
+            continue
+        cp = next(c for c in loo.checkpoints if c.name == gcp.name)
+        d = np.array([cp.de_m, cp.dn_m, cp.du_m])
+        sd = np.maximum(np.asarray(cp.sigma_enu_m, dtype=float), 1e-9)
+        chi2 = float(np.sum((d / sd) ** 2))
+        if not np.isfinite(chi2):
+            untestable.append(gcp.name)
+            continue
+        if worst is None or chi2 > worst.chi2:
+            worst = ExcludedGcp(gcp.name, (float(d[0]), float(d[1]), float(d[2])), chi2)
+    return worst, untestable
+
+
+def _adjust_once(problem: AdjustmentProblem, opt: AdjustmentOptions,
+                 log_warnings: bool = True) -> AdjustmentResult:
+    """One adjustment of `problem` as given (steps 1–6 of the module docstring, no GCP test)."""
     _check_refusals(problem, opt)
     n_img = len(problem.images)
     c_bar = problem.centre_rel.mean(axis=0)
@@ -521,8 +602,15 @@ def adjust(problem: AdjustmentProblem, options: AdjustmentOptions | None = None)
     outliers = tuple((problem.images[i], float(chi2n[i])) for i in np.flatnonzero(outlier))
     if outliers:
         warnings.append(f"{len(outliers)} image(s) flagged as outliers and left out of the final pass")
-    for w in warnings:
-        log.warning("adjust: %s", w)
+    if log_warnings:
+        for w in warnings:
+            log.warning("adjust: %s", w)
+    # the accuracy reached at each camera centre: the parameters' Σ propagated to S(C_i), ⊕ the bundle
+    # adjustment's own σ of C_i, scaled by the residuals' σ̂₀ (never below the stated σ)
+    _, jac_c = model._points(p, model.r0, problem.centre_rel, None)
+    param_var = np.einsum("nij,jk,nik->ni", jac_c, cov_full_finite(cov_full), jac_c)
+    scale_s0 = max(1.0, (sigma0 if np.isfinite(sigma0) else 1.0) * float(np.sqrt(inflation)))
+    camera_sigma = np.sqrt(np.maximum(param_var, 0.0) + (scale_s0 * opt.camera_centre_sigma_m) ** 2)
     return AdjustmentResult(
         scale=float(p[_MU]),
         scale_sigma=float(sd_full[_MU]),
@@ -553,7 +641,13 @@ def adjust(problem: AdjustmentProblem, options: AdjustmentOptions | None = None)
         n_observations=int(res.size),
         variance_inflation=inflation,
         relative_control=opt.relative_control,
+        camera_sigma_enu_m=camera_sigma,
     )
+
+
+def cov_full_finite(cov_full: Arr) -> Arr:
+    """The covariance with undeterminable entries (NaN/inf) as a very large variance, for propagation."""
+    return np.nan_to_num(cov_full, nan=0.0, posinf=1e12, neginf=-1e12)
 
 
 def variance_inflation(

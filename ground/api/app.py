@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import json
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from ground.api.jobs import JobFunction, JobRunner
 from ground.api.routes import flights
@@ -18,9 +20,55 @@ log = logging.getLogger(__name__)
 
 def default_job_functions() -> dict[str, JobFunction]:
     """The processing jobs the API offers (kind → function)."""
-    from ground.cli import adjust_job, rtk_job
+    from ground.api.job_kinds import adjust_job, rtk_job
 
     return {"adjust": adjust_job, "rtk": rtk_job}
+
+
+class BodyLimit:
+    """ASGI middleware: a request body other than an upload chunk (`PUT …/files/…`, capped by its route) larger
+    than `limit` bytes is answered 413 before the application parses it."""
+
+    def __init__(self, app: ASGIApp, limit: int) -> None:
+        self.app = app
+        self.limit = limit
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope["method"] in ("GET", "HEAD") or (
+                scope["method"] == "PUT" and "/files/" in scope["path"]):
+            await self.app(scope, receive, send)
+            return
+        declared = dict(scope["headers"]).get(b"content-length", b"")
+        if declared.isdigit() and int(declared) > self.limit:
+            await self._refuse(send, int(declared))
+            return
+        chunks: list[bytes] = []
+        size = 0
+        more = True
+        while more:
+            message = await receive()
+            if message["type"] != "http.request":
+                await self.app(scope, receive, send)  # disconnect: let the app see it
+                return
+            body = message.get("body", b"")
+            size += len(body)
+            if size > self.limit:
+                await self._refuse(send, size)
+                return
+            chunks.append(body)
+            more = bool(message.get("more_body", False))
+        replay = [{"type": "http.request", "body": b"".join(chunks), "more_body": False}]
+
+        async def replayed() -> Message:
+            return replay.pop() if replay else await receive()
+
+        await self.app(scope, replayed, send)
+
+    async def _refuse(self, send: Send, size: int) -> None:
+        body = json.dumps({"detail": f"request body of {size}+ bytes > limit {self.limit}"}).encode()
+        await send({"type": "http.response.start", "status": 413,
+                    "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})
+        await send({"type": "http.response.body", "body": body})
 
 
 def create_app(settings: ApiSettings, job_functions: dict[str, JobFunction] | None = None) -> FastAPI:
@@ -51,6 +99,7 @@ def create_app(settings: ApiSettings, job_functions: dict[str, JobFunction] | No
     )
     app.state.settings = settings
     app.state.file_locks = flights.FileLocks()
+    app.add_middleware(BodyLimit, limit=settings.max_json_bytes)
     app.include_router(flights.router)
 
     @app.get("/health", tags=["health"])

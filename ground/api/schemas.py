@@ -5,7 +5,13 @@ from __future__ import annotations
 import datetime as dt
 from typing import Any, Literal
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from ground.io.crs import MAX_DATUM_ERROR_M, WGS84_ECEF
+from ground.io.events import parse_capture_time
+from ground.pipeline import AdjustJobOptions, RtkJobOptions, parameter_specs
+from onboard import validate
+from onboard.errors import InputError
 
 
 class ManifestFile(BaseModel):
@@ -73,12 +79,86 @@ class FlightSummary(BaseModel):
 
 
 class JobCreate(BaseModel):
-    """Start a job. `adjust` params: trajectory/events/orientations/gcp file names (default: by manifest role)
-    and the `python -m ground adjust` options (lever_arm, lever_arm_sigma, delay, delay_sigma, estimate, crs,
-    gcp_crs). `rtk` re-processes the trajectory from uploaded rover/base observations and navigation data."""
+    """Start a job: `kind` and its `params` (see `AdjustParams`, `RtkParams`; checked at submission, 422)."""
 
     kind: Literal["adjust", "rtk"]
     params: dict[str, Any] = Field(default_factory=dict)
+
+
+class AdjustParams(BaseModel):
+    """Parameters of an `adjust` job: file names of the flight (default: the file with that manifest role) and
+    the options of `python -m ground adjust`. Values are checked as on the command line (finite, with units)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    trajectory: str | None = Field(default=None, description="RTKLIB .pos (default: role trajectory, else the "
+                                   "flight's last RTK job output)")
+    events: str | None = Field(default=None, description="events.jsonl or CSV image,week,tow (role events)")
+    orientations: str | None = Field(default=None, description="bundle adjustment file (role orientations)")
+    gcp: str | None = Field(default=None, description="GCP file (role gcp)")
+    gcp_rel: str | None = Field(default=None, description="relative GCP CSV for ODM/MicMac GCP files (role gcp_rel)")
+    capture_times: str | dict[str, str] | None = Field(
+        default=None, description="to match events.jsonl to the images: a file of the flight (CSV/JSON, role "
+        "capture_times) or {image: camera clock time, EXIF 'YYYY:MM:DD HH:MM:SS' or ISO 8601}")
+    lever_arm: tuple[float, float, float] | None = Field(default=None, description="dx,dy,dz (m), camera frame")
+    lever_arm_sigma: float | None = Field(default=None, description="σ (m) making lever_arm a prior")
+    delay: float | None = Field(default=None, description="shutter delay t_d (s)")
+    delay_sigma: float | None = Field(default=None, description="σ (s) making delay a prior")
+    estimate: list[Literal["lever-arm", "delay"]] = Field(default_factory=list)
+    crs: str = Field(default="EPSG:4979", description="CRS of the exports")
+    gcp_crs: str = Field(default=WGS84_ECEF, description="CRS of the GCP ground coordinates")
+    relative_control: bool = False
+    events_kind: Literal["trigger", "flash"] = "trigger"
+    datum_tolerance_m: float = MAX_DATUM_ERROR_M
+    accept_single: bool = False
+    accept_blunder: bool = False
+
+    @model_validator(mode="after")
+    def _check(self) -> AdjustParams:
+        options = self.job_options()  # ValueError in onboard.validate's words → 422
+        try:
+            parameter_specs(options)
+        except InputError as exc:  # a value/σ/estimate rule
+            raise ValueError(str(exc)) from None
+        if isinstance(self.capture_times, dict):
+            for image, text in self.capture_times.items():
+                if parse_capture_time(text) is None:
+                    raise ValueError(f"capture_times[{image!r}] {text!r}: must be 'YYYY:MM:DD HH:MM:SS' or ISO 8601")
+        return self
+
+    def job_options(self) -> AdjustJobOptions:
+        """The pipeline's options of these parameters."""
+        return AdjustJobOptions(
+            lever_arm_m=self.lever_arm, lever_arm_sigma_m=self.lever_arm_sigma, delay_s=self.delay,
+            delay_sigma_s=self.delay_sigma, estimate=tuple(self.estimate), crs=self.crs, gcp_crs=self.gcp_crs,
+            relative_control=self.relative_control, events_kind=self.events_kind,
+            datum_tolerance_m=self.datum_tolerance_m, accept_single=self.accept_single,
+            accept_blunder=self.accept_blunder)
+
+
+class RtkParams(BaseModel):
+    """Parameters of an `rtk` job: file names (default: by role rover_obs, base_obs, nav) and options."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    rover_obs: str | None = None
+    base_obs: str | None = None
+    nav: str | None = None
+    base_pos: str | tuple[float, float, float] | None = Field(
+        default=None, description="base antenna phase centre, ECEF m: 'X,Y,Z' or [X, Y, Z] (default: the base "
+        "file's header)")
+    direction: Literal["forward", "backward", "combined"] = "forward"
+    elmask_deg: float = Field(default=15.0, description="elevation mask (°, 0–90)")
+
+    @model_validator(mode="after")
+    def _check(self) -> RtkParams:
+        self.job_options()
+        return self
+
+    def job_options(self) -> RtkJobOptions:
+        """The pipeline's options of these parameters."""
+        pos = None if self.base_pos is None else validate.ecef_position_m(self.base_pos, name="base_pos")
+        return RtkJobOptions(base_pos_ecef_m=pos, direction=self.direction, elmask_deg=self.elmask_deg)
 
 
 class ErrorOut(BaseModel):

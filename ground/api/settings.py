@@ -6,6 +6,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from onboard import validate
 from onboard.errors import ConfigFileError
 
 TOKEN_ENV = "DIRECTGEO_TOKEN"
@@ -24,13 +25,23 @@ class ApiSettings:
     max_chunk_bytes: int = 16 * 1024**2
     max_files_per_flight: int = 10_000
     job_workers: int = 1
+    #: a job running longer than this (s) is stopped and failed
+    job_timeout_s: float = 4 * 3600.0
+    #: largest JSON request body (bytes): manifests of 10 000 files fit in ~2 MB
+    max_json_bytes: int = 4 * 1024**2
 
     def __post_init__(self) -> None:
         if len(self.token) < MIN_TOKEN_CHARS:
             raise ConfigFileError(f"the API token must have at least {MIN_TOKEN_CHARS} characters")
-        for name in ("max_file_bytes", "max_flight_bytes", "max_chunk_bytes", "max_files_per_flight"):
-            if getattr(self, name) <= 0:
-                raise ConfigFileError(f"{name} must be positive")
+        for name in ("max_file_bytes", "max_flight_bytes", "max_chunk_bytes", "max_files_per_flight",
+                     "max_json_bytes", "job_workers"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+                raise ConfigFileError(f"{name} {value!r}: must be a whole number > 0")
+        try:
+            validate.positive(self.job_timeout_s, name="job_timeout_s", unit=" s")
+        except ValueError as exc:
+            raise ConfigFileError(str(exc)) from None
 
     @property
     def db_url(self) -> str:

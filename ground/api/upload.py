@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import hashlib
 import re
 from dataclasses import dataclass
 
 _NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9._+\-]{0,199}$")
 _SHA_RE = re.compile(r"^[0-9a-f]{64}$")
+EMPTY_SHA256 = hashlib.sha256(b"").hexdigest()
+"""The SHA-256 of zero bytes: the only hash a file of size 0 can have."""
 
 
 class UploadRejected(ValueError):
@@ -65,6 +68,9 @@ def check_manifest_files(files: list[tuple[str, int, str]], limits: Limits) -> N
         seen.add(name)
         if size < 0:
             raise UploadRejected(400, f"file {name!r}: negative size")
+        if size == 0 and sha.strip().lower() != EMPTY_SHA256:
+            raise UploadRejected(422, f"file {name!r}: size 0 with SHA-256 {sha.strip().lower()[:16]}…, which is not "
+                                      f"the hash of an empty file ({EMPTY_SHA256[:16]}…): it could never complete")
         if size > limits.max_file_bytes:
             raise UploadRejected(413, f"file {name!r}: {size} bytes > limit {limits.max_file_bytes}")
         total += size

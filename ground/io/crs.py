@@ -172,3 +172,40 @@ def is_geographic(crs: str) -> bool:
     if c.is_compound and c.sub_crs_list:
         c = c.sub_crs_list[0]
     return bool(c.is_geographic)
+
+
+#: a site this far (degrees) outside a CRS's area of use is refused; nearer, the export is accepted with a
+#: warning: half a UTM zone beyond its strip (9° from the central meridian) the scale error is still ≤ 0.5 %
+#: at mid-latitudes, a known distortion users choose for a site straddling two zones; half a world away the
+#: projection is meaningless
+AREA_OF_USE_MARGIN_DEG = 3.0
+
+
+def check_crs_covers(origin_ecef_m: npt.ArrayLike, crs: str,
+                     margin_deg: float = AREA_OF_USE_MARGIN_DEG) -> list[str]:
+    """Refuse (CrsError) a CRS whose area of use is more than `margin_deg` away from the site; return a warning
+    when the site is just outside it, else nothing. Geographic/geocentric CRSs cover the whole Earth."""
+    c = parse_crs(crs)
+    area = c.area_of_use
+    if area is None:
+        return []
+    lon, lat = (float(v) for v in ecef_to_lonlat_deg(origin_ecef_m)[:2])
+    west, south, east, north = area.west, area.south, area.east, area.north
+    lon_in = (west <= lon <= east) if west <= east else (lon >= west or lon <= east)
+
+    def lon_gap(a: float, b: float) -> float:
+        return min(abs((a - b + 180.0) % 360.0 - 180.0), 360.0)
+
+    gap_lon = 0.0 if lon_in else min(lon_gap(lon, west), lon_gap(lon, east))
+    gap_lat = max(south - lat, lat - north, 0.0)
+    if gap_lon == 0.0 and gap_lat == 0.0:
+        return []
+    zone = int((lon + 180.0) // 6.0) % 60 + 1
+    utm = f"EPSG:{(32600 if lat >= 0 else 32700) + zone}"
+    where = (f"{abs(lon):.3f}°{'E' if lon >= 0 else 'W'}, {abs(lat):.3f}°{'N' if lat >= 0 else 'S'}")
+    text = (f"{crs} ({c.name}) is meant for {west:g}° to {east:g}° longitude, {south:g}° to {north:g}° "
+            f"latitude; the site is at {where}, {max(gap_lon, gap_lat):.1f}° outside")
+    if gap_lon > margin_deg or gap_lat > margin_deg:
+        raise CrsError(f"{text}: its coordinates there are distorted or meaningless; use the CRS of the site "
+                       f"(its UTM zone is {zone}, {utm})")
+    return [f"{text}: accepted (within {margin_deg:g}°), but the distortion grows outside the zone"]

@@ -20,6 +20,7 @@ from ground.adjust.types import CameraPose
 from ground.io import crs as crsmod
 from ground.io.orientations import write_micmac_orientation, write_opk_csv
 from ground.io.rotations import opk_deg_from_r_cam_to_world
+from onboard.formats.atomic import atomic_output
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation, enu_to_ecef
 
 Vec = npt.NDArray[np.float64]
@@ -76,7 +77,7 @@ def write_odm_geo_txt(path: str | Path, cams: ExportedCameras) -> None:
     (columns 8–9); ODM passes them to OpenSfM as the GPS standard deviations of each image.
     """
     g = cams.geographic
-    with Path(path).open("w", encoding="utf-8") as fh:
+    with atomic_output(path, "w") as fh:
         fh.write(cams.crs + "\n")
         fh.writelines(
             f"{name} {_fmt(p[0], g)} {_fmt(p[1], g)} {p[2]:.4f} nan nan nan {sh:.4f} {sv:.4f}\n"
@@ -87,7 +88,7 @@ def write_odm_geo_txt(path: str | Path, cams: ExportedCameras) -> None:
 def write_pix4d_csv(path: str | Path, cams: ExportedCameras) -> None:
     """Pix4D image geolocation: no header, `image,lat,lon,alt,omega,phi,kappa,acc_h,acc_v` (geographic: lat
     first) or `image,x,y,z,omega,phi,kappa,acc_h,acc_v` (projected); angles in degrees, accuracies in m."""
-    with Path(path).open("w", encoding="utf-8", newline="") as fh:
+    with atomic_output(path, "w") as fh:
         w = csv.writer(fh, lineterminator="\n")
         for i, name in enumerate(cams.images):
             x, y, z = cams.xyz[i]
@@ -99,7 +100,7 @@ def write_pix4d_csv(path: str | Path, cams: ExportedCameras) -> None:
 
 def write_metashape_txt(path: str | Path, cams: ExportedCameras) -> None:
     """Metashape reference import (columns `nxyzopk` + accuracies `abc`: label, x/lon, y/lat, z, ω, φ, κ)."""
-    with Path(path).open("w", encoding="utf-8", newline="") as fh:
+    with atomic_output(path, "w") as fh:
         fh.write(f"# CRS: {cams.crs}\n# columns: nxyzopkabc (Label,X,Y,Z,Omega,Phi,Kappa,X_acc,Y_acc,Z_acc)\n")
         w = csv.writer(fh, lineterminator="\n")
         for i, name in enumerate(cams.images):
@@ -119,7 +120,7 @@ def write_all(out_dir: str | Path, cams: ExportedCameras, centres_enu_m: Vec, r_
     write_pix4d_csv(d / "pix4d.csv", cams)
     write_metashape_txt(d / "metashape.txt", cams)
     poses = [CameraPose(n, cams.xyz[i], cams.r_cam_to_crs[i]) for i, n in enumerate(cams.images)]
-    write_opk_csv(d / "opk.csv", poses, crs=cams.crs)
+    write_opk_csv(d / "opk.csv", poses, crs=cams.crs, geographic=cams.geographic)
     ori = d / "Ori-directgeo"
     ori.mkdir(exist_ok=True)
     euclid = poses if not cams.geographic else [

@@ -56,6 +56,9 @@ def read_gcp_csv(path: str | Path, crs: str = crsmod.WGS84_ECEF) -> list[GroundP
     out: list[GroundPoint] = []
     names: set[str] = set()
     for n, row in enumerate(rows[1:], start=2):
+        if len(row) < 8:
+            raise FormatError(p, f"row has {len(row)} field(s), 8 needed (name,role,x_rel,y_rel,z_rel,X,Y,Z)",
+                              line=n)
         try:
             name, role = row[0].strip(), row[1].strip().lower()
             vals = np.array([float(v) for v in row[2:8]])
@@ -68,6 +71,8 @@ def read_gcp_csv(path: str | Path, crs: str = crsmod.WGS84_ECEF) -> list[GroundP
             raise FormatError(p, f"point {name!r} listed twice", line=n)
         if not np.all(np.isfinite(vals)):
             raise FormatError(p, "non-finite coordinate", line=n)
+        if sigma is not None and not (np.all(np.isfinite(sigma)) and np.all(sigma > 0)):
+            raise FormatError(p, f"sigma_m {row[8].strip()}: must be a finite number > 0 (m)", line=n)
         names.add(name)
         out.append(GroundPoint(name=name, ground=vals[3:], crs=crs, role=role, rel=vals[:3], sigma_m=sigma))
     if not out:

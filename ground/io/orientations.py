@@ -27,6 +27,7 @@ from ground.io.rotations import (
     rotation_from_axis_angle,
     rotation_from_quaternion_wxyz,
 )
+from onboard.formats.atomic import atomic_output, write_atomic
 
 log = logging.getLogger(__name__)
 
@@ -215,8 +216,7 @@ def write_micmac_orientation(path: str | Path, pose: CameraPose) -> None:
         ET.SubElement(matr, k).text = " ".join(repr(float(v)) for v in row)
     ET.SubElement(ET.SubElement(oc, "ConvOri"), "KnownConv").text = "eConvApero_DistM2C"
     ET.indent(oc, space="     ")
-    Path(path).write_text('<?xml version="1.0" ?>\n' + ET.tostring(oc, encoding="unicode") + "\n",
-                          encoding="utf-8")
+    write_atomic(path, '<?xml version="1.0" ?>\n' + ET.tostring(oc, encoding="unicode") + "\n")
 
 
 # ---------------------------------------------------------------- Metashape camera XML
@@ -355,20 +355,31 @@ def read_opk_csv(path: str | Path) -> OrientationSet:
     return OrientationSet(poses=poses, format="opk-csv", frame=crs or "OPK CSV frame", crs=crs)
 
 
-def write_opk_csv(path: str | Path, poses: list[CameraPose], crs: str | None = None) -> None:
-    """Write an OPK CSV (`image,X,Y,Z,omega,phi,kappa`, degrees, PATB axes) and a `.prj` when `crs` is given."""
+def write_opk_csv(path: str | Path, poses: list[CameraPose], crs: str | None = None,
+                  geographic: bool | None = None) -> None:
+    """Write an OPK CSV (`image,X,Y,Z,omega,phi,kappa`, degrees, PATB axes) and a `.prj` when `crs` is given,
+    both atomically.
+
+    X,Y are written with 9 decimals when they are degrees (a geographic CRS: 1e-9° ≈ 0.1 mm; the 4 decimals
+    of metres would be 1e-4° ≈ 11 m of latitude), with 4 (0.1 mm) when they are metres. `geographic` defaults
+    to what `crs` says (metres without a CRS).
+    """
+    from ground.io.crs import is_geographic
     from ground.io.rotations import opk_deg_from_r_cam_to_world
 
     p = Path(path)
-    with p.open("w", encoding="utf-8", newline="") as fh:
+    degrees = geographic if geographic is not None else (crs is not None and is_geographic(crs))
+    xy = ".9f" if degrees else ".4f"
+    with atomic_output(p, "w") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(["image", "X", "Y", "Z", "omega", "phi", "kappa"])
         for pose in poses:
             o, ph, k = opk_deg_from_r_cam_to_world(pose.r_cam_to_rel)
             c = pose.centre_rel
-            w.writerow([pose.image, f"{c[0]:.4f}", f"{c[1]:.4f}", f"{c[2]:.4f}", f"{o:.6f}", f"{ph:.6f}", f"{k:.6f}"])
+            w.writerow([pose.image, f"{c[0]:{xy}}", f"{c[1]:{xy}}", f"{c[2]:.4f}", f"{o:.6f}", f"{ph:.6f}",
+                        f"{k:.6f}"])
     if crs is not None:
-        p.with_suffix(".prj").write_text(crs + "\n", encoding="utf-8")
+        write_atomic(p.with_suffix(".prj"), crs + "\n")
 
 
 # ---------------------------------------------------------------- dispatch

@@ -122,11 +122,16 @@ def test_relative_control_cancels_a_gnss_bias(block_factory: Any, problem_factor
     block = block_factory(5, gnss_bias_m=bias, gcp_names=("P00", "P10"), **quiet)
     problem = problem_factory(block)
     lever = LeverArmSpec(mode="prior", value_m=tuple(block.truth_lever_arm_m), sigma_m=(0.005,) * 3)
-    absolute = adjust(problem, AdjustmentOptions(lever_arm=lever, camera_centre_sigma_m=0.001))
+    # GNSS outweighs two GCPs: the bias would go to the ground; the leave-one-out test sees both GCPs
+    # contradict the images and refuses rather than deliver a block 30 cm off
+    with pytest.raises(AdjustmentRefused, match="2 of 2 GCPs contradict the others"):
+        adjust(problem, AdjustmentOptions(lever_arm=lever, camera_centre_sigma_m=0.001))
+    absolute = adjust(problem, AdjustmentOptions(lever_arm=lever, camera_centre_sigma_m=0.001,
+                                                 gcp_blunder_test=False))
     relative = adjust(
         problem, AdjustmentOptions(lever_arm=lever, relative_control=True, camera_centre_sigma_m=0.001)
     )
-    assert absolute.checkpoint_rms_m["3d"] > 0.15  # GNSS outweighs two GCPs: the bias goes to the ground
+    assert absolute.checkpoint_rms_m["3d"] > 0.15  # without the test: the bias goes to the ground
     assert relative.checkpoint_rms_m["3d"] < 0.01
     assert relative.delay_s == pytest.approx(block.truth_delay_s, abs=0.001)
     assert relative.relative_control and relative.to_dict()["relative_control"] is True

@@ -12,9 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ground.cli import AdjustRequest, main, parameter_specs
+from ground.cli import main
 from ground.io import crs as crsmod
 from ground.io.orientations import read_micmac_folder, read_opk_csv
+from ground.pipeline import AdjustJobOptions, parameter_specs
 from onboard.errors import InputError
 from tests.ground_io.flightgen import ORIGIN_ECEF, write_synthetic_flight
 
@@ -28,19 +29,18 @@ def _args(d: Path, *extra: str) -> list[str]:
 
 def test_parameter_rules() -> None:
     """Value alone → fixed; value + σ → prior; nothing → free; --estimate with a value but no σ → error."""
-    base = AdjustRequest(Path("t"), Path("e"), Path("o"))
-    lever, delay = parameter_specs(base)
+    lever, delay = parameter_specs(AdjustJobOptions())
     assert lever.mode == "free" and delay.mode == "free"
-    r = AdjustRequest(Path("t"), Path("e"), Path("o"), lever_arm_m=(0.1, 0.0, -0.1), delay_s=0.06, delay_sigma_s=0.002)
+    r = AdjustJobOptions(lever_arm_m=(0.1, 0.0, -0.1), delay_s=0.06, delay_sigma_s=0.002)
     lever, delay = parameter_specs(r)
     assert lever.mode == "fixed" and lever.value_m == (0.1, 0.0, -0.1)
     assert delay.mode == "prior" and delay.sigma_s == 0.002
     with pytest.raises(InputError, match="lever-arm-sigma"):
-        parameter_specs(AdjustRequest(Path("t"), Path("e"), Path("o"), lever_arm_m=(0, 0, 0), estimate=("lever-arm",)))
-    with pytest.raises(InputError, match="--estimate"):
-        parameter_specs(AdjustRequest(Path("t"), Path("e"), Path("o"), estimate=("scale",)))
+        parameter_specs(AdjustJobOptions(lever_arm_m=(0, 0, 0), estimate=("lever-arm",)))
+    with pytest.raises(ValueError, match="estimate 'scale': must be one of lever-arm, delay"):
+        AdjustJobOptions(estimate=("scale",))
     with pytest.raises(InputError, match="needs --delay"):
-        parameter_specs(AdjustRequest(Path("t"), Path("e"), Path("o"), delay_sigma_s=0.001))
+        parameter_specs(AdjustJobOptions(delay_sigma_s=0.001))
 
 
 def test_adjust_free_recovers_truth_and_exports_utm(tmp_path: Path) -> None:
@@ -161,6 +161,7 @@ def test_events_jsonl_matched_by_exif_capture_times(tmp_path: Path) -> None:
     assert res["delay_s"] == pytest.approx(truth.delay_s, abs=0.005)
 
 
+@pytest.mark.slow
 def test_gcp_in_projected_crs_and_odm_list_with_relative_file(tmp_path: Path) -> None:
     """GCP ground coordinates given in UTM 30N (--gcp-crs) or as an ODM gcp_list.txt + --gcp-rel give the same
     adjustment as the ECEF CSV."""
@@ -259,6 +260,7 @@ def test_report_shows_undetermined_parameters(tmp_path: Path) -> None:
     assert html.count("undetermined") >= 2 and 'id="parameters"' in html
 
 
+@pytest.mark.slow
 def test_report_says_how_each_parameter_entered_and_what_went_in(tmp_path: Path) -> None:
     """The report's summary names the GCP and check-point counts and the check-point RMS; each parameter row says
     whether it was free, a prior (with its value ± σ) or fixed; a correlation that has its own named warning is

@@ -32,6 +32,7 @@ from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
 from sqlalchemy import select
 
 from ground.api.deps import SettingsDep, StoreDep, require_token
+from ground.api.job_kinds import check_job
 from ground.api.jobs import JobRunner
 from ground.api.schemas import FileOut, FlightCreate, FlightOut, FlightSummary, JobCreate, JobOut
 from ground.api.settings import ApiSettings
@@ -44,6 +45,7 @@ from ground.api.upload import (
     check_sha256,
 )
 from ground.store import Flight, FlightFile, Job, Store, UploadSession
+from onboard.errors import InputError
 
 log = logging.getLogger(__name__)
 
@@ -127,7 +129,7 @@ def _get_flight(store: Store, flight_id: str) -> Flight:
 
 @router.post("", response_model=FlightOut, status_code=status.HTTP_201_CREATED,
              responses={200: {"model": FlightOut, "description": "identical flight already exists (resume)"},
-                        400: {}, 409: {}, 413: {}})
+                        400: {}, 409: {}, 413: {}, 422: {}})
 def create_flight(body: FlightCreate, response: Response, settings: SettingsDep,
                   store: StoreDep) -> FlightOut:
     """Create a flight from its upload manifest; the same name and files again returns the existing flight."""
@@ -374,7 +376,8 @@ def _maybe_auto_adjust(store: Store, flight_id: str, jobs: JobRunner) -> None:
         jobs.submit(job_id)
 
 
-@router.post("/{flight_id}/jobs", response_model=JobOut, status_code=status.HTTP_202_ACCEPTED)
+@router.post("/{flight_id}/jobs", response_model=JobOut, status_code=status.HTTP_202_ACCEPTED,
+             responses={404: {}, 409: {}, 413: {}, 422: {}})
 def create_job(flight_id: str, body: JobCreate, request: Request, store: StoreDep) -> JobOut:
     """Queue a processing job (runs in the background; poll its status)."""
     with store.session() as s:
@@ -383,6 +386,10 @@ def create_job(flight_id: str, body: JobCreate, request: Request, store: StoreDe
             raise HTTPException(status_code=404, detail=f"no flight {flight_id}")
         if flight.status != "complete":
             raise HTTPException(status_code=409, detail="the flight's upload is not complete")
+        try:
+            check_job(body.kind, body.params, {f.name: f.role for f in flight.files if f.status == "complete"})
+        except InputError as exc:
+            raise HTTPException(status_code=422, detail=f"{body.kind} job: {exc}") from exc
         job = Job(flight_id=flight_id, kind=body.kind, params=body.params)
         s.add(job)
         s.commit()
