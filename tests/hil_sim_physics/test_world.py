@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from hil_sim.scenario import ErrorModel, FlightPlan, ReceiverModel, Scenario
+from hil_sim.scenario import DEFAULT_NAV_PATH, ErrorModel, FlightPlan, ReceiverModel, Scenario
 from hil_sim.world import OutsideSimulatedSpan, World
 from onboard.errors import InputError
 from onboard.gnsstime import GpsTime
@@ -18,14 +18,12 @@ from onboard.rtk.ephemeris import eph_position, eph_position_velocity
 from onboard.rtk.geodesy import azimuth_elevation, ecef_to_llh
 from onboard.rtk.models import klobuchar_m, saastamoinen_m
 from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP
-from tests.conftest import shared_file
 
-NAV = "gnss/broadcast-nav-20100701/brdc1820.10n"
 C_1MS_M = CLIGHT_M_S * 1e-3
 
 
 def make_world(**overrides: object) -> World:
-    nav = shared_file(NAV)
+    nav = DEFAULT_NAV_PATH
     model = str(overrides.pop("model", "m8t"))
     return World(Scenario.default(model, nav_path=nav, **overrides))
 
@@ -351,7 +349,7 @@ def test_missing_navigation_file_is_a_clear_error(tmp_path) -> None:  # type: ig
 
 def test_scenario_time_without_ephemerides_and_bad_queries_are_rejected(clean_world: World) -> None:
     with pytest.raises(InputError, match="no healthy GPS ephemeris"):
-        World(Scenario.default(nav_path=shared_file(NAV), start=GpsTime(1600, 0)))
+        World(Scenario.default(nav_path=DEFAULT_NAV_PATH, start=GpsTime(1600, 0)))
     with pytest.raises(OutsideSimulatedSpan, match="outside the simulated span"):
         clean_world.observe("rover", clean_world.start.add_s(-3600))
     with pytest.raises(ValueError, match="unknown receiver"):
