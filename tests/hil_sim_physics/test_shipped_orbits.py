@@ -21,7 +21,7 @@ def test_default_world_reads_the_orbits_shipped_inside_the_package() -> None:
 
 def test_every_shipped_file_is_in_the_notice_with_its_checksum_and_licence() -> None:
     notice = (DATA_DIR / "NOTICE.md").read_text(encoding="utf-8")
-    listed = dict((name, digest) for digest, name in re.findall(r"^\s+([0-9a-f]{64})  (\S+)$", notice, re.M))
+    listed = {name: digest for digest, name in re.findall(r"^\s+([0-9a-f]{64})  (\S+)$", notice, re.MULTILINE)}
     shipped = sorted(p for p in DATA_DIR.rglob("*") if p.is_file() and p.name != "NOTICE.md")
     assert shipped, "no orbit file shipped"
     assert sorted(listed) == sorted(str(p.relative_to(DATA_DIR)) for p in shipped)
