@@ -244,6 +244,7 @@ def _wait_job(c: httpx.Client, fid: str, timeout_s: float = 90.0) -> dict[str, A
     raise AssertionError("job did not finish")
 
 
+@pytest.mark.slow
 def test_uploaded_orientations_trigger_the_adjustment(live: LiveServer, tmp_path: Path) -> None:
     """Trajectory + events + orientations (+ GCP) uploaded with roles: the adjustment job runs by itself and its
     results and report are served; the recovered lever arm and delay match the synthetic truth."""
@@ -312,6 +313,7 @@ def test_base_data_triggers_rtk_reprocessing(live: LiveServer, tmp_path: Path) -
         assert bad["kind"] == "rtk" and bad["status"] == "failed" and bad["message"]
 
 
+@pytest.mark.slow
 def test_unfinished_jobs_survive_a_restart_and_flight_names_are_unique(api_settings: ApiSettings,
                                                                        tmp_path: Path) -> None:
     """A job left queued when the server stopped runs at the next start; a second manifest under an existing

@@ -18,6 +18,7 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"
 pytestmark = pytest.mark.timeout(180)
 
 
+@pytest.mark.slow
 def test_report_renders_in_chromium(live: LiveServer, tmp_path: Path) -> None:
     if not CHROMIUM.exists():
         pytest.skip("Debian's chromium (/usr/bin/chromium) is not installed: browser test skipped")

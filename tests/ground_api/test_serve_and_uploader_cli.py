@@ -37,6 +37,7 @@ def _env(**extra: str) -> dict[str, str]:
     return env
 
 
+@pytest.mark.slow
 def test_serve_refuses_to_start_without_a_token(tmp_path: Path) -> None:
     out = subprocess.run([sys.executable, "-m", "ground", "serve", "--data-dir", str(tmp_path)], cwd=ROOT,
                          env=_env(), capture_output=True, text=True, timeout=60, check=False)
@@ -47,6 +48,7 @@ def test_serve_refuses_to_start_without_a_token(tmp_path: Path) -> None:
     assert out.returncode == 2 and "at least 16" in out.stderr
 
 
+@pytest.mark.slow
 def test_serve_and_uploader_command_lines(tmp_path: Path) -> None:
     """Server from `python -m ground serve --token-file`, flight sent by `python -m onboard.upload` (token from
     the environment), SQLite file in the data dir; a second uploader run sends nothing."""
@@ -158,6 +160,7 @@ def _start_limited(data: Path, limit: int) -> tuple[subprocess.Popen[str], str]:
         time.sleep(0.1)
 
 
+@pytest.mark.slow
 def test_full_disk_rejects_the_chunk_and_keeps_what_was_stored(tmp_path: Path) -> None:
     """The server process may not write files past 350 kB (RLIMIT_FSIZE, like a full disk): the chunk that does
     not fit gets 507, the partial file is cut back to the last whole chunk, and after a restart with space the

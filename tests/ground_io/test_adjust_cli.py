@@ -43,6 +43,7 @@ def test_parameter_rules() -> None:
         parameter_specs(AdjustRequest(Path("t"), Path("e"), Path("o"), delay_sigma_s=0.001))
 
 
+@pytest.mark.slow
 def test_adjust_free_recovers_truth_and_exports_utm(tmp_path: Path) -> None:
     truth = write_synthetic_flight(tmp_path)
     assert main(_args(tmp_path, "--estimate", "lever-arm,delay", "--crs", "EPSG:32630")) == 0
@@ -161,6 +162,7 @@ def test_events_jsonl_matched_by_exif_capture_times(tmp_path: Path) -> None:
     assert res["delay_s"] == pytest.approx(truth.delay_s, abs=0.005)
 
 
+@pytest.mark.slow
 def test_gcp_in_projected_crs_and_odm_list_with_relative_file(tmp_path: Path) -> None:
     """GCP ground coordinates given in UTM 30N (--gcp-crs) or as an ODM gcp_list.txt + --gcp-rel give the same
     adjustment as the ECEF CSV."""
@@ -241,6 +243,7 @@ def test_calibrate_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     assert "bad.csv:2" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_report_shows_undetermined_parameters(tmp_path: Path) -> None:
     """to_dict() writes null for the σ (and correlations) of an undeterminable parameter: the report says
     "undetermined" instead of failing."""

@@ -48,6 +48,7 @@ def _stats(rows: dict[int, list[tuple[float, float, float, int]]]) -> tuple[floa
     return math.sqrt(c0 / n0), (c1 / n1) / (c0 / n0)
 
 
+@pytest.mark.slow
 def test_simulated_code_error_is_as_large_and_as_time_correlated_as_a_real_m8p() -> None:
     obs = read_rinex_obs(shared_file("gnss/ublox-m8p-galway-2018/rinex/rover-20181004-1237.obs.gz")).epochs[:600]
     store = EphemerisStore(read_rinex_nav(shared_file("gnss/ublox-m8p-galway-2018/rinex/rover-20181004-1237.nav.gz"))

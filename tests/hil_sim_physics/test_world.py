@@ -208,6 +208,7 @@ def _only(**fields: float) -> ErrorModel:
     return dataclasses.replace(ErrorModel.noise_free(), **fields)
 
 
+@pytest.mark.slow
 def test_white_noise_statistics_match_the_error_model() -> None:
     clean = make_world(errors=ErrorModel.noise_free())
     noisy = make_world(errors=_only(code_sigma_zenith_m=0.5, phase_sigma_zenith_m=0.003,
@@ -246,6 +247,7 @@ def test_cn0_follows_elevation_between_35_and_50_dbhz() -> None:
     assert np.corrcoef(c, e)[0, 1] > 0.8
 
 
+@pytest.mark.slow
 def test_multipath_is_first_order_gauss_markov_with_its_sigma_and_time_constant() -> None:
     clean = make_world(errors=ErrorModel.noise_free())
     mp = make_world(errors=_only(mp_code_sigma_zenith_m=0.5, mp_phase_sigma_zenith_m=0.001, mp_tau_s=30.0))
@@ -270,6 +272,7 @@ def test_multipath_is_first_order_gauss_markov_with_its_sigma_and_time_constant(
     assert np.std(pv) == pytest.approx(0.001, rel=0.2)
 
 
+@pytest.mark.slow
 def test_common_errors_cancel_between_receivers_and_iono_gradient_is_about_1_mm_per_km() -> None:
     """Orbit, satellite clock, iono model error and tropo residual are common: single differences of the
     same epoch see only the iono gradient (and geometry)."""
@@ -295,6 +298,7 @@ def test_common_errors_cancel_between_receivers_and_iono_gradient_is_about_1_mm_
     assert np.max(per_km) > 0.5e-3
 
 
+@pytest.mark.slow
 def test_cycle_slips_with_and_without_lli() -> None:
     errors = _only(slip_lli_rate_per_h=8.0, slip_undetected_rate_per_h=8.0, slip_undetected_max_cyc=3)
     world = make_world(errors=errors, flight=FlightPlan(fly=False))
@@ -320,6 +324,7 @@ def test_cycle_slips_with_and_without_lli() -> None:
     assert seen_lli >= 3 and seen_undetected >= 3
 
 
+@pytest.mark.slow
 def test_half_cycle_flag_after_acquisition_then_subtracted() -> None:
     errors = _only(slip_lli_rate_per_h=20.0, half_cycle_probability=1.0, half_cycle_resolve_s=2.0)
     world = make_world(errors=errors, flight=FlightPlan(fly=False))

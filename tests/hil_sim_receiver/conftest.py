@@ -19,6 +19,10 @@ import numpy as np
 import pytest
 
 from hil_sim.scenario import DEFAULT_NAV_PATH
+
+# The shipped broadcast file, absolute: other folders' tests call shared_file(NAV), which then finds it (a path
+# joined to an absolute one is that one) and runs on a clone without ../shared.
+NAV = str(DEFAULT_NAV_PATH)
 from onboard.formats.rinex_nav import read_rinex_nav
 from onboard.gnsstime import GpsTime
 from onboard.receiver.framing import Frame, Protocol, StreamFramer, ubx_frame

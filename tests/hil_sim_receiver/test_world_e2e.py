@@ -88,6 +88,7 @@ def test_configured_receiver_on_the_world_streams_raw_subframes_and_marks(model:
     assert trig and all(m.time == 1 for m in trig)
 
 
+@pytest.mark.slow
 def test_cli_prints_the_pty_path_answers_and_exits_cleanly_on_sigterm_and_sigint(pty_client_factory) -> None:
     for sig in (signal.SIGTERM, signal.SIGINT):
         proc = subprocess.Popen([sys.executable, "-m", "hil_sim", "receiver", "--model", "lea6t", "--speed", "5",
@@ -110,6 +111,7 @@ def test_cli_prints_the_pty_path_answers_and_exits_cleanly_on_sigterm_and_sigint
                 proc.wait()
 
 
+@pytest.mark.slow
 def test_cli_reports_a_missing_navigation_file(tmp_path) -> None:
     proc = subprocess.run([sys.executable, "-m", "hil_sim", "receiver", "--model", "m8t", "--nav",
                            str(tmp_path / "missing.10n")], cwd=PROJECT_ROOT, capture_output=True, text=True,

@@ -136,6 +136,7 @@ def test_one_xyz_parser_behind_the_positions_of_the_command_lines_and_settings()
         base_xyz("1 2")
 
 
+@pytest.mark.slow
 def test_ubx_rover_log_with_its_own_ephemerides(tmp_path, capsys):
     """The raw M8P rover log (RXM-RAWX + RXM-SFRBX, gzip) needs no --nav: ephemerides come from the log."""
     d = "gnss/ublox-m8p-galway-2018/"
