@@ -3,7 +3,7 @@
 A `Scenario` is data only (no I/O): start time, site, base placement, navigation file path, the error model,
 the flight and camera plans and the two receivers' models. `Scenario.default(model, **overrides)` gives the
 standard survey flight on 2010-07-01 (GPS week 1590, the day of the real broadcast orbits in
-`shared/data/gnss/broadcast-nav-20100701/brdc1820.10n`) at 13:00 GPST over Zurich, when 9 GPS satellites are
+`hil_sim/data/broadcast-nav-20100701/brdc1820.10n`, shipped with the package) at 13:00 GPST over Zurich, when 9 GPS satellites are
 above 15° (10 above the 5° receiver mask).
 """
 
@@ -16,10 +16,10 @@ from pathlib import Path
 
 from onboard.gnsstime import GpsTime
 
-DEFAULT_NAV_PATH = Path(__file__).resolve().parents[2] / "shared" / "data" / "gnss" / "broadcast-nav-20100701" / (
-    "brdc1820.10n"
-)
-"""Where the real broadcast orbits of 2010-07-01 live (../shared/data; never copied into the project)."""
+DATA_DIR = Path(__file__).resolve().parent / "data"
+"""Broadcast orbits shipped with the simulator (provenance and licence in data/NOTICE.md)."""
+DEFAULT_NAV_PATH = DATA_DIR / "broadcast-nav-20100701" / "brdc1820.10n"
+"""The real GPS broadcast orbits of 2010-07-01 (RTKLIB test data, BSD 2-Clause), the default world's sky."""
 DEFAULT_START = GpsTime(1590, 392_400 * 1_000_000_000)
 """2010-07-01 13:00:00 GPST (Thursday of GPS week 1590)."""
 

@@ -271,7 +271,7 @@ class World:
         if not nav_path.is_file():
             raise InputError(
                 f"navigation file {nav_path} not found: the simulator needs real broadcast orbits "
-                "(Scenario.nav_path; default ../shared/data/gnss/broadcast-nav-20100701/brdc1820.10n)"
+                "(Scenario.nav_path; default hil_sim/data/broadcast-nav-20100701/brdc1820.10n, shipped with the package)"
             )
         nav = read_rinex_nav(nav_path)
         self._alpha = nav.iono_alpha

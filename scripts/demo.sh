@@ -3,5 +3,5 @@
 # pseudo-terminal), then print what was recorded and where. Extra arguments go to `python -m hil_sim flight`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/setup.sh
+scripts/setup.sh onboard ground  # the simulator runs both roles: the recorder, onboard rtk, ground adjust
 exec .venv/bin/python -m hil_sim flight --out demo-output "$@"

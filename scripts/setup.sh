@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Set up directgeo on a fresh Debian / Raspberry Pi OS machine with Python ≥ 3.11:
-# a project virtualenv in .venv with the package and the extras named as arguments (e.g. "test").
+# a project virtualenv in .venv with the package and the extras named as arguments
+# (roles: "onboard" on the Pi, "ground" on the ground server; "onboard ground test" for the tests).
 # Idempotent: re-running only installs what changed.
 set -euo pipefail
 cd "$(dirname "$0")/.."

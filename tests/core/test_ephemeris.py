@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hil_sim.scenario import DEFAULT_NAV_PATH
 from onboard.formats.rinex_nav import read_rinex_nav
 from onboard.gnsstime import GpsTime
 from onboard.rtk.consts import CLIGHT_M_S
@@ -19,7 +20,7 @@ RTKLIB_EPH2POS = [
 
 
 def test_eph_position_matches_rtklib() -> None:
-    nav = read_rinex_nav(shared_file("gnss/broadcast-nav-20100701/brdc1820.10n"))
+    nav = read_rinex_nav(DEFAULT_NAV_PATH)
     for prn, iode, tow, x, y, z, dts in RTKLIB_EPH2POS:
         eph = next(e for e in nav.ephemerides if e.prn == prn and e.iode == iode)
         pos, clk = eph_position(eph, GpsTime.from_week_tow_s(1590, tow))
@@ -28,7 +29,7 @@ def test_eph_position_matches_rtklib() -> None:
 
 
 def test_rinex_nav_reads_header_and_all_gps_records() -> None:
-    nav = read_rinex_nav(shared_file("gnss/broadcast-nav-20100701/brdc1820.10n"))
+    nav = read_rinex_nav(DEFAULT_NAV_PATH)
     assert nav.iono_alpha is not None and nav.iono_beta is not None
     assert nav.leap_s == 15
     assert len(nav.ephemerides) == 421
@@ -43,7 +44,7 @@ def test_rinex3_mixed_nav_keeps_gps_only() -> None:
 
 
 def test_store_selects_nearest_toe_and_refuses_stale() -> None:
-    nav = read_rinex_nav(shared_file("gnss/broadcast-nav-20100701/brdc1820.10n"))
+    nav = read_rinex_nav(DEFAULT_NAV_PATH)
     store = EphemerisStore(nav.ephemerides)
     t = GpsTime.from_week_tow_s(1590, 350000.0)
     eph = store.select(1, t)
@@ -53,7 +54,7 @@ def test_store_selects_nearest_toe_and_refuses_stale() -> None:
 
 
 def test_satellite_states_and_signal_travel() -> None:
-    nav = read_rinex_nav(shared_file("gnss/broadcast-nav-20100701/brdc1820.10n"))
+    nav = read_rinex_nav(DEFAULT_NAV_PATH)
     store = EphemerisStore(nav.ephemerides)
     rcv = np.array([-3947762.0, 3364401.0, 3699431.0])  # near Tokyo
     t = GpsTime.from_week_tow_s(1590, 346000.0)

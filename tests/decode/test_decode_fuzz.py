@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from functools import cache
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -75,6 +76,7 @@ DAMAGE = st.sampled_from(["replace", "insert", "delete", "truncate"])
 @settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.sampled_from(["ubx/gpsd_ublox-neo-m8t.log", "ubx/pyublox_6P-raw-PPP-2.ubx"]), DAMAGE,
        st.integers(0, 10**9), st.binary(min_size=1, max_size=300), st.integers(1, 4096))
+@pytest.mark.slow
 def test_damaged_capture_resynchronises(name: str, kind: str, where: int, junk: bytes, chunk: int) -> None:
     """Corrupting, inserting, deleting or cutting bytes loses at most the frames the damage touches: every
     original frame wholly before or wholly after the damaged span is still framed and decoded identically."""

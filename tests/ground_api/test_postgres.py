@@ -75,6 +75,7 @@ def postgres_url() -> Iterator[str]:
         shutil.rmtree(root, ignore_errors=True)
 
 
+@pytest.mark.slow
 def test_interrupted_upload_resumes_on_postgresql(postgres_url: str, tmp_path: Path) -> None:
     """Same protocol as on SQLite: link lost after 3 chunks, server restarted on the same database, the next run
     sends only the rest and the files are byte-identical; a corrupted chunk is refused; the rows are in

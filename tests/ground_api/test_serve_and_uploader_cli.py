@@ -40,6 +40,7 @@ def _env(**extra: str) -> dict[str, str]:
     return env
 
 
+@pytest.mark.slow
 def test_serve_refuses_to_start_without_a_token(tmp_path: Path) -> None:
     out = subprocess.run([sys.executable, "-m", "ground", "serve", "--data-dir", str(tmp_path)], cwd=ROOT,
                          env=_env(), capture_output=True, text=True, timeout=60, check=False)

@@ -43,6 +43,7 @@ def test_parameter_rules() -> None:
         parameter_specs(AdjustJobOptions(delay_sigma_s=0.001))
 
 
+@pytest.mark.slow
 def test_adjust_free_recovers_truth_and_exports_utm(tmp_path: Path) -> None:
     truth = write_synthetic_flight(tmp_path)
     assert main(_args(tmp_path, "--estimate", "lever-arm,delay", "--crs", "EPSG:32630")) == 0
@@ -242,6 +243,7 @@ def test_calibrate_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     assert "bad.csv:2" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_report_shows_undetermined_parameters(tmp_path: Path) -> None:
     """to_dict() writes null for the σ (and correlations) of an undeterminable parameter: the report says
     "undetermined" instead of failing."""

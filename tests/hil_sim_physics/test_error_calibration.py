@@ -48,6 +48,7 @@ def _stats(rows: dict[int, list[tuple[float, float, float, int]]]) -> tuple[floa
     return math.sqrt(c0 / n0), (c1 / n1) / (c0 / n0)
 
 
+@pytest.mark.slow
 def test_simulated_code_error_is_as_large_and_as_time_correlated_as_a_real_m8p() -> None:
     obs = read_rinex_obs(shared_file("gnss/ublox-m8p-galway-2018/rinex/rover-20181004-1237.obs.gz")).epochs[:600]
     store = EphemerisStore(read_rinex_nav(shared_file("gnss/ublox-m8p-galway-2018/rinex/rover-20181004-1237.nav.gz"))
@@ -63,10 +64,10 @@ def test_simulated_code_error_is_as_large_and_as_time_correlated_as_a_real_m8p()
             if sats.ok[j] and el[j] >= MASK_RAD:
                 real.setdefault(int(prn), []).append((ep.time.diff_s(obs[0].time), cmc[j], el[j], int(ep.lli[g][j])))
 
-    from hil_sim.scenario import Scenario
+    from hil_sim.scenario import DEFAULT_NAV_PATH, Scenario
     from hil_sim.world import World
 
-    sc = Scenario.default("m8t", nav_path=shared_file("gnss/broadcast-nav-20100701/brdc1820.10n"), duration_s=620.0)
+    sc = Scenario.default("m8t", nav_path=DEFAULT_NAV_PATH, duration_s=620.0)
     world = World(sc)
     sim: dict[int, list[tuple[float, float, float, int]]] = {}
     for k in range(600):  # the static base antenna

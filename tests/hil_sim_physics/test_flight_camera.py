@@ -11,7 +11,7 @@ import pytest
 
 from hil_sim.camera import camera_event, camera_events, pulse_index_range, pulse_time
 from hil_sim.flight import Trajectory
-from hil_sim.scenario import CameraPlan, FlightPlan, Scenario
+from hil_sim.scenario import DEFAULT_NAV_PATH, CameraPlan, FlightPlan, Scenario
 from onboard.gnsstime import NS_PER_S
 from onboard.rtk.geodesy import ecef_to_enu
 
@@ -190,9 +190,8 @@ def test_camera_events_are_reproducible_per_pulse() -> None:
 
 def test_world_camera_events_give_truth_camera_positions_during_climb_lines_and_descent() -> None:
     from hil_sim.world import World
-    from tests.conftest import shared_file
 
-    world = World(Scenario.default(nav_path=shared_file("gnss/broadcast-nav-20100701/brdc1820.10n")))
+    world = World(Scenario.default(nav_path=DEFAULT_NAV_PATH))
     evs = world.camera_events(world.start, world.end)
     assert evs[0].pulse_time >= world.start.add_s(world.scenario.camera.valid_after_s)
     phases = set()

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from hil_sim.scenario import ErrorModel, FlightPlan, ReceiverModel, Scenario
+from hil_sim.scenario import DEFAULT_NAV_PATH, ErrorModel, FlightPlan, ReceiverModel, Scenario
 from hil_sim.world import OutsideSimulatedSpan, World
 from onboard.errors import InputError
 from onboard.gnsstime import GpsTime
@@ -18,14 +18,12 @@ from onboard.rtk.ephemeris import eph_position, eph_position_velocity
 from onboard.rtk.geodesy import azimuth_elevation, ecef_to_llh
 from onboard.rtk.models import klobuchar_m, saastamoinen_m
 from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP
-from tests.conftest import shared_file
 
-NAV = "gnss/broadcast-nav-20100701/brdc1820.10n"
 C_1MS_M = CLIGHT_M_S * 1e-3
 
 
 def make_world(**overrides: object) -> World:
-    nav = shared_file(NAV)
+    nav = DEFAULT_NAV_PATH
     model = str(overrides.pop("model", "m8t"))
     return World(Scenario.default(model, nav_path=nav, **overrides))
 
@@ -210,6 +208,7 @@ def _only(**fields: float) -> ErrorModel:
     return dataclasses.replace(ErrorModel.noise_free(), **fields)
 
 
+@pytest.mark.slow
 def test_white_noise_statistics_match_the_error_model() -> None:
     clean = make_world(errors=ErrorModel.noise_free())
     noisy = make_world(errors=_only(code_sigma_zenith_m=0.5, phase_sigma_zenith_m=0.003,
@@ -248,6 +247,7 @@ def test_cn0_follows_elevation_between_35_and_50_dbhz() -> None:
     assert np.corrcoef(c, e)[0, 1] > 0.8
 
 
+@pytest.mark.slow
 def test_multipath_is_first_order_gauss_markov_with_its_sigma_and_time_constant() -> None:
     clean = make_world(errors=ErrorModel.noise_free())
     mp = make_world(errors=_only(mp_code_sigma_zenith_m=0.5, mp_phase_sigma_zenith_m=0.001, mp_tau_s=30.0))
@@ -272,6 +272,7 @@ def test_multipath_is_first_order_gauss_markov_with_its_sigma_and_time_constant(
     assert np.std(pv) == pytest.approx(0.001, rel=0.2)
 
 
+@pytest.mark.slow
 def test_common_errors_cancel_between_receivers_and_iono_gradient_is_about_1_mm_per_km() -> None:
     """Orbit, satellite clock, iono model error and tropo residual are common: single differences of the
     same epoch see only the iono gradient (and geometry)."""
@@ -297,6 +298,7 @@ def test_common_errors_cancel_between_receivers_and_iono_gradient_is_about_1_mm_
     assert np.max(per_km) > 0.5e-3
 
 
+@pytest.mark.slow
 def test_cycle_slips_with_and_without_lli() -> None:
     errors = _only(slip_lli_rate_per_h=8.0, slip_undetected_rate_per_h=8.0, slip_undetected_max_cyc=3)
     world = make_world(errors=errors, flight=FlightPlan(fly=False))
@@ -322,6 +324,7 @@ def test_cycle_slips_with_and_without_lli() -> None:
     assert seen_lli >= 3 and seen_undetected >= 3
 
 
+@pytest.mark.slow
 def test_half_cycle_flag_after_acquisition_then_subtracted() -> None:
     errors = _only(slip_lli_rate_per_h=20.0, half_cycle_probability=1.0, half_cycle_resolve_s=2.0)
     world = make_world(errors=errors, flight=FlightPlan(fly=False))
@@ -351,7 +354,7 @@ def test_missing_navigation_file_is_a_clear_error(tmp_path) -> None:  # type: ig
 
 def test_scenario_time_without_ephemerides_and_bad_queries_are_rejected(clean_world: World) -> None:
     with pytest.raises(InputError, match="no healthy GPS ephemeris"):
-        World(Scenario.default(nav_path=shared_file(NAV), start=GpsTime(1600, 0)))
+        World(Scenario.default(nav_path=DEFAULT_NAV_PATH, start=GpsTime(1600, 0)))
     with pytest.raises(OutsideSimulatedSpan, match="outside the simulated span"):
         clean_world.observe("rover", clean_world.start.add_s(-3600))
     with pytest.raises(ValueError, match="unknown receiver"):

@@ -9,11 +9,9 @@ import numpy as np
 from hil_sim.flight import FlightPlan
 from hil_sim.scenario import ErrorModel, Scenario
 from hil_sim.world import World
-from tests.conftest import shared_file
 
 
 def test_common_errors_drift_smoothly_over_a_radio_gap() -> None:
-    shared_file("gnss/broadcast-nav-20100701/brdc1820.10n")
     # only the common errors (orbit, satellite clock, ionosphere model error, troposphere residual)
     common = dataclasses.replace(ErrorModel.noise_free(), orbit_sigma_m=0.3, sat_clock_sigma_m=0.3,
                                  iono_model_error_fraction=0.2, tropo_residual_zenith_sigma_m=0.02)

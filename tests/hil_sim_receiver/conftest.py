@@ -2,7 +2,7 @@
 
 `make_world` builds A1's `hil_sim.world.World` when it is importable; otherwise a deliberately small
 stand-in (geometric ranges from the real broadcast orbits, no error model) so the protocol tests can run.
-Both need the real broadcast file ../shared/data/gnss/broadcast-nav-20100701/brdc1820.10n (skip if absent).
+Both use the real broadcast file shipped with the simulator (hil_sim/data/broadcast-nav-20100701/brdc1820.10n).
 """
 
 from __future__ import annotations
@@ -18,6 +18,11 @@ from typing import Any
 import numpy as np
 import pytest
 
+from hil_sim.scenario import DEFAULT_NAV_PATH
+
+# The shipped broadcast file, absolute: other folders' tests call shared_file(NAV), which then finds it (a path
+# joined to an absolute one is that one) and runs on a clone without ../shared.
+NAV = str(DEFAULT_NAV_PATH)
 from onboard.formats.rinex_nav import read_rinex_nav
 from onboard.gnsstime import GpsTime
 from onboard.receiver.framing import Frame, Protocol, StreamFramer, ubx_frame
@@ -25,9 +30,7 @@ from onboard.rtk.consts import LAMBDA_L1_M
 from onboard.rtk.ephemeris import eph_position, geometric_range
 from onboard.rtk.geodesy import azimuth_elevation, llh_to_ecef
 from onboard.rtk.types import Ephemeris, ObsEpoch
-from tests.conftest import shared_file
 
-NAV = "gnss/broadcast-nav-20100701/brdc1820.10n"
 T0 = GpsTime(1590, 4 * 86400 * 10**9 + 2 * 3600 * 10**9)  # 2010-07-01 02:00 GPST
 
 
@@ -90,7 +93,7 @@ class StandInWorld:
 
 @pytest.fixture(scope="session")
 def broadcast_ephemerides() -> list[Ephemeris]:
-    return read_rinex_nav(shared_file(NAV)).ephemerides
+    return read_rinex_nav(DEFAULT_NAV_PATH).ephemerides
 
 
 @pytest.fixture

@@ -15,13 +15,11 @@ from hil_sim import ubx_encode as enc
 from hil_sim.pty_server import ReceiverEmulator
 from hil_sim.radio import RadioChannel, RadioLink, RadioOptions
 from hil_sim.receiver import ReceiverOptions
-from tests.conftest import shared_file
 
 pytestmark = pytest.mark.timeout(60)
 
 
 def test_base_and_rover_emulators_run_side_by_side_on_their_own_ptys(pty_client_factory) -> None:
-    shared_file("gnss/broadcast-nav-20100701/brdc1820.10n")
     from hil_sim.scenario import Scenario
     from hil_sim.world import World
 

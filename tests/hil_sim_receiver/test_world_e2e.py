@@ -18,7 +18,7 @@ from hil_sim import ubx_encode as enc
 from hil_sim.pty_server import ReceiverEmulator
 from hil_sim.receiver import M8T_TP5_DEFAULTS, ReceiverOptions
 from onboard.gnsstime import GpsTime
-from tests.conftest import PROJECT_ROOT, shared_file
+from tests.conftest import PROJECT_ROOT
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -26,7 +26,6 @@ VALID_AFTER_S = 4.0
 
 
 def make_world(model: str):
-    shared_file("gnss/broadcast-nav-20100701/brdc1820.10n")
     from hil_sim.scenario import Scenario
     from hil_sim.world import World
 
@@ -89,8 +88,8 @@ def test_configured_receiver_on_the_world_streams_raw_subframes_and_marks(model:
     assert trig and all(m.time == 1 for m in trig)
 
 
+@pytest.mark.slow
 def test_cli_prints_the_pty_path_answers_and_exits_cleanly_on_sigterm_and_sigint(pty_client_factory) -> None:
-    shared_file("gnss/broadcast-nav-20100701/brdc1820.10n")
     for sig in (signal.SIGTERM, signal.SIGINT):
         proc = subprocess.Popen([sys.executable, "-m", "hil_sim", "receiver", "--model", "lea6t", "--speed", "5",
                                  "--duration", "120"], cwd=PROJECT_ROOT, stdout=subprocess.PIPE,
@@ -112,6 +111,7 @@ def test_cli_prints_the_pty_path_answers_and_exits_cleanly_on_sigterm_and_sigint
                 proc.wait()
 
 
+@pytest.mark.slow
 def test_cli_reports_a_missing_navigation_file(tmp_path) -> None:
     proc = subprocess.run([sys.executable, "-m", "hil_sim", "receiver", "--model", "m8t", "--nav",
                            str(tmp_path / "missing.10n")], cwd=PROJECT_ROOT, capture_output=True, text=True,

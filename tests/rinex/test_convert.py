@@ -32,6 +32,7 @@ def m8p_converted(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_m8p_gps_observations_equal_rtklib(m8p_converted: Path) -> None:
     """Same epochs, satellites, values (to RINEX rounding) and LLI as RTKLIB convbin on the same log."""
     ours = read_rinex_obs(m8p_converted / "rover-20181004-1237.obs").epochs
@@ -212,6 +213,7 @@ def test_command_line_exit_code_without_traceback(tmp_path: Path) -> None:
     assert "Traceback" not in proc.stderr and "nope.ubx.gz: no such file" in proc.stderr
 
 
+@pytest.mark.slow
 def test_progress_bar_on_a_terminal_only(tmp_path: Path) -> None:
     """With stderr on a real pseudo-terminal the command draws a tqdm bar; piped, it prints none."""
     import fcntl

@@ -132,6 +132,7 @@ def test_real_ntrip_capture_1004_1077_1005_1019() -> None:
     assert abs(dt) < 2.0
 
 
+@pytest.mark.slow
 def test_m8p_lossy_base_stream_decodes_every_gps_epoch() -> None:
     path = shared_file("gnss/ublox-m8p-galway-2018/rtcm3/base-20181004-1236.rtcm3.gz")
     frames = iter_frames(gzip.decompress(path.read_bytes()))

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from onboard.formats.rinex_nav import read_rinex_nav
 from onboard.formats.rinex_obs import read_rinex_obs
@@ -89,6 +90,7 @@ def _assert_m8p_lossy_targets(q, fixed, enu, first_s) -> None:
     assert np.linalg.norm(enu[fixed], axis=1).max() <= 0.10
 
 
+@pytest.mark.slow
 def test_m8p_static_on_the_lossy_rtcm_base_rinex_meets_the_fix_targets_and_refixes_after_a_release():
     """The M8P base's lossy RTCM3 stream converted to RINEX (bench/rtk_accuracy.py row 1): 97.2 % fixed (was
     94.2 %), first fix 30 s (23 s before the static code factor, static_code_correlation_s). At epoch 421 G11's phase stops fitting the
@@ -102,6 +104,7 @@ def test_m8p_static_on_the_lossy_rtcm_base_rinex_meets_the_fix_targets_and_refix
     assert fixed[415:445].all()
 
 
+@pytest.mark.slow
 def test_m8p_static_on_the_raw_lossy_rtcm3_stream_meets_the_fix_targets():
     """The same base as the raw RTCM3 stream decoded in process (`onboard rtk --base …rtcm3.gz`, bench_rtk's
     "lossy RTCM" row): 96.3 % fixed (was 93.0 %), first fix 41 s (21 s before the static code factor)."""
@@ -149,6 +152,7 @@ def test_geonet_standing_still_keeps_the_five_satellite_tail_fixed_to_millimetre
     assert [s.ns for s in tail] == [5] * 6
 
 
+@pytest.mark.slow
 def test_m8p_walk_a_set_winning_for_under_a_minute_against_its_float_is_not_fixed():
     """M8P walk under trees (no truth), walker standing at epochs 1040-1095: an integer set wins the ratio test
     for 30-55 s while the float rejects it (Mahalanobis). Fixed, it would sit 79-82 cm from the M8P's own RTK

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from onboard.formats.rinex_nav import read_rinex_nav
 from onboard.formats.rinex_obs import read_rinex_obs
@@ -33,6 +34,7 @@ def test_backward_pass_from_the_end_of_the_m8p_glw1_run_never_fixes_wrong():
     assert max(err) <= 0.10, err
 
 
+@pytest.mark.slow
 def test_backward_pass_over_the_m8p_static_run_never_fixes_wrong():
     """Processed backward, the M8P run starts on its hardest minutes (float 0.78 m off with σ ≈ 0.2 m per axis
     from code multipath): the integer set left after partial AR dropped the 4 lowest of 10 satellites won 10 s

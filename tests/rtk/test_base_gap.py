@@ -53,6 +53,7 @@ def _run(world, rover, base, gap: range, slip_prn: int | None = None):
     return out
 
 
+@pytest.mark.slow
 def test_a_20_s_radio_gap_keeps_the_fix_without_wrong_fixes_and_fakes_no_slips(flight):
     world, rover, base = flight
     out = _run(world, rover, base, GAP)
@@ -75,6 +76,7 @@ def test_rover_slip_inside_a_radio_gap_is_caught_where_it_happens(flight):
     assert all(x[1] <= 0.10 for x in out if x[0] == Q_FIX)
 
 
+@pytest.mark.slow
 def test_past_30_s_without_base_single_then_the_fix_returns(flight):
     world, rover, base = flight
     out = _run(world, rover, base, LONG_GAP)

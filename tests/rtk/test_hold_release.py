@@ -4,6 +4,7 @@ keep the fix); several at once release the whole hold. Never a Q=1 epoch more th
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.types import Q_FIX
@@ -17,6 +18,7 @@ def _two_slips(prns: list[int]):
     return lambda k, rov, bas: second(k, *first(k, rov, bas))
 
 
+@pytest.mark.slow
 def test_one_undetected_slip_in_a_held_set_resets_that_satellite_only(nav):  # noqa: F811
     """1 cycle without LLI is under the Doppler test's 2-cycle threshold: the post-fit residual catches it."""
     prn = _visible_prns(nav)[2]
@@ -30,6 +32,7 @@ def test_one_undetected_slip_in_a_held_set_resets_that_satellite_only(nav):  # n
     assert st.held_prns[prn - 1] or st.lock[prn - 1] < 70 - SLIP_EPOCH + 1  # it restarted at the slip
 
 
+@pytest.mark.slow
 def test_two_satellites_slipping_at_once_release_the_hold(nav):  # noqa: F811
     prns = _visible_prns(nav)[2:4]
     sols, truths, st = _run(nav, 70, RtkOptions(), tamper=_two_slips(prns))

@@ -62,6 +62,7 @@ def _run(nav: Nav, options: RtkOptions, n: int = 240):
 ON = RtkOptions()
 
 
+@pytest.mark.slow
 def test_iono_states_fix_the_right_integers_and_less_biased_than_the_ambiguity_walk(nav):
     # (with L1 alone the states stay near their prior: what they change is the fixed position's bias)
     sols, st, _slant, pos = _run(nav, ON)
@@ -95,6 +96,7 @@ def test_no_iono_states_on_short_baselines(nav):
     assert not a.iono_on and a.x.size == NXI and a.p.shape == (NXI, NXI)  # no ionosphere columns at all
 
 
+@pytest.mark.slow
 def test_dropping_the_states_folds_them_into_the_ambiguities(nav):
     """_drop_iono keeps what the phase sees: λ·N − m(el)·I per satellite (value and variance) becomes λ·N'."""
     _, st, _, _ = _run(nav, ON, n=60)

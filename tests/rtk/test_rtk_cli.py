@@ -145,6 +145,7 @@ def test_one_xyz_check_behind_the_positions_of_the_command_lines(capsys):
         assert capsys.readouterr().err.startswith(f"directgeo: base: error: --position {bad}: must be ")
 
 
+@pytest.mark.slow
 def test_ubx_rover_log_with_its_own_ephemerides(tmp_path, capsys):
     """The raw M8P rover log (RXM-RAWX + RXM-SFRBX, gzip) needs no --nav: ephemerides come from the log."""
     d = "gnss/ublox-m8p-galway-2018/"

@@ -50,6 +50,7 @@ def _run(nav: Nav, n: int, options: RtkOptions, velocity_enu_m_s=(0.0, 0.0, 0.0)
     return sols, truths, st
 
 
+@pytest.mark.slow
 def test_noise_free_static_rover_fixes_and_matches_truth_to_a_millimetre(nav):
     sols, truths, st = _run(nav, 60, RtkOptions())
     fixed = [(s, p) for s, (_, p) in zip(sols, truths) if s.q == Q_FIX]
@@ -65,6 +66,7 @@ def test_noise_free_static_rover_fixes_and_matches_truth_to_a_millimetre(nav):
     assert st.slips == 0
 
 
+@pytest.mark.slow
 def test_noise_free_moving_rover_tracks_truth_and_velocity(nav):
     sols, truths, _ = _run(nav, 60, RtkOptions(), velocity_enu_m_s=(4.0, 3.0, 0.5))
     fixed = [(s, p) for s, (_, p) in zip(sols, truths) if s.q == Q_FIX]
@@ -85,6 +87,7 @@ def test_without_known_point_the_first_epoch_is_not_fixed(nav):
     assert sols[0].q == Q_FLOAT
 
 
+@pytest.mark.slow
 def test_noisy_kinematic_run_has_no_wrong_fix(nav):
     sols, truths, _ = _run(nav, 90, RtkOptions(), velocity_enu_m_s=(3.0, 0.0, 0.0), noise=True)
     q = np.array([s.q for s in sols])
@@ -124,6 +127,7 @@ def _slip_tamper(prn: int, at: int, cycles: float, lli: bool, on_base: bool = Fa
     [(7.0, True, False, "LLI flag"), (7.0, False, False, "Doppler-predicted phase"),
      (7.0, False, True, "base geometry residual")],
 )
+@pytest.mark.slow
 def test_slip_detectors_reset_only_the_slipped_ambiguity(nav, cycles, lli, on_base, detector):
     prn = _visible_prns(nav)[2]
     seen: dict[str, np.ndarray] = {}
@@ -145,6 +149,7 @@ def test_slip_detectors_reset_only_the_slipped_ambiguity(nav, cycles, lli, on_ba
     assert np.linalg.norm(sols[-1].pos_ecef_m - truths[-1][1]) < 2e-3
 
 
+@pytest.mark.slow
 def test_undetected_small_slip_after_hold_is_not_reported_as_a_wrong_fix(nav):
     """A 1-cycle slip without LLI is below the Doppler test's threshold: it must be noticed (by the residuals
     of a held fix, or, the standing rover's code weighted once per 17 s delaying the fix to 3 epochs before the
@@ -208,6 +213,7 @@ def test_phase_gap_without_lli_is_a_slip_unless_the_doppler_bridges_it(nav, cycl
     assert st.slips == slips
 
 
+@pytest.mark.slow
 def test_first_fix_waits_until_the_integer_set_has_won_the_ratio_test_for_confirm_fix_span_s(nav):
     """No held set, no known start: the winning integer set must keep winning for confirm_fix_span_s before
     Q=1 (the real-time chain's 1.5 s wrong fix of a float 4 m off); a full set (no satellite dropped) needs

@@ -34,6 +34,7 @@ _WITHOUT_STATIC_CODE_FACTOR = RtkOptions(static_code_correlation_s=0.0)
 
 
 @pytest.mark.parametrize("model", ["lea6t", "m8t"])
+@pytest.mark.slow
 def test_radio_gaps_of_5_10_20_s_while_flying_keep_the_fix(model: str) -> None:
     gaps = ((100.0, 105.0), (120.0, 130.0), (150.0, 170.0))
     r = _run(model, gaps_s=gaps)
@@ -46,6 +47,7 @@ def test_radio_gaps_of_5_10_20_s_while_flying_keep_the_fix(model: str) -> None:
     assert set(q[in_gap].tolist()) <= {Q_FIX, Q_FLOAT}  # never single on base data ≤ 30 s old
 
 
+@pytest.mark.slow
 def test_a_45_s_gap_goes_single_past_30_s_never_wrong_and_fixes_after() -> None:
     r = _run("lea6t", gaps_s=((110.0, 155.0),))
     q, stale = r["q"], r["age_s"] > 30.0
@@ -64,6 +66,7 @@ def test_known_take_off_point_fixes_at_the_first_epoch() -> None:
     assert r["slips"] <= 8
 
 
+@pytest.mark.slow
 def test_five_satellites_never_report_a_wrong_fix() -> None:
     # 5 satellites (the 5 highest): even the right integers give 3D errors up to 11 cm (σ 6.6 cm) in flight,
     # so the engine holds the fix internally and reports float; nothing it reports as fixed is wrong
@@ -74,12 +77,14 @@ def test_five_satellites_never_report_a_wrong_fix() -> None:
     assert r["max cm"] < 2.0  # … to the centimetre (static mode)
 
 
+@pytest.mark.slow
 def test_undetected_slips_make_no_wrong_fix() -> None:
     r = _run("m8t", undetected_slips_per_h=2.0)
     assert r["wrong"] == 0 and r["slips"] >= 5
 
 
 @pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.slow
 def test_5_km_baseline_never_fixes_wrong(seed: int) -> None:
     # seed 2 fixed a set ~1.6 m off at 74 s and held it before the baseline-scaled ambiguity noise; seed 1 one
     # 1.6 m off at 58 s (a partial set after 10 s of wins) before the partial-set confirmation outlasted the
@@ -89,6 +94,7 @@ def test_5_km_baseline_never_fixes_wrong(seed: int) -> None:
 
 
 
+@pytest.mark.slow
 def test_undetected_slips_2_per_hour_in_a_600_s_flight_keep_most_airborne_epochs_fixed() -> None:
     # a slip of the DD reference makes every phase residual fail the held fix's check at once: resetting
     # the reference alone (not all seven) keeps the flight fixed (71.6 % → 91.1 % airborne on this one)
@@ -96,6 +102,7 @@ def test_undetected_slips_2_per_hour_in_a_600_s_flight_keep_most_airborne_epochs
     assert r["wrong"] == 0 and r["air fix %"] >= 90.0 and r["3D RMS cm"] <= 2.0
 
 
+@pytest.mark.slow
 def test_the_rover_is_held_static_on_the_ground_and_released_at_take_off(caplog: pytest.LogCaptureFixture) -> None:
     """Standstill detection (time-differenced phase) holds the waiting drone static 10 s after the start and
     lets go at take-off (60 s), once each: no flapping on the ground or in flight, and no wrong fix around it."""
@@ -115,6 +122,7 @@ def test_the_rover_is_held_static_on_the_ground_and_released_at_take_off(caplog:
     assert r["wrong"] == 0 and r["air fix %"] >= 99.0
 
 
+@pytest.mark.slow
 def test_lea6t_half_cycle_resolved_after_a_slip_makes_no_wrong_fix() -> None:
     # seed 2: rover PRN 27 slips at 510.7 s, its half cycle is resolved (phase moved ½ cycle, RXM-RAW reports
     # no slip) at 513 s; kept, that step made the held set exclude the wrong satellite: 22 fixes 8-16 cm off
@@ -124,6 +132,7 @@ def test_lea6t_half_cycle_resolved_after_a_slip_makes_no_wrong_fix() -> None:
     assert np.all(q[505:560] == Q_FIX)  # the held fix carries on through the slip and the parity fix
 
 
+@pytest.mark.slow
 def test_a_cold_start_fixes_when_the_right_set_keeps_winning_against_an_overconfident_float() -> None:
     # seed 3 (measured u-blox error model), its standing code weighted as independent every epoch
     # (static_code_correlation_s = 0): the right integer set wins the ratio test from 25 s on while the float,
@@ -135,6 +144,7 @@ def test_a_cold_start_fixes_when_the_right_set_keeps_winning_against_an_overconf
     assert r["first fix s"] <= 90.0 and r["air fix %"] >= 95.0 and r["3D RMS cm"] <= 2.0
 
 
+@pytest.mark.slow
 def test_a_cold_start_settles_faster_once_the_rover_flies() -> None:
     # seed 2, its standing code weighted every epoch: the float is 2.2-2.9 m off through the 60 s on the
     # ground (static code multipath, σ of a few decimetres); the right full set wins the ratio test from 65 s
@@ -149,6 +159,7 @@ def test_a_cold_start_settles_faster_once_the_rover_flies() -> None:
     assert static_rate["first fix s"] >= 120.0 and static_rate["wrong"] == 0
 
 
+@pytest.mark.slow
 def test_standing_code_counted_once_per_correlation_time_fixes_the_cold_start_on_the_ground() -> None:
     # the same seed with the default static_code_correlation_s (17 s): the standing rover's code gets 17×
     # its variance, the float stops trusting one draw of the multipath as if it were 60, and the right set
@@ -158,6 +169,7 @@ def test_standing_code_counted_once_per_correlation_time_fixes_the_cold_start_on
     assert r["air fix %"] == 100.0 and r["3D RMS cm"] <= 2.0
 
 
+@pytest.mark.slow
 def test_a_partial_set_at_5_km_waits_longer_for_its_confirmation() -> None:
     # seed 7: a partial set 1.5 m off won the ratio test (3.1-3.5) for 30 s and was fixed for 3 epochs; the
     # differential ionosphere keeps a u-blox float off for minutes: 6 s per km more (confirm_fix_span_per_km_s)
@@ -165,6 +177,7 @@ def test_a_partial_set_at_5_km_waits_longer_for_its_confirmation() -> None:
     assert r["wrong"] == 0 and r["air fix %"] >= 70.0
 
 
+@pytest.mark.slow
 def test_a_partial_set_contradicting_the_full_set_is_not_a_first_fix() -> None:
     # seed 17 at 5 km: partial AR's survivor (6 satellites) had PRN 11, 14 and 25 one cycle off the full set's
     # best integers, won the ratio test at 6-9 for 60 s on a float 10 cm from the truth, and was fixed 35 cm off
@@ -177,6 +190,7 @@ def test_a_partial_set_contradicting_the_full_set_is_not_a_first_fix() -> None:
     assert unchecked["wrong"] > 50
 
 
+@pytest.mark.slow
 def test_no_cold_first_fix_beyond_the_maximum_baseline_but_a_known_take_off_point_fixes() -> None:
     # seed 12 at 20 km: the full set won the ratio test on a float biased by the differential ionosphere and was
     # fixed 28 cm off at 95 s and held, without max_first_fix_baseline_km
@@ -192,6 +206,7 @@ def test_no_cold_first_fix_beyond_the_maximum_baseline_but_a_known_take_off_poin
     assert known["air fix %"] >= 99.0 and known["3D RMS cm"] <= 2.0
 
 
+@pytest.mark.slow
 def test_a_float_stuck_on_absorbed_slips_restarts_instead_of_fixing_wrong() -> None:
     # the 19:00 sky (6 satellites over the mask), undetected slips 2/h, seed 1: slips absorbed during the cold
     # start left the float 1.7 m off while its ambiguities looked determined (success rate 1.0, ratio 1.0-1.8
@@ -206,6 +221,7 @@ def test_a_float_stuck_on_absorbed_slips_restarts_instead_of_fixing_wrong() -> N
     assert never["wrong"] > 100 and never["float restarts"] == 0
 
 
+@pytest.mark.slow
 def test_one_cycle_base_slips_are_caught_by_the_base_geometry_check() -> None:
     # seed 3, undetected slips 2/h: base PRN 11 and 17 slip by -1 cycle (no LLI) at 256.8 and 260.6 s, under a
     # held fix; a 1.0-cycle threshold on the base's phase - range step let both through and the hold settled
@@ -216,6 +232,7 @@ def test_one_cycle_base_slips_are_caught_by_the_base_geometry_check() -> None:
     assert np.all(r["q"][250:] == Q_FIX)
 
 
+@pytest.mark.slow
 def test_a_one_cycle_rover_slip_under_a_held_fix_is_caught_by_the_doppler() -> None:
     # seed 6, undetected slips 2/h: rover PRN 17 slips +1 cycle (no LLI) at 330.7 s under a held fix; the
     # Doppler test at 2 cycles let it through and the hold settled 18 cm off (268 wrong epochs, main too)
@@ -223,6 +240,7 @@ def test_a_one_cycle_rover_slip_under_a_held_fix_is_caught_by_the_doppler() -> N
     assert r["wrong"] == 0 and r["air fix %"] >= 95.0 and r["3D RMS cm"] <= 2.0
 
 
+@pytest.mark.slow
 def test_a_slip_the_hold_absorbed_is_excluded_not_an_innocent_satellite() -> None:
     # seed 15, undetected slips 2/h: rover PRN 17 slips -1 cycle (no LLI) at 317.3 s in a manoeuvre. With the
     # fixed Doppler threshold alone (slip_outlier_factor = 0) the test sees 0.83 < 0.85 cycle and, a
@@ -245,6 +263,7 @@ def test_a_slip_the_hold_absorbed_is_excluded_not_an_innocent_satellite() -> Non
     assert r["wrong"] == 0 and r["air fix %"] >= 99.0
 
 
+@pytest.mark.slow
 def test_a_base_half_cycle_arc_does_not_reach_the_rover_unflagged() -> None:
     # seed 10, undetected slips 2/h: base PRN 27 restarts (LLI) with an unresolved half cycle at 372.7 s; sent
     # in 1004, which cannot flag it, as whole-cycle phase, the held set ended 10-15 cm off (10 fixes, 380-409 s). The base

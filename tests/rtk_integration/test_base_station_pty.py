@@ -50,6 +50,7 @@ def _read_all(fd: int, into: bytearray, stop: threading.Event) -> None:
                 pass
 
 
+@pytest.mark.slow
 def test_base_station_sends_rtcm_matching_its_journal_within_budget(tmp_path: Path) -> None:
     shared_file("gnss/broadcast-nav-20100701/brdc1820.10n")
     from hil_sim.pty_server import ReceiverEmulator
@@ -138,6 +139,7 @@ def test_base_station_sends_rtcm_matching_its_journal_within_budget(tmp_path: Pa
     np.testing.assert_allclose(snap["position_ecef_m"], world.base_ecef_m, atol=1e-3)
 
 
+@pytest.mark.slow
 def test_python_m_onboard_base_end_to_end_and_sigterm(tmp_path: Path) -> None:
     """The command itself (a subprocess): configures the emulated LEA-6T, sends 1004 + 1006, stops on SIGTERM."""
     import signal
@@ -197,6 +199,7 @@ def test_python_m_onboard_base_end_to_end_and_sigterm(tmp_path: Path) -> None:
     assert len(flights) == 1 and (flights[0] / "radio-tx.rtcm3").read_bytes() == bytes(got)
 
 
+@pytest.mark.slow
 def test_survey_in_over_the_emulated_base_gates_corrections_and_lands_near_the_antenna(tmp_path: Path) -> None:
     shared_file("gnss/broadcast-nav-20100701/brdc1820.10n")
     from hil_sim.pty_server import ReceiverEmulator

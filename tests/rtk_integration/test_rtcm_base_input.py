@@ -47,6 +47,7 @@ def test_rtcm_base_epochs_equal_convbins_rinex_of_the_same_stream() -> None:
     assert all(b.time > a.time for a, b in zip(base.epochs, base.epochs[1:]))
 
 
+@pytest.mark.slow
 def test_rover_raw_log_with_the_lossy_rtcm_base_fixes_at_the_reference() -> None:
     rover = read_observations(shared_file(M8P + "raw/rover-20181004-1237.ubx.gz"))
     base = read_base_observations(shared_file(M8P + "rtcm3/base-20181004-1236.rtcm3.gz"), rover.epochs[0].time)

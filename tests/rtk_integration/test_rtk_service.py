@@ -101,6 +101,7 @@ def _run_service(world, tmp_path: Path, gaps, options: RtkServiceOptions | None 
     return svc, list(sent), flight, ages
 
 
+@pytest.mark.slow
 def test_radio_gaps_degrade_without_wrong_fixes_and_fix_again_after(world, tmp_path) -> None:
     svc, sent, flight, ages = _run_service(world, tmp_path, GAPS_S)
     track = read_pos(flight / SOLUTION_NAME)

@@ -32,6 +32,7 @@ NO_FLASH = 1
 BOUNCE_AT = 4  # event 4's flash bounces 3 ms later (same epoch: TIM-TM2 loses an edge, count jumps)
 
 
+@pytest.mark.slow
 def test_every_simulated_flash_paired_with_the_simulators_delay() -> None:
     from onboard.formats.rinex_nav import read_rinex_nav
 

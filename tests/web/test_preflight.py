@@ -142,6 +142,7 @@ def live_page(tmp_path: Path) -> Iterator[tuple[str, Path]]:
     thread.join(timeout=5)
 
 
+@pytest.mark.slow
 def test_page_in_a_real_browser_follows_the_snapshot(live_page: tuple[str, Path]) -> None:
     if not CHROMIUM.exists():
         pytest.skip("Debian's chromium is not installed (scripts/test.sh installs it when run as root)")
