@@ -2,6 +2,7 @@
 
 The first stdout line is the pty slave path (flushed), so a parent process can read it and open the port.
 `python -m hil_sim radio …` prints "<base-side pty> <drone-side pty>" and forwards between them.
+`python -m hil_sim autopilot …` prints its pty slave path (or "udp:HOST:PORT") and flies its script.
 """
 
 from __future__ import annotations
@@ -73,6 +74,24 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--gap-min", type=float, default=5.0)
     a.add_argument("--gap-max", type=float, default=20.0)
     a.add_argument("-v", "--verbose", action="store_true")
+    ap = sub.add_parser("autopilot", help="ArduCopter stand-in: MAVLink on a raw pty or UDP, scripted flight")
+    ap.add_argument("--udp", metavar="HOST:PORT", help="send to the companion there (default: a raw pty)")
+    ap.add_argument("--speed", type=float, default=1.0, help="simulated time runs N× real time")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--system-id", type=int, default=1, help="the vehicle's MAVLink system id")
+    ap.add_argument("--arm-at", type=float, default=10.0, help="simulated s on the ground before arming")
+    ap.add_argument("--survey", type=float, default=30.0, help="simulated s of survey lines in the air")
+    ap.add_argument("--mavlink1", action="store_true", help="MAVLink 1 only: send v1, ignore v2 frames")
+    ap.add_argument("--no-gcs-heartbeat", action="store_true", help="do not forward a ground station's heartbeat")
+    ap.add_argument("--link-loss", type=_window, action="append", default=[], metavar="AT_S:DURATION_S")
+    ap.add_argument("--heartbeat-stop", type=_window, action="append", default=[], metavar="AT_S:DURATION_S")
+    ap.add_argument("--reboot-at", type=float, action="append", default=[], metavar="AT_S")
+    ap.add_argument("--rtcm", help="file of RTCM3 bytes to inject as GPS_RTCM_DATA (one message per interval)")
+    ap.add_argument("--rtcm-interval", type=float, default=0.5, help="simulated s between RTCM messages")
+    ap.add_argument("--drop-fragment-rate", type=float, default=0.0, help="probability per GPS_RTCM_DATA fragment")
+    ap.add_argument("--reorder-fragments", action="store_true", help="shuffle each message's fragments")
+    ap.add_argument("--report", help="JSON file: what the stand-in heard and sent (rewritten twice a second)")
+    ap.add_argument("-v", "--verbose", action="store_true")
     from hil_sim.mission import add_parser as add_flight_parser
 
     add_flight_parser(sub)
@@ -166,6 +185,37 @@ def run_receiver(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_autopilot(args: argparse.Namespace) -> int:
+    """Print the pty slave path (or "udp:HOST:PORT") and fly the script until a signal."""
+    from pathlib import Path
+
+    from hil_sim.autopilot import AutopilotSim, options_from_args
+
+    target = None
+    if args.udp:
+        host, _, port = args.udp.rpartition(":")
+        if not host or not port.isdigit():
+            print(f"hil_sim autopilot: --udp {args.udp!r}: expected HOST:PORT", file=sys.stderr)
+            return 2
+        target = (host, int(port))
+    try:
+        options = options_from_args(args)
+    except OSError as exc:
+        print(f"hil_sim autopilot: --rtcm: {exc}", file=sys.stderr)
+        return 2
+    sim = AutopilotSim(options, speed=args.speed, udp_target=target,
+                       report_path=Path(args.report) if args.report else None)
+    done = _wait_for_signal()
+    print(sim.start(), flush=True)
+    try:
+        while not done.wait(0.2):
+            if sim.error is not None:
+                return 1
+    finally:
+        sim.stop()
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of `python -m hil_sim`."""
     args = build_parser().parse_args(argv)
@@ -175,6 +225,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run_receiver(args)
     if args.command == "radio":
         return run_radio(args)
+    if args.command == "autopilot":
+        return run_autopilot(args)
     if args.command == "flight":
         logging.getLogger().setLevel(logging.WARNING)
         return int(args.func(args))
