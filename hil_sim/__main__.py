@@ -87,6 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--heartbeat-stop", type=_window, action="append", default=[], metavar="AT_S:DURATION_S")
     ap.add_argument("--reboot-at", type=float, action="append", default=[], metavar="AT_S")
     ap.add_argument("--rtcm", help="file of RTCM3 bytes to inject as GPS_RTCM_DATA (one message per interval)")
+    ap.add_argument("--rtcm-start", type=float, default=1.0, help="simulated s before the first RTCM message")
     ap.add_argument("--rtcm-interval", type=float, default=0.5, help="simulated s between RTCM messages")
     ap.add_argument("--drop-fragment-rate", type=float, default=0.0, help="probability per GPS_RTCM_DATA fragment")
     ap.add_argument("--reorder-fragments", action="store_true", help="shuffle each message's fragments")

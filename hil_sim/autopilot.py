@@ -427,7 +427,8 @@ def options_from_args(args: Any) -> AutopilotSimOptions:
     return dataclasses.replace(
         AutopilotSimOptions(), system_id=args.system_id, arm_at_s=args.arm_at, survey_s=args.survey,
         mavlink1=args.mavlink1, link_loss=tuple(args.link_loss), heartbeat_stop=tuple(args.heartbeat_stop),
-        reboot_at_s=tuple(args.reboot_at), rtcm_messages=rtcm, rtcm_interval_s=args.rtcm_interval,
+        reboot_at_s=tuple(args.reboot_at), rtcm_messages=rtcm, rtcm_start_s=args.rtcm_start,
+        rtcm_interval_s=args.rtcm_interval,
         drop_fragment_rate=args.drop_fragment_rate, reorder_fragments=args.reorder_fragments, seed=args.seed,
         gcs_heartbeat=not args.no_gcs_heartbeat)
 
