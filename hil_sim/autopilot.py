@@ -104,8 +104,8 @@ class AutopilotCore:
         self.silent_until = -1.0
         self.intervals: dict[int, float] = {}
         self._next: dict[int, float] = {}
-        self._next_hb = 0.0
-        self._next_gcs_hb = 0.5
+        self._next_hb = 0.3
+        self._next_gcs_hb = 0.0  # the ground station's first: a companion must not take it for the autopilot
         self._next_rtcm = options.rtcm_start_s
         self._rtcm_index = 0
         self._rtcm_seq = 0

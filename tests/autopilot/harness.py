@@ -8,7 +8,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 from hil_sim.autopilot import AutopilotCore, AutopilotSimOptions
 from onboard.autopilot.corrections import CorrectionsPipe
@@ -67,7 +67,7 @@ class Joined:
                 self.to_link.put(frame)
             time.sleep(0.005)
 
-    def __enter__(self) -> Joined:
+    def __enter__(self) -> Self:
         self._t0 = time.monotonic()
         self.link.start(self.tmp, self.events.append)
         self._thread.start()

@@ -10,7 +10,7 @@ import pytest
 
 from hil_sim.autopilot import AutopilotSimOptions
 from onboard.autopilot.corrections import CorrectionsPipe
-from onboard.autopilot.feature import STREAMS, AutopilotOptions
+from onboard.autopilot.feature import STREAMS
 from tests.autopilot.harness import Joined
 from tests.autopilot.rtcm_frames import rtcm_frame
 
