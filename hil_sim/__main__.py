@@ -79,6 +79,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--speed", type=float, default=1.0, help="simulated time runs N× real time")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--system-id", type=int, default=1, help="the vehicle's MAVLink system id")
+    ap.add_argument("--mission", action="store_true",
+                    help="fly the receiver's default mission (hil_sim.scenario / flight), not the short script")
     ap.add_argument("--arm-at", type=float, default=10.0, help="simulated s on the ground before arming")
     ap.add_argument("--survey", type=float, default=30.0, help="simulated s of survey lines in the air")
     ap.add_argument("--mavlink1", action="store_true", help="MAVLink 1 only: send v1, ignore v2 frames")
@@ -204,8 +206,14 @@ def run_autopilot(args: argparse.Namespace) -> int:
     except OSError as exc:
         print(f"hil_sim autopilot: --rtcm: {exc}", file=sys.stderr)
         return 2
+    flight = None
+    if args.mission:
+        from hil_sim.autopilot import MissionFlight
+        from hil_sim.scenario import Scenario
+
+        flight = MissionFlight(Scenario.default(seed=args.seed))
     sim = AutopilotSim(options, speed=args.speed, udp_target=target,
-                       report_path=Path(args.report) if args.report else None)
+                       report_path=Path(args.report) if args.report else None, flight=flight)
     done = _wait_for_signal()
     print(sim.start(), flush=True)
     try:

@@ -86,13 +86,119 @@ class _Collect:
         return len(data)
 
 
+class ScriptedFlight:
+    """A short scripted flight: ground, arm, spool, take-off climb to 40 m, lawn-mower lines at 5 m/s, land,
+    disarm (times from `AutopilotSimOptions`)."""
+
+    def __init__(self, o: AutopilotSimOptions) -> None:
+        self.o = o
+        self.camera_period_s = o.camera_period_s
+        self.utc_start = o.utc_start
+        self.t_takeoff = o.arm_at_s + o.spool_s
+        self.t_air = self.t_takeoff + o.takeoff_s
+        self.t_land = self.t_air + o.survey_s
+        self.t_down = self.t_land + o.landing_s
+
+    def phase(self, t: float) -> tuple[bool, int, int]:
+        """(armed, landed_state, custom_mode) at simulated time `t`."""
+        if t < self.o.arm_at_s:
+            return False, 1, COPTER_LOITER
+        if t < self.t_takeoff:
+            return True, 1, COPTER_AUTO
+        if t < self.t_air:
+            return True, 3, COPTER_AUTO
+        if t < self.t_land:
+            return True, 2, COPTER_AUTO
+        if t < self.t_down:
+            return True, 4, COPTER_LAND
+        return t < self.t_down + self.o.disarm_after_s, 1, COPTER_LAND
+
+    def camera_active(self, t: float) -> bool:
+        """Whether the camera triggers at `t` (on the survey lines)."""
+        return self.phase(t)[1] == 2
+
+    def pose(self, t: float) -> Pose:
+        """Where the vehicle is and how it is turned at `t`."""
+        _, landed, _ = self.phase(t)
+        east = north = up = yaw = 0.0
+        if landed == 3:
+            up = 40.0 * (t - self.t_takeoff) / self.o.takeoff_s
+        elif landed == 4:
+            up = 40.0 * (1 - (t - self.t_land) / self.o.landing_s)
+        elif landed == 2:
+            s = 5.0 * (t - self.t_air)  # 5 m/s along 50 m lines, 10 m apart
+            line, along = divmod(s, 50.0)
+            east, north, up = (along if int(line) % 2 == 0 else 50.0 - along), 10.0 * line, 40.0
+            yaw = math.pi / 2 if int(line) % 2 == 0 else -math.pi / 2
+        lat = SITE_LAT_DEG + north / 111_320.0
+        lon = SITE_LON_DEG + east / (111_320.0 * math.cos(math.radians(SITE_LAT_DEG)))
+        roll = 0.05 * math.sin(t) if landed == 2 else 0.0
+        return Pose(lat, lon, SITE_ALT_M + up, up, roll, 0.02, yaw)
+
+
+class MissionFlight:
+    """The receiver's simulated mission (`hil_sim.flight.Trajectory` of a `Scenario`): armed `spool_s` before
+    the climb until `disarm_after_s` after touchdown; landed_state TAKEOFF for the first 2 m of the climb,
+    LANDING on the descent; attitude and position from the trajectory; camera triggers on the survey lines."""
+
+    def __init__(self, scenario: Any, spool_s: float = 2.0, disarm_after_s: float = 3.0) -> None:
+        from hil_sim.flight import Trajectory
+        from onboard.rtk.geodesy import ecef_to_llh
+
+        self.traj = Trajectory(scenario.flight, scenario.start, scenario.site_lat_deg, scenario.site_lon_deg,
+                               scenario.site_h_m)
+        self._llh = ecef_to_llh
+        self.site_h_m = scenario.site_h_m
+        self.spool_s, self.disarm_after_s = spool_s, disarm_after_s
+        self.camera_period_s = scenario.camera.period_s
+        self.utc_start = scenario.start.to_utc()
+
+    def phase(self, t: float) -> tuple[bool, int, int]:
+        """(armed, landed_state, custom_mode) at simulated time `t` (s since the scenario's start)."""
+        st = self.traj.state_at_s(t)
+        takeoff, landing = self.traj.takeoff_s, self.traj.landing_s
+        armed = bool(takeoff - self.spool_s <= t < landing + self.disarm_after_s)
+        if st.phase == "climb":
+            return True, (3 if st.pos_enu_m[2] < 2.0 else 2), COPTER_AUTO
+        if st.phase == "descent":
+            return True, 4, COPTER_LAND
+        if st.phase == "ground":
+            return armed, 1, (COPTER_LAND if t >= landing else COPTER_AUTO if armed else COPTER_LOITER)
+        return True, 2, COPTER_AUTO
+
+    def camera_active(self, t: float) -> bool:
+        """Whether the camera triggers at `t` (on the survey lines)."""
+        return self.traj.state_at_s(t).phase == "line"
+
+    def pose(self, t: float) -> Pose:
+        """The trajectory's antenna position and body attitude at `t`."""
+        st = self.traj.state_at_s(t)
+        lat, lon, h = self._llh(st.pos_ecef_m)
+        return Pose(math.degrees(lat), math.degrees(lon), float(h), float(st.pos_enu_m[2]), st.roll_rad,
+                    st.pitch_rad, st.yaw_rad)
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Position (deg, m above the ellipsoid, m above take-off) and attitude (rad) of the vehicle."""
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    relative_alt_m: float
+    roll_rad: float
+    pitch_rad: float
+    yaw_rad: float
+
+
 class AutopilotCore:
     """The vehicle in simulated time (see module doc). `step(t_s)` → packets to send; `receive(data, t_s)`."""
 
-    def __init__(self, options: AutopilotSimOptions) -> None:
+    def __init__(self, options: AutopilotSimOptions, flight: ScriptedFlight | MissionFlight | None = None) -> None:
         from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
         self.o = options
+        self.flight = flight or ScriptedFlight(options)
         self.mavlink = mavlink
         self._out = _Collect()
         self.mav = mavlink.MAVLink(self._out, srcSystem=options.system_id, srcComponent=options.component_id)
@@ -119,43 +225,12 @@ class AutopilotCore:
         self.sent: dict[str, int] = {}
         self.rtcm_intact: list[int] = []
         self.rtcm_broken: list[int] = []
+        self.utc_start = self.flight.utc_start
 
     # -- the flight --------------------------------------------------------------------------------------
     def phase(self, t: float) -> tuple[bool, int, int]:
         """(armed, landed_state, custom_mode) at simulated time `t`."""
-        o = self.o
-        t_takeoff = o.arm_at_s + o.spool_s
-        t_air = t_takeoff + o.takeoff_s
-        t_land = t_air + o.survey_s
-        t_down = t_land + o.landing_s
-        if t < o.arm_at_s:
-            return False, 1, COPTER_LOITER
-        if t < t_takeoff:
-            return True, 1, COPTER_AUTO
-        if t < t_air:
-            return True, 3, COPTER_AUTO
-        if t < t_land:
-            return True, 2, COPTER_AUTO
-        if t < t_down:
-            return True, 4, COPTER_LAND
-        return t < t_down + o.disarm_after_s, 1, COPTER_LAND
-
-    def position(self, t: float) -> tuple[float, float, float, float]:
-        """(east m, north m, height above take-off m, yaw rad): a lawn-mower survey at 40 m."""
-        o = self.o
-        t_air = o.arm_at_s + o.spool_s + o.takeoff_s
-        t_land = t_air + o.survey_s
-        _, landed, _ = self.phase(t)
-        if landed == 3:
-            return 0.0, 0.0, 40.0 * (t - o.arm_at_s - o.spool_s) / o.takeoff_s, 0.0
-        if landed == 4:
-            return 0.0, 0.0, 40.0 * (1 - (t - t_land) / o.landing_s), 0.0
-        if landed != 2:
-            return 0.0, 0.0, 0.0, 0.0
-        s = 5.0 * (t - t_air)  # 5 m/s along 50 m lines, 10 m apart
-        line, along = divmod(s, 50.0)
-        east = along if int(line) % 2 == 0 else 50.0 - along
-        return east, 10.0 * line, 40.0, 0.0 if int(line) % 2 == 0 else math.pi
+        return self.flight.phase(t)
 
     # -- I/O of the core -----------------------------------------------------------------------------------
     def receive(self, data: bytes, t: float) -> None:
@@ -246,51 +321,46 @@ class AutopilotCore:
     def _stream(self, msg_id: int, t: float) -> None:
         mav = self.mav
         _, landed, _ = self.phase(t)
-        east, north, up, yaw = self.position(t)
-        lat = SITE_LAT_DEG + north / 111_320.0
-        lon = SITE_LON_DEG + east / (111_320.0 * math.cos(math.radians(SITE_LAT_DEG)))
+        p = self.flight.pose(t)
+        lat, lon = round(p.lat_deg * 1e7), round(p.lon_deg * 1e7)
         boot = self._boot_ms(t)
         if msg_id == MSG["EXTENDED_SYS_STATE"]:
             self._send(mav.extended_sys_state_encode(0, landed))
         elif msg_id == MSG["ATTITUDE"]:
-            roll = 0.05 * math.sin(t) if landed == 2 else 0.0
-            self._send(mav.attitude_encode(boot, roll, 0.02, yaw, 0.0, 0.0, 0.0))
+            self._send(mav.attitude_encode(boot, p.roll_rad, p.pitch_rad, p.yaw_rad, 0.0, 0.0, 0.0))
         elif msg_id == MSG["GLOBAL_POSITION_INT"]:
-            self._send(mav.global_position_int_encode(boot, round(lat * 1e7), round(lon * 1e7),
-                                                      round((SITE_ALT_M + up) * 1e3), round(up * 1e3),
-                                                      0, 0, 0, round(math.degrees(yaw) * 100) % 36000))
+            self._send(mav.global_position_int_encode(boot, lat, lon, round(p.alt_m * 1e3),
+                                                      round(p.relative_alt_m * 1e3), 0, 0, 0,
+                                                      round(math.degrees(p.yaw_rad) * 100) % 36000))
         elif msg_id == MSG["GPS_RAW_INT"]:
-            self._send(mav.gps_raw_int_encode(int(t * 1e6), 6, round(lat * 1e7), round(lon * 1e7),
-                                              round((SITE_ALT_M + up) * 1e3), 70, 110, 0, 0, 17,
+            self._send(mav.gps_raw_int_encode(int(t * 1e6), 6, lat, lon, round(p.alt_m * 1e3), 70, 110, 0, 0, 17,
                                               h_acc=20, v_acc=30))
         elif msg_id == MSG["SYS_STATUS"]:
             present = PREARM_CHECK | 0x3F
             self._send(mav.sys_status_encode(present, present, present, 250, 12600 - int(t), 850, 87,
                                              0, 0, 0, 0, 0, 0))
         elif msg_id == MSG["SYSTEM_TIME"]:
-            utc = self.o.utc_start + _dt.timedelta(seconds=t)
+            utc = self.utc_start + _dt.timedelta(seconds=t)
             usec = (utc - _dt.datetime(1970, 1, 1, tzinfo=_dt.UTC)) // _dt.timedelta(microseconds=1)
             self._send(mav.system_time_encode(usec, boot))
 
     def _camera(self, t: float) -> None:
-        _, landed, _ = self.phase(t)
-        if landed != 2:
+        if not self.flight.camera_active(t):
             self._camera_next = None
             return
         if self._camera_next is None:
             self._camera_next = t
         if t < self._camera_next:
             return
-        self._camera_next += self.o.camera_period_s
+        self._camera_next += self.flight.camera_period_s
         self._img_idx += 1
         if MSG["CAMERA_FEEDBACK"] not in self.intervals:
             return  # ArduPilot sends it on the links asking for it
-        east, north, up, yaw = self.position(t)
-        lat = SITE_LAT_DEG + north / 111_320.0
-        lon = SITE_LON_DEG + east / (111_320.0 * math.cos(math.radians(SITE_LAT_DEG)))
-        self._send(self.mav.camera_feedback_encode(int(t * 1e6), 0, 0, self._img_idx, round(lat * 1e7),
-                                                   round(lon * 1e7), SITE_ALT_M + up, up, 0.0, 0.0,
-                                                   math.degrees(yaw), 0.0, 0))
+        p = self.flight.pose(t)
+        self._send(self.mav.camera_feedback_encode(int(t * 1e6), 0, 0, self._img_idx, round(p.lat_deg * 1e7),
+                                                   round(p.lon_deg * 1e7), p.alt_m, p.relative_alt_m,
+                                                   math.degrees(p.roll_rad), math.degrees(p.pitch_rad),
+                                                   math.degrees(p.yaw_rad), 0.0, 0))
 
     def _rtcm(self, t: float) -> None:
         o = self.o
@@ -319,8 +389,9 @@ class AutopilotSim:
     """The shell: the core on a raw pty (`start()` returns its slave path) or sending to UDP `udp_target`."""
 
     def __init__(self, options: AutopilotSimOptions, speed: float = 1.0, udp_target: tuple[str, int] | None = None,
-                 report_path: Path | None = None, report_interval_s: float = 0.5) -> None:
-        self.core = AutopilotCore(options)
+                 report_path: Path | None = None, report_interval_s: float = 0.5,
+                 flight: ScriptedFlight | MissionFlight | None = None) -> None:
+        self.core = AutopilotCore(options, flight)
         self.speed = speed
         self.udp_target = udp_target
         self.report_path = report_path

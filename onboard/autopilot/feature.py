@@ -184,6 +184,7 @@ class AutopilotLink:
         self._emit: Callable[[dict[str, Any]], None] | None = None
         self._autopilot: tuple[int, int] | None = None
         self._last_heartbeat_ns: int | None = None
+        self._last_packet_ns: int | None = None
         self._last_seen_ns: dict[str, int] = {}
         self._last_request_ns: int | None = None
         self._last_sent_heartbeat_ns: int | None = None
@@ -313,6 +314,10 @@ class AutopilotLink:
                 log.info("autopilot %d/%d (type %d, autopilot %d)", src[0], src[1], msg.type, msg.autopilot)
         if src != self._autopilot:
             return []
+        last = self._last_packet_ns
+        if last is not None and now - last > self.options.link_timeout_s * 1e9:
+            self.loss.restart()  # after an outage the sequence gap says nothing about the link's quality
+        self._last_packet_ns = now
         self.loss.update(msg.get_seq())
         self._status.packets, self._status.packets_lost = self.loss.received, self.loss.lost
         self._status.packet_loss = round(self.loss.loss_ratio, 4)

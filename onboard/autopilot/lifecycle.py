@@ -102,7 +102,9 @@ class BootTimeMap:
 
 
 class SequenceLoss:
-    """Packets lost on the link from one sender's MAVLink sequence numbers (0–255, +1 per packet)."""
+    """Packets lost on the link from one sender's MAVLink sequence numbers (0–255, +1 per packet). Across a
+    link outage (`restart`) the count is unknowable (the numbers wrap every 256 packets): the outage is the
+    link's down time, not packet loss."""
 
     def __init__(self) -> None:
         self.received = 0
@@ -117,6 +119,10 @@ class SequenceLoss:
                 self.lost += gap
         self._last = seq
         self.received += 1
+
+    def restart(self) -> None:
+        """The link was down: the next packet starts a new count of gaps."""
+        self._last = None
 
     @property
     def loss_ratio(self) -> float:
@@ -137,9 +143,21 @@ class FlightLifecycle:
         """Whether landed_state reached IN_AIR since the link came up (a flight was flown)."""
         self.reboots = 0
         self._max_boot_ms: int | None = None
+        self._last_boot: tuple[int, int] | None = None  # (time_boot_ms, monotonic ns it arrived at)
+
+    def gpst_at(self, now_ns: int) -> GpsTime | None:
+        """GPS time of host instant `now_ns`: on the autopilot's own clock (its latest time_boot_ms, plus the
+        host time since that message arrived), else through the latest SYSTEM_TIME's arrival; None before
+        SYSTEM_TIME."""
+        if self._last_boot is not None:
+            boot_ms, rx_ns = self._last_boot
+            at_boot = self.times.gpst_at_boot_ms(boot_ms)
+            if at_boot is not None:
+                return at_boot.add_ns(now_ns - rx_ns)
+        return self.times.gpst_at_monotonic(now_ns)
 
     def _event(self, name: str, now_ns: int, **detail: Any) -> LifecycleEvent:
-        return LifecycleEvent(name, now_ns, self.times.gpst_at_monotonic(now_ns), detail or None)
+        return LifecycleEvent(name, now_ns, self.gpst_at(now_ns), detail or None)
 
     def on_heartbeat(self, base_mode: int, now_ns: int) -> list[LifecycleEvent]:
         """The autopilot's HEARTBEAT (the caller filters out other senders: `is_autopilot_heartbeat`)."""
@@ -170,6 +188,8 @@ class FlightLifecycle:
             self.reboots += 1
             event = self._event("reboot", now_ns, previous_boot_ms=previous, time_boot_ms=time_boot_ms)
             self.times.reset()
+            self._last_boot = (time_boot_ms, now_ns)
             return [event]
+        self._last_boot = (time_boot_ms, now_ns)
         self._max_boot_ms = time_boot_ms if self._max_boot_ms is None else max(self._max_boot_ms, time_boot_ms)
         return []

@@ -39,8 +39,8 @@ class Joined:
     """Stand-in (simulated time at `speed`× real time) ↔ AutopilotLink; `run_until(predicate)`."""
 
     def __init__(self, tmp: Path, sim: AutopilotSimOptions, link: AutopilotOptions | None = None,
-                 speed: float = 4.0, corrections: CorrectionsPipe | None = None) -> None:
-        self.core = AutopilotCore(sim)
+                 speed: float = 4.0, corrections: CorrectionsPipe | None = None, flight: Any = None) -> None:
+        self.core = AutopilotCore(sim, flight)
         self.speed = speed
         self.to_link: queue.Queue[bytes] = queue.Queue()
         self.to_sim: queue.Queue[bytes] = queue.Queue()

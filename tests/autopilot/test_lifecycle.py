@@ -113,3 +113,16 @@ def test_sequence_loss() -> None:
     loss.update(100)  # a jump of 96: counted
     loss.update(10)  # a jump back (sender restarted): not 165 losses
     assert loss.lost == 3 + 96
+
+
+def test_events_are_timed_on_the_autopilots_clock() -> None:
+    """An event is timed from the autopilot's latest time_boot_ms plus the host time since that message, not
+    from the SYSTEM_TIME's arrival: a slow SYSTEM_TIME (1 Hz) and host latency do not shift it."""
+    lc = FlightLifecycle()
+    utc = dt.datetime(2026, 1, 1, tzinfo=dt.UTC)
+    usec = (utc - dt.datetime(1970, 1, 1, tzinfo=dt.UTC)) // dt.timedelta(microseconds=1)
+    lc.on_boot_ms(10_000, 100 * S)
+    lc.times.update(usec, 10_000, 100 * S + 300_000_000)  # this SYSTEM_TIME waited 0.3 s on the host
+    lc.on_boot_ms(12_000, 101 * S)  # an ATTITUDE: the autopilot's clock ran 2 s while the host's ran 1 s
+    (ev,) = lc.on_heartbeat(ARMED, 101 * S + 100_000_000)
+    assert ev.gpst == GpsTime.from_utc(utc).add_s(2.1)
