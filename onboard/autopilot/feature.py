@@ -233,9 +233,23 @@ class AutopilotLink:
 
     # -- the thread -------------------------------------------------------------------------------------
     def _run(self) -> None:
-        t0 = time.perf_counter()
-        from pymavlink.dialects.v20 import ardupilotmega as mavlink  # MAVLink 2, the ArduPilot dialect
+        try:
+            self._run_link()
+        except Exception as exc:  # a bug: logged with its traceback; recording goes on without the link
+            log.exception("autopilot link stopped by an internal error")
+            with self._lock:
+                self._status.link_open, self._status.link_error = False, f"internal error: {exc!r}"
+                self._status.errors += 1
 
+    def _run_link(self) -> None:
+        t0 = time.perf_counter()
+        try:
+            from pymavlink.dialects.v20 import ardupilotmega as mavlink  # MAVLink 2, the ArduPilot dialect
+        except ImportError as exc:
+            log.error("autopilot link: pymavlink is not installed (%s)", exc)
+            with self._lock:
+                self._status.link_error = f"pymavlink is not installed: {exc}"
+            return
         self._mavlink = mavlink
         with self._lock:
             self._status.pymavlink_import_s = round(time.perf_counter() - t0, 3)
