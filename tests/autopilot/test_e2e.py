@@ -194,3 +194,31 @@ def test_corrections_only_through_gps_rtcm_data(tmp_path: Path) -> None:
     assert snap["rtcm"]["dropped"] >= len([i for i in report["rtcm_broken"] if msgs[i] not in intact[:k]]) - 1
     rtk = json.loads(status_path.with_name("rtk.json").read_text())
     assert rtk["radio_bytes"] == len(radio) and rtk["base_frames"] == len(frames)
+
+
+def test_reboot_and_mavlink1_over_udp(tmp_path: Path) -> None:
+    """A MAVLink-1-only autopilot that reboots on the ground: the daemon answers in MAVLink 1, logs the reboot
+    and asks for its streams again (they are off after a reboot)."""
+    port = free_udp_port()
+    standin, _, report_path = start_standin(tmp_path, "--udp", f"127.0.0.1:{port}", "--mavlink1", "--arm-at",
+                                            "1000", "--reboot-at", "20")
+    daemon, data_dir, status_path = start_daemon(tmp_path, f"udpin:127.0.0.1:{port}",
+                                                 "rerequest_s = 2.0\n")
+    try:
+        wait_until(lambda: autopilot_json(status_path).get("reboots") == 1
+                   and autopilot_json(status_path).get("time_synced"), 40, "reboot seen and streams back")
+        snap = autopilot_json(status_path)
+        stop(daemon)
+    finally:
+        reap(daemon)
+        standin.send_signal(signal.SIGTERM)
+        standin.communicate(timeout=30)
+    assert snap["mavlink_version"] == 1 and snap["link_up"]
+    report = json.loads(report_path.read_text())
+    assert {(h["system_id"], h["component_id"], h["type"], h["mavlink_version"])
+            for h in report["heard_heartbeats"]} == {(1, 191, 18, 1)}
+    after = {r["message_id"] for r in report["interval_requests"] if r["t_s"] > 20}
+    assert after == {0, 1, 2, 24, 30, 33, 180, 245}
+    (flight,) = data_dir.glob("flight-*")
+    events = [r for r in read_events(flight / "events.jsonl").records if r.get("type") == "autopilot"]
+    assert [e["event"] for e in events] == ["reboot"]
