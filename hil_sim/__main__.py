@@ -1,11 +1,13 @@
 """`python -m hil_sim`: the hardware-in-the-loop simulator (stand-ins for the drone's hardware).
 
-Three commands:
+Four commands:
   receiver  a u-blox LEA-6T or NEO-M8T on a pseudo-terminal, answering the recorder as the real receiver does
             (configuration, raw measurements of a simulated sky, camera time marks, injected faults) until
             SIGTERM/SIGINT; its first stdout line is the pty path to open (flushed).
   radio     the base-to-drone telemetry radio: prints "<base-side pty> <drone-side pty>" and forwards between
             them with dropouts and an air byte budget, until SIGTERM/SIGINT.
+  autopilot an ArduCopter stand-in speaking MAVLink 2 (or 1) on a raw pty or UDP: prints its pty path (or
+            "udp:HOST:PORT") and flies a scripted flight or the simulated mission, with injected faults.
   flight    a whole simulated flight through the real recorder daemons (rover and base), RINEX conversion,
             RTK post-processing and the block adjustment; prints each stage's result and a summary.json.
 """
@@ -97,6 +99,30 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--gap-min", type=float, default=5.0, help="shortest dropout, simulated s (default 5)")
     a.add_argument("--gap-max", type=float, default=20.0, help="longest dropout, simulated s (default 20)")
     a.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    ap = sub.add_parser("autopilot", help="ArduCopter stand-in: MAVLink on a raw pty or UDP, scripted flight")
+    ap.add_argument("--udp", metavar="HOST:PORT", help="send to the companion there (default: a raw pty)")
+    ap.add_argument("--speed", type=float, default=1.0, help="simulated time runs N× real time")
+    ap.add_argument("--seed", type=int, default=1, help="seed of the injected losses (default 1)")
+    ap.add_argument("--system-id", type=int, default=1, help="the vehicle's MAVLink system id")
+    ap.add_argument("--mission", action="store_true",
+                    help="fly the receiver's default mission (hil_sim.scenario / flight), not the short script")
+    ap.add_argument("--arm-at", type=float, default=10.0, help="simulated s on the ground before arming")
+    ap.add_argument("--survey", type=float, default=30.0, help="simulated s of survey lines in the air")
+    ap.add_argument("--mavlink1", action="store_true", help="MAVLink 1 only: send v1, ignore v2 frames")
+    ap.add_argument("--no-gcs-heartbeat", action="store_true", help="do not forward a ground station's heartbeat")
+    ap.add_argument("--link-loss", type=_window, action="append", default=[], metavar="AT_S:DURATION_S",
+                    help="no bytes either way from simulated AT_S for DURATION_S (repeatable)")
+    ap.add_argument("--heartbeat-stop", type=_window, action="append", default=[], metavar="AT_S:DURATION_S",
+                    help="the autopilot sends no HEARTBEAT from AT_S for DURATION_S (repeatable)")
+    ap.add_argument("--reboot-at", type=float, action="append", default=[], metavar="AT_S",
+                    help="the autopilot reboots at simulated AT_S: boot clock back to 0, streams off (repeatable)")
+    ap.add_argument("--rtcm", help="file of RTCM3 bytes to inject as GPS_RTCM_DATA (one message per interval)")
+    ap.add_argument("--rtcm-start", type=float, default=1.0, help="simulated s before the first RTCM message")
+    ap.add_argument("--rtcm-interval", type=float, default=0.5, help="simulated s between RTCM messages")
+    ap.add_argument("--drop-fragment-rate", type=float, default=0.0, help="probability per GPS_RTCM_DATA fragment")
+    ap.add_argument("--reorder-fragments", action="store_true", help="shuffle each message's fragments")
+    ap.add_argument("--report", help="JSON file: what the stand-in heard and sent (rewritten twice a second)")
+    ap.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     from hil_sim.mission import add_parser as add_flight_parser
 
     add_flight_parser(sub)
@@ -190,6 +216,43 @@ def run_receiver(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_autopilot(args: argparse.Namespace) -> int:
+    """Print the pty slave path (or "udp:HOST:PORT") and fly the script until a signal."""
+    from pathlib import Path
+
+    from hil_sim.autopilot import AutopilotSim, options_from_args
+
+    target = None
+    if args.udp:
+        host, _, port = args.udp.rpartition(":")
+        if not host or not port.isdigit():
+            print(f"hil_sim autopilot: --udp {args.udp!r}: expected HOST:PORT", file=sys.stderr)
+            return 2
+        target = (host, int(port))
+    try:
+        options = options_from_args(args)
+    except OSError as exc:
+        print(f"hil_sim autopilot: --rtcm: {exc}", file=sys.stderr)
+        return 2
+    flight = None
+    if args.mission:
+        from hil_sim.autopilot import MissionFlight
+        from hil_sim.scenario import Scenario
+
+        flight = MissionFlight(Scenario.default(seed=args.seed))
+    sim = AutopilotSim(options, speed=args.speed, udp_target=target,
+                       report_path=Path(args.report) if args.report else None, flight=flight)
+    done = _wait_for_signal()
+    print(sim.start(), flush=True)
+    try:
+        while not done.wait(0.2):
+            if sim.error is not None:
+                return 1
+    finally:
+        sim.stop()
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of `python -m hil_sim`."""
     args = build_parser().parse_args(argv)
@@ -199,6 +262,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run_receiver(args)
     if args.command == "radio":
         return run_radio(args)
+    if args.command == "autopilot":
+        return run_autopilot(args)
     if args.command == "flight":
         logging.getLogger().setLevel(logging.WARNING)
         return int(args.func(args))

@@ -114,7 +114,12 @@ class NtripByteStream(TcpByteStream):
 
 
 def open_base_stream(spec: str, read_timeout_s: float = 0.1) -> Callable[[], ByteStream]:
-    """A factory for the base-correction stream named by `spec` (see module doc); ValueError if malformed."""
+    """A factory for the base-correction stream named by `spec` (see module doc); ValueError if malformed.
+    ("mavlink", the autopilot's GPS_RTCM_DATA, is no stream of its own: `onboard.recorder.app.recorder_for`
+    connects the autopilot link's reassembled RTCM to the RTK service.)"""
+    if spec == "mavlink":
+        raise ValueError("base stream 'mavlink' comes from the autopilot link (set autopilot.link); the "
+                         "recorder's composition root connects it")
     if spec.startswith("serial:"):
         device, _, baud = spec[len("serial:"):].partition("@")
         rate = int(baud) if baud else 57600

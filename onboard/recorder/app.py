@@ -12,9 +12,17 @@ from onboard.hw.ports import ByteStream, EdgeSource
 from onboard.recorder.daemon import Recorder, RecorderDeps
 from onboard.recorder.feature import RecorderFeature
 from onboard.recorder.sdnotify import SdNotifier
-from onboard.recorder.settings import Settings, receiver_options, rtk_engine_options, takeoff_position_ecef_m
+from onboard.recorder.settings import (
+    MAVLINK_BASE_STREAM,
+    Settings,
+    receiver_options,
+    rtk_engine_options,
+    takeoff_position_ecef_m,
+)
 
 if TYPE_CHECKING:
+    from onboard.autopilot.feature import AutopilotFeature
+    from onboard.hw.ports import Clock
     from onboard.realtime.service import RtkFeature, RtkServiceOptions
 
 
@@ -75,24 +83,52 @@ def run(recorder: Recorder, command: str) -> int:
 
 
 def rtk_feature(settings: Settings, deps: RecorderDeps, base_stream: str,
-                options: RtkServiceOptions | None = None) -> RtkFeature:
+                options: RtkServiceOptions | None = None,
+                open_base: Callable[[], ByteStream] | None = None) -> RtkFeature:
     """Real-time RTK on the corrections of `base_stream` (`serial:DEV[@BAUD]`, `tcp://HOST:PORT`,
-    `ntrip://[USER:PASS@]HOST[:PORT]/MOUNT`; ValueError if malformed), with the settings' engine options."""
+    `ntrip://[USER:PASS@]HOST[:PORT]/MOUNT`; ValueError if malformed) or of `open_base` when given (the
+    autopilot's GPS_RTCM_DATA), with the settings' engine options."""
     from onboard.hw.net_stream import open_base_stream
     from onboard.realtime.service import RtkFeature, RtkServiceOptions
 
     options = options or RtkServiceOptions(engine=rtk_engine_options(settings),
                                            max_base_age_s=settings.rtk_max_base_age_s,
                                            takeoff_position_ecef_m=takeoff_position_ecef_m(settings))
-    return RtkFeature(options, open_base_stream(base_stream), deps.clock)
+    return RtkFeature(options, open_base or open_base_stream(base_stream), deps.clock)
+
+
+def autopilot_feature(settings: Settings, clock: Clock | None = None,
+                      with_corrections: bool = False) -> AutopilotFeature:
+    """The autopilot link of `autopilot.link` (ValueError if malformed); `with_corrections`: its reassembled
+    GPS_RTCM_DATA go to a `CorrectionsPipe` (`feature.corrections`) for real-time RTK."""
+    from onboard.autopilot.corrections import CorrectionsPipe
+    from onboard.autopilot.feature import AutopilotFeature, AutopilotOptions
+    from onboard.hw.mavlink_link import open_mavlink_link
+
+    options = AutopilotOptions(system_id=settings.autopilot_system_id,
+                               fast_interval_s=settings.autopilot_fast_interval_s,
+                               slow_interval_s=settings.autopilot_slow_interval_s,
+                               link_timeout_s=settings.autopilot_link_timeout_s,
+                               rerequest_s=settings.autopilot_rerequest_s)
+    return AutopilotFeature(options, open_mavlink_link(settings.autopilot_link), clock, settings.autopilot_link,
+                            CorrectionsPipe() if with_corrections else None)
 
 
 def recorder_for(settings: Settings, deps: RecorderDeps, base_stream: str | None,
                  options: RtkServiceOptions | None = None,
                  features: Sequence[RecorderFeature] = ()) -> Recorder:
-    """The composition root's one call: the recorder with `features` (e.g. the base station's), plus real-time
-    RTK when a base stream is named (see `rtk_feature`)."""
+    """The composition root's one call: the recorder with `features` (e.g. the base station's), plus the
+    autopilot link when `autopilot.link` is set, plus real-time RTK when a base stream is named (see
+    `rtk_feature`; "mavlink": the autopilot link's GPS_RTCM_DATA)."""
     assembled = list(features)
+    open_base: Callable[[], ByteStream] | None = None
+    if settings.autopilot_link:
+        autopilot = autopilot_feature(settings, deps.clock, with_corrections=base_stream == MAVLINK_BASE_STREAM)
+        assembled.append(autopilot)
+        if autopilot.corrections is not None:
+            open_base = autopilot.corrections.open
+    elif base_stream == MAVLINK_BASE_STREAM:
+        raise ValueError('rtk.base_stream = "mavlink" needs autopilot.link')
     if base_stream:
-        assembled.append(rtk_feature(settings, deps, base_stream, options))
+        assembled.append(rtk_feature(settings, deps, base_stream, options, open_base))
     return Recorder(settings, deps, features=assembled)

@@ -359,7 +359,8 @@ class Recorder:
         self.status.flight_dir = str(flight_dir)
         self._setup_decoder()
         context = FlightContext(flight_dir=flight_dir, clock=self.clock, journal_options=options,
-                                status_path=s.status_path, post=self._post, request_stop=self.request_stop)
+                                status_path=s.status_path, post=self._post, request_stop=self.request_stop,
+                                append_event=self._append_event)
         self._features_open = True
         for feature in self.features:
             self._feature_call(feature, feature.on_flight_opened, context)

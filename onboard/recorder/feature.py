@@ -43,7 +43,9 @@ class FlightContext:
     recorder's clock (monotonic and wall ns); `journal_options` how the recorder journals (segment size/age,
     sync interval), for a feature that journals a stream of its own; `status_path` the recorder's status.json
     (a feature's snapshot goes beside it); `post(fn, *args)` runs `fn(*args)` on the recorder's loop in posting
-    order (safe from any thread); `request_stop(reason, exit_code)` stops the recorder (loop only).
+    order (safe from any thread); `request_stop(reason, exit_code)` stops the recorder (loop only);
+    `append_event(record)` appends one JSON-able record to the flight's events.jsonl (loop only: from a thread,
+    `post(append_event, record)`; None when the recorder keeps no event log).
     """
 
     flight_dir: Path
@@ -52,6 +54,7 @@ class FlightContext:
     status_path: Path
     post: Callable[..., None]
     request_stop: Callable[[str, int], None]
+    append_event: Callable[[dict[str, Any]], None] | None = None
 
 
 class RecorderFeature:

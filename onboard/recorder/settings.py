@@ -59,6 +59,12 @@ class Settings:
     rtk_takeoff_position: str = ""
     rtk_engine: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
     """`[rtk.engine]`: RTK engine options by their TOML names (onboard.rtk.options.TOML_KEYS)."""
+    autopilot_link: str = ""
+    autopilot_system_id: int = 0
+    autopilot_fast_interval_s: float = 0.25
+    autopilot_slow_interval_s: float = 1.0
+    autopilot_link_timeout_s: float = 3.0
+    autopilot_rerequest_s: float = 5.0
 
 
 RTK_ENGINE = "rtk.engine."
@@ -90,9 +96,17 @@ KEYS: Mapping[str, str] = MappingProxyType(
         "rtk.base_stream": "rtk_base_stream",
         "rtk.max_base_age_s": "rtk_max_base_age_s",
         "rtk.takeoff_position": "rtk_takeoff_position",
+        "autopilot.link": "autopilot_link",
+        "autopilot.system_id": "autopilot_system_id",
+        "autopilot.fast_interval_s": "autopilot_fast_interval_s",
+        "autopilot.slow_interval_s": "autopilot_slow_interval_s",
+        "autopilot.link_timeout_s": "autopilot_link_timeout_s",
+        "autopilot.rerequest_s": "autopilot_rerequest_s",
     }
 )
 MODELS = ("auto", "lea6t", "m8t")
+MAVLINK_BASE_STREAM = "mavlink"
+"""`rtk.base_stream` value: the corrections a ground station injects through the autopilot (GPS_RTCM_DATA)."""
 PIN_FACTORIES = ("lgpio", "mock")
 
 
@@ -147,6 +161,11 @@ BOUNDS: Mapping[str, Bound] = MappingProxyType(
         "gpio.pps_pin": GPIO_PIN,
         "gpio.flash_pin": GPIO_PIN,
         "rtk.max_base_age_s": Bound(0, 300, " s", True),
+        "autopilot.system_id": Bound(0, 255, why="a MAVLink system id, 0 = the autopilot's own"),
+        "autopilot.fast_interval_s": Bound(0, 10, " s", True),
+        "autopilot.slow_interval_s": Bound(0, 10, " s", True),
+        "autopilot.link_timeout_s": Bound(0, 60, " s", True),
+        "autopilot.rerequest_s": Bound(0, 300, " s", True),
         # receiver options the receiver profile does not bound itself
         "receiver.ant_cable_delay_ns": Bound(-32768, 32767, " ns", why="CFG-TP5 holds it in 16 signed bits"),
         "receiver.pulse_len_ms": Bound(0, 3000, " ms", True, "shorter than the camera period, at most 3 s"),
@@ -313,9 +332,20 @@ def validate(s: Settings) -> None:
         raise ConfigFileError("receiver.trigger = \"gpio\" needs gpio.trigger_pin and gpio.pps_pin (BCM numbers)")
     if s.gpio_flash_pin >= 0 and s.gpio_pps_pin < 0:
         raise ConfigFileError("gpio.flash_pin needs gpio.pps_pin (BCM number): GPIO edges are timed through PPS")
-    if s.rtk_base_stream and not s.rtk_base_stream.startswith(("serial:", "tcp://", "ntrip://")):
-        raise ConfigFileError(f"rtk.base_stream: expected serial:DEV[@BAUD], tcp://HOST:PORT or "
-                              f"ntrip://[USER:PASS@]HOST[:PORT]/MOUNT, got {s.rtk_base_stream!r}")
+    if s.rtk_base_stream == MAVLINK_BASE_STREAM:
+        if not s.autopilot_link:
+            raise ConfigFileError("rtk.base_stream = \"mavlink\" needs autopilot.link (the corrections come "
+                                  "through the autopilot's GPS_RTCM_DATA)")
+    elif s.rtk_base_stream and not s.rtk_base_stream.startswith(("serial:", "tcp://", "ntrip://")):
+        raise ConfigFileError(f"rtk.base_stream: expected serial:DEV[@BAUD], tcp://HOST:PORT, "
+                              f"ntrip://[USER:PASS@]HOST[:PORT]/MOUNT or mavlink, got {s.rtk_base_stream!r}")
+    if s.autopilot_link:
+        from onboard.hw.mavlink_link import parse_link_spec
+
+        try:
+            parse_link_spec(s.autopilot_link)
+        except ValueError as exc:
+            raise ConfigFileError(f"autopilot.link {exc}") from exc
     try:
         takeoff_position_ecef_m(s)
     except ValueError as exc:
