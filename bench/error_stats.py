@@ -372,7 +372,7 @@ def real() -> None:
     walk = read_rinex_obs(M8P / "rinex/rover-20181004-1532.obs.gz").epochs
     nav2 = _nav_store(M8P / "rinex/rover-20181004-1532.nav.gz")
     report_code("M8P walking rover, trees (1 Hz)", series_from_epochs(walk, nav2, lambda k: None, BASE_1236_ECEF_M))
-    from onboard.postpro.convert import collect
+    from onboard.receiver.ubx_collect import collect
     raw = (DATA / "ubx" / "rtklib_ubx_20080526.ubx").read_bytes()
     col = collect(iter([raw]))
     report_code("u-blox RXM-RAW 2008 static (1 Hz)",

@@ -88,8 +88,8 @@ def simulate(case: SimCase, model: str) -> SimData:
     from hil_sim import ubx_encode as enc
     from hil_sim.world import World
     from onboard.base.station import BaseCore, BaseOptions
-    from onboard.postpro.convert import collect
     from onboard.receiver.base_epochs import collect_rtcm
+    from onboard.receiver.ubx_collect import collect
 
     world = World(scenario_for(case, model))
     encode = enc.rxm_raw if model == "lea6t" else enc.rxm_rawx

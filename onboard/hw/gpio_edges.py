@@ -25,6 +25,16 @@ def lgpio_factory() -> Any:
     return LGPIOFactory()
 
 
+def pin_factory(name: str) -> Any:
+    """The gpiozero pin factory named by the settings key `gpio.pin_factory`: "lgpio" (the Pi) or "mock"
+    (gpiozero's MockFactory: the hardware edge's test double, pins driven by a test)."""
+    if name == "mock":
+        from gpiozero.pins.mock import MockFactory
+
+        return MockFactory()
+    return lgpio_factory()
+
+
 class GpioEdgeSource:
     """Queue of edges on one BCM pin.
 

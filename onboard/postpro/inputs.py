@@ -55,8 +55,8 @@ def read_observations(path: str | Path) -> ObsInput:
         # (M8P rover + RAWX base 0.065 -> 0.049 s CPU, with the GLW1 CORS base 0.091 -> 0.070 s)
         rnx = read_rinex_obs(path, systems="G")
         return ObsInput(rnx.epochs, [], rnx.header.antenna_position_ecef_m(), "rinex")
-    from onboard.postpro.convert import StreamPlaces, collect, describe_unframed
     from onboard.receiver.decode import iter_file_bytes
+    from onboard.receiver.ubx_collect import StreamPlaces, collect, describe_unframed
 
     col = collect(iter_file_bytes(path))
     for message in describe_unframed(col, StreamPlaces(((str(path), None),))):  # what the reader skipped
@@ -135,9 +135,9 @@ def read_base_observations(path: str | Path, reference: GpsTime | None) -> ObsIn
 def _read_journal_dir(path: Path, reference: GpsTime | None) -> ObsInput:
     """Base input from a journal directory (segments in order, torn tail tolerated): RTCM3 or UBX inside."""
     from onboard.logger.journal import iter_journal_bytes
-    from onboard.postpro.convert import collect
     from onboard.receiver.base_epochs import collect_rtcm, count_protocols
     from onboard.receiver.framing import Protocol
+    from onboard.receiver.ubx_collect import collect
 
     data = b"".join(iter_journal_bytes(path))
     counts = count_protocols(data)

@@ -46,14 +46,9 @@ def gpio_edge_sources(settings: Settings) -> Callable[[], Sequence[EdgeSource]] 
         return None
 
     def open_sources() -> Sequence[EdgeSource]:
-        from onboard.hw.gpio_edges import GpioEdgeSource, lgpio_factory
+        from onboard.hw.gpio_edges import GpioEdgeSource, pin_factory
 
-        if settings.gpio_pin_factory == "mock":
-            from gpiozero.pins.mock import MockFactory
-
-            factory = MockFactory()
-        else:
-            factory = lgpio_factory()
+        factory = pin_factory(settings.gpio_pin_factory)
         sources = [GpioEdgeSource(settings.gpio_pps_pin, factory, line="pps")]
         if trigger:
             sources.append(GpioEdgeSource(settings.gpio_trigger_pin, factory, line="trigger"))

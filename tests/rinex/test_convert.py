@@ -252,8 +252,9 @@ def test_progress_bar_on_a_terminal_only(tmp_path: Path) -> None:
 def test_header_names_the_receiver_from_mon_ver() -> None:
     import datetime as dt
 
-    from onboard.postpro.convert import Collected, header_info
+    from onboard.postpro.convert import header_info
     from onboard.receiver.decode import MonVer
+    from onboard.receiver.ubx_collect import Collected
 
     col = Collected(mon_ver=MonVer("ROM CORE 3.01 (107888)", "00080000", ("FWVER=TIM 1.10", "MOD=NEO-M8T")),
                     fixes_ecef_m=[(1.0, 2.0, 3.0), (1.2, 2.0, 3.0), (50.0, 2.0, 3.0)])
