@@ -333,34 +333,22 @@ def run_rtk(inputs: RtkInputs, options: RtkJobOptions, output: Path) -> RtkOutco
     """
     from dataclasses import replace
 
-    from onboard.formats.pos import write_pos
-    from onboard.postpro.inputs import is_rinex, read_base_observations, read_navigation, read_observations
+    from onboard.errors import DataRefused
+    from onboard.formats.pos import is_position, write_pos
+    from onboard.postpro.inputs import load_rtk_inputs
     from onboard.rtk.options import RtkOptions
     from onboard.rtk.postpro import postprocess
-    from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE
+    from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE
 
-    rover = read_observations(inputs.rover)
-    if inputs.base.is_file() and is_rinex(inputs.base):
-        base = read_observations(inputs.base)
-    else:
-        base = read_base_observations(inputs.base, rover.epochs[0].time if rover.epochs else None)
-    nav = read_navigation(list(inputs.nav), rover.ephemerides + base.ephemerides)
-    if len(nav.store) == 0:
-        raise InputError("no GPS ephemeris: upload a RINEX navigation file (role nav) or logs with RXM-SFRB(X)")
-    base_pos = options.base_pos_ecef_m if options.base_pos_ecef_m is not None else base.antenna_pos_ecef_m
-    if base_pos is None:
-        raise InputError(f"no base position: {inputs.base.name} has none in its header; give base_pos X,Y,Z")
-    base_pos_arr = np.asarray(base_pos, dtype=float)
-    rov_gps = [e for e in rover.epochs if len(e.gps_only())]
-    bas_gps = [e for e in base.epochs if len(e.gps_only())]
-    if not rov_gps:
-        raise InputError(f"{inputs.rover.name}: no GPS observations")
-    if not bas_gps:
-        raise InputError(f"{inputs.base.name}: no GPS observations")
+    try:
+        run = load_rtk_inputs(inputs.rover, inputs.base, list(inputs.nav), options.base_pos_ecef_m,
+                              base_pos_hint="base_pos X,Y,Z", nav_hint="a RINEX navigation file (role nav)")
+    except DataRefused as exc:
+        raise RefusedByData(str(exc)) from None
+    rov_gps, bas_gps, nav, base_pos_arr = run.rover, run.base, run.nav, run.base_pos_ecef_m
     rtk_options = replace(RtkOptions(), elmask_deg=options.elmask_deg, ar_elmask_deg=max(options.elmask_deg, 15.0))
     sols, _ = postprocess(rov_gps, bas_gps, nav, base_pos_arr, rtk_options, options.direction)
-    good = [s for s in sols if s.q != Q_NONE and bool(np.all(np.isfinite(s.pos_ecef_m)))
-            and float(np.linalg.norm(s.pos_ecef_m)) > validate.EARTH_RADIUS_MIN_M]
+    good = [s for s in sols if is_position(s)]
     q = np.array([s.q for s in sols], dtype=int)
     if not good:
         raise RefusedByData(f"no epoch of {len(sols)} has a position solution (wrong navigation day, base "

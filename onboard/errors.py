@@ -39,3 +39,8 @@ class DiskFull(OnboardError, OSError):
 
 class InputError(OnboardError, ValueError):
     """A file given to a command cannot be used (unreadable, wrong format, nothing in common)."""
+
+
+class DataRefused(OnboardError):
+    """The inputs are well-formed but cannot support an answer (exit 3): e.g. no ephemeris valid at the
+    observations' time, no epoch with a solution. The message says why and what was (not) written."""

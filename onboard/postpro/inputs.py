@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from onboard.errors import InputError
+from onboard.errors import DataRefused, InputError
 from onboard.gnsstime import GpsTime
 from onboard.rtk.ephemeris import EphemerisStore
 from onboard.rtk.rtkpos import Nav
@@ -153,3 +153,69 @@ def _read_journal_dir(path: Path, reference: GpsTime | None) -> ObsInput:
         raise InputError(f"{path}: journal without base observations (RTCM3 1002/1004/1074/1077 or UBX RXM-RAW(X))")
     pos = np.median(np.array(col.fixes_ecef_m), axis=0) if col.fixes_ecef_m else None
     return ObsInput(col.epochs, col.ephemerides, pos, "ubx")
+
+
+@dataclass
+class RtkRunInputs:
+    """What the RTK engine post-processes, read and checked: GPS epochs of rover and base (time order), the
+    navigation data, the base antenna position (ECEF m) and where it came from."""
+
+    rover: list[ObsEpoch]
+    base: list[ObsEpoch]
+    nav: Nav
+    base_pos_ecef_m: np.ndarray
+    base_pos_source: str
+
+
+def load_rtk_inputs(rover_path: str | Path, base_path: str | Path, nav_paths: Sequence[str | Path],
+                    base_pos_ecef_m: Sequence[float] | None = None, *, base_pos_hint: str = "--base-pos X,Y,Z",
+                    nav_hint: str = "--nav FILE (RINEX navigation)") -> RtkRunInputs:
+    """Read rover, base and navigation files for a post-processing run and check they can make one.
+
+    The base may be RINEX, a UBX log, an RTCM3 stream or a journal folder; `base_pos_ecef_m` overrides its header
+    or stream position. Raises `InputError` (unusable files, no base position, no GPS observations, no common
+    epochs) or `DataRefused` (no ephemeris valid at the observations' time: a navigation file of another day).
+    The hints name, in the caller's words, how to give a base position and a navigation file.
+    """
+    from onboard.rtk.ephemeris import MAX_EPH_AGE_S
+    from onboard.validate import ecef_position_m
+
+    rover = read_observations(rover_path)
+    base_file = Path(base_path)
+    if base_file.is_file() and is_rinex(base_file):
+        base = read_observations(base_file)  # without loading the RTCM3 decoders (start-up time)
+    else:
+        # the base may also be an RTCM3 stream or a journal folder (e.g. the rover's radio/ journal)
+        base = read_base_observations(base_file, rover.epochs[0].time if rover.epochs else None)
+    nav = read_navigation(nav_paths, rover.ephemerides + base.ephemerides)
+    if len(nav.store) == 0:
+        raise InputError(f"no GPS ephemeris: give {nav_hint} or logs with RXM-SFRB(X)/AID-EPH")
+    if base_pos_ecef_m is not None:
+        base_pos, source = np.asarray(base_pos_ecef_m, dtype=float), "given"
+    elif base.antenna_pos_ecef_m is None:
+        raise InputError(f"no base position: {base_path} has none in its header; give {base_pos_hint}")
+    else:
+        base_pos, source = np.asarray(base.antenna_pos_ecef_m, dtype=float), f"{base.kind} header/stream"
+        try:
+            ecef_position_m(base_pos.tolist(), name=f"{base_path}: header position")
+        except ValueError as exc:
+            raise InputError(f"{exc}; give {base_pos_hint}") from None
+    rov_gps = [e for e in rover.epochs if len(e.gps_only())]
+    bas_gps = [e for e in base.epochs if len(e.gps_only())]
+    if not rov_gps:
+        raise InputError(f"{rover_path}: no GPS observations")
+    if not bas_gps:
+        raise InputError(f"{base_path}: no GPS observations")
+    t0 = max(rov_gps[0].time, bas_gps[0].time)
+    t1 = min(rov_gps[-1].time, bas_gps[-1].time)
+    if t1.diff_s(t0) < -30.0:
+        raise InputError(f"rover ({rov_gps[0].time}..{rov_gps[-1].time}) and base ({bas_gps[0].time}.."
+                         f"{bas_gps[-1].time}) have no common epochs")
+    times = [rov_gps[0].time, rov_gps[len(rov_gps) // 2].time, rov_gps[-1].time]
+    if not any(nav.store.select(prn, t) is not None for t in times for prn in nav.store.prns()):
+        first = rov_gps[0].time.to_gpst_datetime()
+        last = rov_gps[-1].time.to_gpst_datetime()
+        raise DataRefused(f"no GPS ephemeris valid at the observations' time ({first:%Y-%m-%d %H:%M} to "
+                          f"{last:%H:%M} GPST; {len(nav.store)} ephemerides, none within "
+                          f"{MAX_EPH_AGE_S / 3600:.0f} h): is the navigation file of another day? nothing written")
+    return RtkRunInputs(rov_gps, bas_gps, nav, base_pos, source)

@@ -28,13 +28,11 @@ from onboard.cmdline import (
     output_file,
     report_error,
 )
-from onboard.errors import InputError
-from onboard.postpro.inputs import is_rinex, read_base_observations, read_navigation, read_observations
-from onboard.rtk.ephemeris import MAX_EPH_AGE_S
+from onboard.errors import DataRefused, InputError
+from onboard.postpro.inputs import load_rtk_inputs
 from onboard.rtk.options import AR_MODES, RtkOptions
 from onboard.rtk.postpro import DIRECTIONS, postprocess
-from onboard.rtk.rtkpos import Nav
-from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE, ObsEpoch
+from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE
 from onboard.validate import arg_type, ecef_position_m, elevation_mask_deg
 
 log = logging.getLogger(__name__)
@@ -106,10 +104,6 @@ def _elmask_deg(text: str) -> float:
     return value
 
 
-class Refused(Exception):
-    """The data cannot support an answer (exit 3); the message says why."""
-
-
 def rtk_main(args: argparse.Namespace) -> int:
     """Run the command; returns the process exit code (see the module docstring). Prints a summary."""
     inputs = [Path(args.rover), Path(args.base), *(Path(n) for n in args.nav)]
@@ -120,7 +114,7 @@ def rtk_main(args: argparse.Namespace) -> int:
         return _run(args)
     except InputError as exc:
         return report_error(COMMAND, str(exc), EXIT_USAGE)
-    except Refused as exc:
+    except DataRefused as exc:
         return report_error(COMMAND, str(exc), EXIT_REFUSED)
     except OSError as exc:
         kept = "the previous file is unchanged" if out.exists() else "nothing written"
@@ -128,40 +122,8 @@ def rtk_main(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    rover = read_observations(args.rover)
-    base_path = Path(args.base)
-    if base_path.is_file() and is_rinex(base_path):
-        base = read_observations(base_path)  # without loading the RTCM3 decoders (start-up time)
-    else:
-        # the base may also be an RTCM3 stream or a journal folder (e.g. the rover's radio/ journal)
-        base = read_base_observations(args.base, rover.epochs[0].time if rover.epochs else None)
-    nav = read_navigation(args.nav, rover.ephemerides + base.ephemerides)
-    if len(nav.store) == 0:
-        raise InputError("no GPS ephemeris: give --nav FILE (RINEX navigation) or logs with RXM-SFRB(X)/AID-EPH")
-    header_pos = base.antenna_pos_ecef_m
-    if args.base_pos is not None:
-        base_pos = np.array(args.base_pos)
-    elif header_pos is None:
-        raise InputError(f"no base position: {args.base} has none in its header; give --base-pos X,Y,Z")
-    else:
-        base_pos = header_pos
-        try:
-            ecef_position_m(base_pos.tolist(), name=f"{args.base}: header position")
-        except ValueError as exc:
-            raise InputError(f"{exc}; give --base-pos X,Y,Z") from None
-    rov_gps = [e for e in rover.epochs if len(e.gps_only())]
-    bas_gps = [e for e in base.epochs if len(e.gps_only())]
-    if not rov_gps:
-        raise InputError(f"{args.rover}: no GPS observations")
-    if not bas_gps:
-        raise InputError(f"{args.base}: no GPS observations")
-    t0 = max(rov_gps[0].time, bas_gps[0].time)
-    t1 = min(rov_gps[-1].time, bas_gps[-1].time)
-    if t1.diff_s(t0) < -30.0:
-        raise InputError(f"rover ({rov_gps[0].time}..{rov_gps[-1].time}) and base ({bas_gps[0].time}.."
-                         f"{bas_gps[-1].time}) have no common epochs")
-    if not _ephemerides_cover(nav, rov_gps):
-        raise Refused(_no_ephemeris_message(nav, rov_gps))
+    run = load_rtk_inputs(args.rover, args.base, args.nav, args.base_pos)
+    rov_gps, bas_gps, nav, base_pos = run.rover, run.base, run.nav, run.base_pos_ecef_m
     try:
         options = replace(RtkOptions(), elmask_deg=args.elmask, ar_elmask_deg=max(args.elmask, 15.0),
                           ar_mode=args.ar_mode, static_start=args.static_start or args.init_pos is not None)
@@ -179,7 +141,7 @@ def _run(args: argparse.Namespace) -> int:
     try:
         sols, stats = postprocess(rov_gps, bas_gps, nav, base_pos, options, args.direction, init_pos, progress)
     except ValueError as exc:  # the engine's data rules (e.g. a base position its own data contradicts)
-        raise Refused(str(exc)) from exc
+        raise DataRefused(str(exc)) from exc
     finally:
         if bar is not None:
             bar.close()
@@ -187,7 +149,7 @@ def _run(args: argparse.Namespace) -> int:
 
     solved = [s for s in sols if is_position(s)]
     if not solved:
-        raise Refused(f"no epoch has a solution ({len(sols)} rover epochs): check that the base position "
+        raise DataRefused(f"no epoch has a solution ({len(sols)} rover epochs): check that the base position "
                       f"and the navigation files belong to these observations; nothing written")
     bx, by, bz = base_pos
     info = [
@@ -214,20 +176,6 @@ def _run(args: argparse.Namespace) -> int:
           f"float {np.sum(q == Q_FLOAT)}, single {np.sum(q == Q_SINGLE)}; slips {sum(s.slips for s in stats)}; "
           f"written {args.output}")
     return EXIT_OK
-
-
-def _ephemerides_cover(nav: Nav, epochs: Sequence[ObsEpoch]) -> bool:
-    """True when some GPS ephemeris is valid (|t − toe| within the engine's limit) at the first, middle or last
-    observation time."""
-    times = [epochs[0].time, epochs[len(epochs) // 2].time, epochs[-1].time]
-    return any(nav.store.select(prn, t) is not None for t in times for prn in nav.store.prns())
-
-
-def _no_ephemeris_message(nav: Nav, epochs: Sequence[ObsEpoch]) -> str:
-    first, last = epochs[0].time, epochs[-1].time
-    return (f"no GPS ephemeris valid at the observations' time ({first.to_gpst_datetime():%Y-%m-%d %H:%M} to "
-            f"{last.to_gpst_datetime():%H:%M} GPST; {len(nav.store)} ephemerides, none within "
-            f"{MAX_EPH_AGE_S / 3600:.0f} h): is the navigation file of another day? nothing written")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
