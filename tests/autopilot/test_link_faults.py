@@ -113,6 +113,7 @@ def test_corrections_reach_the_pipe_whole_or_not_at_all(tmp_path: Path) -> None:
     assert snap["rtcm"]["dropped"] >= len(report["rtcm_broken"]) - 1
 
 
+@pytest.mark.slow
 def test_mission_flight_events_on_the_receivers_timeline(tmp_path: Path) -> None:
     """Driven by the receiver's mission (hil_sim.flight.Trajectory): the lifecycle events' GPS times (through
     SYSTEM_TIME) fall where the trajectory climbs past 2 m and touches down, on the scenario's GPS timeline."""
