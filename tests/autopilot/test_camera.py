@@ -34,7 +34,7 @@ def test_pairs_within_tolerance_and_names_each_orphan() -> None:
         if k != 2:
             cc.add_flash(_t(10 + 2.5 * k + 0.080), 100 + k)
     cc.add_flash(_t(3.0), 99)  # on the ground, before the mission: no autopilot trigger
-    for s in range(0, 40):
+    for s in range(40):
         cc.add_attitude(Attitude(_t(s * 0.25 + 2.0), 1.0, -2.0, 359.0 + s * 0.1))
     recs = cc.poll(_t(30.0))
     assert [r["result"] for r in recs] == [FLASH_WITHOUT_SHOT, MATCHED, MATCHED, SHOT_WITHOUT_FLASH, MATCHED,
