@@ -62,8 +62,10 @@ MAVLINK1_MAGIC = 0xFE
 # message name → id, for the requests (ids from common.xml / ardupilotmega.xml)
 STREAMS: dict[str, int] = {
     "HEARTBEAT": 0, "SYS_STATUS": 1, "SYSTEM_TIME": 2, "GPS_RAW_INT": 24, "ATTITUDE": 30,
-    "GLOBAL_POSITION_INT": 33, "CAMERA_TRIGGER": 112, "CAMERA_FEEDBACK": 180, "EXTENDED_SYS_STATE": 245,
+    "GLOBAL_POSITION_INT": 33, "CAMERA_FEEDBACK": 180, "EXTENDED_SYS_STATE": 245,
 }
+PX4_CAMERA_STREAM = ("CAMERA_TRIGGER", 112)
+"""PX4 reports its camera triggers as CAMERA_TRIGGER (common.xml) instead of ArduPilot's CAMERA_FEEDBACK."""
 EVENT_DRIVEN = frozenset({"CAMERA_FEEDBACK", "CAMERA_TRIGGER"})
 """Sent per camera trigger, not at a rate: its silence says nothing about the stream requests."""
 _ARDUPILOT_MODE_ENUMS = {1: "PLANE_MODE", 2: "COPTER_MODE", 3: "COPTER_MODE", 4: "COPTER_MODE",
@@ -82,7 +84,7 @@ class AutopilotOptions:
     """Interval requested for ATTITUDE and GLOBAL_POSITION_INT (s)."""
     slow_interval_s: float = 1.0
     """Interval requested for HEARTBEAT, EXTENDED_SYS_STATE, SYS_STATUS, SYSTEM_TIME, GPS_RAW_INT,
-    CAMERA_FEEDBACK, CAMERA_TRIGGER (s)."""
+    CAMERA_FEEDBACK (CAMERA_TRIGGER on PX4) (s)."""
     heartbeat_interval_s: float = 1.0
     link_timeout_s: float = 3.0
     """The link is down when the autopilot's last heartbeat is older than this (s)."""
@@ -463,7 +465,11 @@ class AutopilotLink:
     def _request_streams(self, now: int) -> None:
         assert self._autopilot is not None
         system, component = self._autopilot
-        for name, msg_id in STREAMS.items():
+        streams = dict(STREAMS)
+        if (self._status.autopilot or {}).get("autopilot") == MAV_AUTOPILOT_PX4:
+            del streams["CAMERA_FEEDBACK"]
+            streams[PX4_CAMERA_STREAM[0]] = PX4_CAMERA_STREAM[1]
+        for name, msg_id in streams.items():
             interval_us = round(self.options.interval_s(name) * 1e6)
             self._mav.command_long_send(system, component, MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, interval_us,
                                         0, 0, 0, 0, 0, force_mavlink1=self._mavlink1)
