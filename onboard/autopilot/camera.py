@@ -189,8 +189,8 @@ class CameraCrossCheck:
                     if d <= tol and (best is None or d < best[1]):
                         best = (k, d)
                 if best is not None and self._shots:
-                    ft = self._flashes[best[0]][0].total_ns
-                    if abs(self._shots[0].time.total_ns - ft) < best[1]:
+                    flash_ns = self._flashes[best[0]][0].total_ns
+                    if abs(self._shots[0].time.total_ns - flash_ns) < best[1]:
                         best = None
                 if best is None:
                     out.append(self._record(SHOT_WITHOUT_FLASH, shot, None))
