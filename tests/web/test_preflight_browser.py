@@ -125,18 +125,23 @@ def test_page_follows_the_companion_coming_up_and_its_faults(tmp_path: Path) -> 
         wait_verdict(page, "READY TO FLY")
 
 
-def _start(cmd: list[str], env: dict[str, str]) -> tuple[subprocess.Popen[bytes], str]:
-    proc = subprocess.Popen(cmd, cwd=PROJECT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+def _start(cmd: list[str], env: dict[str, str], log: Path) -> tuple[subprocess.Popen[bytes], str]:
+    """Start a simulator; its first stdout line is its pty. Its log goes to a file (a pipe nobody reads would
+    fill and stall it)."""
+    with log.open("wb") as err:
+        proc = subprocess.Popen(cmd, cwd=PROJECT, env=env, stdout=subprocess.PIPE, stderr=err)
     assert proc.stdout is not None
     line = proc.stdout.readline().decode().strip()
-    assert line, (proc.stderr.read().decode() if proc.stderr else "") or f"{cmd} printed nothing"
+    assert line, log.read_text(errors="replace")[-3000:] or f"{cmd} printed nothing"
     return proc, line
 
 
-def test_page_with_the_real_daemon_and_simulators_on_ptys(tmp_path: Path) -> None:
+def test_page_with_the_real_daemon_and_simulators_on_ptys(tmp_path: Path) -> None:  # noqa: PLR0915
     """The real daemon (`python -m onboard run`) with the hil_sim receiver (M8T) and the hil_sim autopilot on
     raw ptys: red while the system starts, go once the receiver is configured, tracks and flashes and the
     autopilot's heartbeat comes; the autopilot stand-in stopped: a no-go naming the autopilot link."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
     env = dict(os.environ, PYTHONPATH=str(PROJECT))
     env.pop("NOTIFY_SOCKET", None)
     status_path = tmp_path / "run" / "status.json"
@@ -145,25 +150,31 @@ def test_page_with_the_real_daemon_and_simulators_on_ptys(tmp_path: Path) -> Non
         try:
             wait_verdict(page, "DO NOT FLY", "no status snapshot")
             receiver, rx_pty = _start([sys.executable, "-m", "hil_sim", "receiver", "--model", "m8t", "--speed",
-                                       "4", "--time-valid-after", "4"], env)
+                                       "4", "--time-valid-after", "4"], env, tmp_path / "receiver.log")
             procs.append(receiver)
             autopilot, ap_pty = _start([sys.executable, "-m", "hil_sim", "autopilot", "--speed", "4",
-                                        "--arm-at", "100000"], env)
+                                        "--arm-at", "100000"], env, tmp_path / "autopilot.log")
             procs.append(autopilot)
             cfg = tmp_path / "recorder.toml"
             cfg.write_text('[receiver]\ncamera_period_s = 2.0\n[journal]\ndisk_floor_mb = 1.0\n'
                            f'[status]\ninterval_s = 0.5\n[autopilot]\nlink = "serial:{ap_pty}@921600"\n'
                            'link_timeout_s = 2.0\n')
-            daemon = subprocess.Popen(
-                [sys.executable, "-m", "onboard", "run", "--config", str(cfg), "--port", rx_pty, "--baud", "115200",
-                 "--data-dir", str(tmp_path / "data"), "--status", str(status_path)],
-                cwd=PROJECT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+            daemon_log = tmp_path / "daemon.log"
+            with daemon_log.open("wb") as out:
+                daemon = subprocess.Popen(
+                    [sys.executable, "-m", "onboard", "run", "--config", str(cfg), "--port", rx_pty, "--baud",
+                     "115200", "--data-dir", str(tmp_path / "data"), "--status", str(status_path)],
+                    cwd=PROJECT, env=env, stdout=out, stderr=subprocess.STDOUT)
             procs.append(daemon)
             # the system comes up: some no-go first (starting, configuring, no epochs yet...), then go
             page.wait_for_function(f"{VERDICT} === 'DO NOT FLY' || {VERDICT} === 'CHECK WARNINGS'", timeout=30000)
             first_fault = page.inner_text("#fault")
             assert first_fault, "the page went straight to go"
-            wait_verdict(page, "READY TO FLY", timeout_s=120)
+            try:
+                wait_verdict(page, "READY TO FLY", timeout_s=120)
+            except PlaywrightTimeout:
+                raise AssertionError(f"never go; page: {page.inner_text('#overall')} / {page.inner_text('#checks')}"
+                                     f"\ndaemon: {daemon_log.read_text(errors='replace')[-2000:]}") from None
             checks = page.inner_text("#checks")
             assert "heartbeat" in checks and "disarmed" in checks and "applied and verified" in checks
             assert "pre-arm checks pass" in checks
@@ -177,8 +188,8 @@ def test_page_with_the_real_daemon_and_simulators_on_ptys(tmp_path: Path) -> Non
             assert "autopilot link" in fault and ("lost" in fault or "closed" in fault), fault
             page.screenshot(path=str(shots_dir(tmp_path) / "preflight-daemon-link-lost.png"), full_page=True)
             daemon.send_signal(signal.SIGTERM)
-            out, _ = daemon.communicate(timeout=30)
-            assert daemon.returncode == 0, out.decode(errors="replace")[-3000:]
+            daemon.wait(timeout=30)
+            assert daemon.returncode == 0, daemon_log.read_text(errors="replace")[-3000:]
         finally:
             for proc in reversed(procs):  # daemon, then the stand-ins: only the processes this test started
                 if proc.poll() is None:
