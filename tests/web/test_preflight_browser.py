@@ -136,7 +136,7 @@ def _start(cmd: list[str], env: dict[str, str], log: Path) -> tuple[subprocess.P
     return proc, line
 
 
-def test_page_with_the_real_daemon_and_simulators_on_ptys(tmp_path: Path) -> None:  # noqa: PLR0915
+def test_page_with_the_real_daemon_and_simulators_on_ptys(tmp_path: Path) -> None:
     """The real daemon (`python -m onboard run`) with the hil_sim receiver (M8T) and the hil_sim autopilot on
     raw ptys: red while the system starts, go once the receiver is configured, tracks and flashes and the
     autopilot's heartbeat comes; the autopilot stand-in stopped: a no-go naming the autopilot link."""
