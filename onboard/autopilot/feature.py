@@ -215,7 +215,8 @@ class AutopilotLink:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
-        self._emit_camera_checks(final=True)
+        # no final camera_check flush: the recorder closed events.jsonl before its features (the last
+        # `decide_after_ns` of shots stay undecided; a flight closes ≥ 20 s after landing, so none in practice)
         if self._tlog is not None:
             try:
                 self._tlog.close()
@@ -422,9 +423,9 @@ class AutopilotLink:
                     self.camera.add_flash(m.time, m.count)
         self._emit_camera_checks()
 
-    def _emit_camera_checks(self, final: bool = False) -> None:
+    def _emit_camera_checks(self) -> None:
         with self._lock:
-            records = self.camera.poll(self.lifecycle.gpst_at(self.clock.monotonic_ns()), final=final)
+            records = self.camera.poll(self.lifecycle.gpst_at(self.clock.monotonic_ns()))
         if self._emit is not None:
             for rec in records:
                 self._emit(rec)
