@@ -457,6 +457,21 @@ def _rows(where: str, obj: dict[str, Any], spec: list[tuple[str, str, str, str, 
     return rows
 
 
+RTK_Q_NAMES = {1: "fixed", 2: "float", 5: "single", 0: "no solution"}
+
+
+def _rtk_state(rtk: dict[str, Any] | None) -> str:
+    """Our real-time RTK quality in words, beside the autopilot's GPS."""
+    if rtk is None:
+        return "not running (post-processed on the ground)"
+    q = rtk.get("q")
+    if "unreadable" in rtk or not isinstance(q, int) or isinstance(q, bool):
+        return "unreadable"
+    ratio = rtk.get("ratio")
+    extra = f", ratio {ratio:.1f}" if isinstance(ratio, (int, float)) and not isinstance(ratio, bool) and q == 1 else ""
+    return RTK_Q_NAMES.get(q, f"Q {q}") + extra
+
+
 def blocks(status: dict[str, Any] | None, rtk: dict[str, Any] | None, ap: dict[str, Any] | None,
            upload: dict[str, Any] | None, base_stream: str | None) -> dict[str, list[list[str]]]:
     """The page's value blocks ("autopilot", "base corrections", "camera", "upload"): [label, text] rows,
@@ -481,6 +496,7 @@ def blocks(status: dict[str, Any] | None, rtk: dict[str, Any] | None, ap: dict[s
             for row in out["autopilot"]:
                 if row[0] == "autopilot GPS fix type" and row[1].isdigit():
                     row[1] = f"{row[1]} ({GPS_FIX_NAMES.get(int(row[1]), '?')})"
+            out["autopilot"].append(["our real-time RTK", _rtk_state(rtk)])
             out["camera"] = _rows(AUTOPILOT, ap, [
                 ("autopilot triggers", "camera_check.shots", "integer", "", 0),
                 ("flash marks", "camera_check.flashes", "integer", "", 0),
