@@ -482,9 +482,10 @@ def blocks(status: dict[str, Any] | None, rtk: dict[str, Any] | None, ap: dict[s
             out["autopilot"] = [["status", f"unreadable: {ap['unreadable']}"]]
         else:
             out["autopilot"] = _rows(AUTOPILOT, ap, [
-                ("link", "link", "text", "", 0), ("link up", "link_up", "bool", "", 0),
+                ("link", "link", "text", "", 0), ("link open", "link_open", "bool", "", 0),
+                ("link up (heartbeat)", "link_up", "bool", "", 0),
                 ("heartbeat age", "heartbeat_age_s", "number", " s", 1),
-                ("packet loss", "packet_loss", "number", "", 4), ("armed", "armed", "bool", "", 0),
+                ("packets lost", "packets_lost", "integer", "", 0), ("armed", "armed", "bool", "", 0),
                 ("mode", "mode", "text", "", 0), ("landed state", "landed_state", "text", "", 0),
                 ("pre-arm healthy", "prearm_ok", "bool", "", 0),
                 ("battery", "battery.voltage_v", "number", " V", 2),
@@ -499,7 +500,7 @@ def blocks(status: dict[str, Any] | None, rtk: dict[str, Any] | None, ap: dict[s
             out["autopilot"].append(["our real-time RTK", _rtk_state(rtk)])
             out["camera"] = _rows(AUTOPILOT, ap, [
                 ("autopilot triggers", "camera_check.shots", "integer", "", 0),
-                ("flash marks", "camera_check.flashes", "integer", "", 0),
+                ("flashes (TIM-TM2 falling edges)", "camera_check.flashes", "integer", "", 0),
                 ("agree", "camera_check.matched", "integer", "", 0),
                 ("trigger without flash", "camera_check.shots_without_flash", "integer", "", 0),
                 ("flash without trigger", "camera_check.flashes_without_shot", "integer", "", 0),
@@ -510,8 +511,7 @@ def blocks(status: dict[str, Any] | None, rtk: dict[str, Any] | None, ap: dict[s
         rows = [["source", describe_base_stream(base_stream, ap)]]
         rows += _rows("rtk.json", rtk, [
             ("age of corrections", "age_s", "number", " s", 1), ("base epochs", "base_epochs", "integer", "", 0),
-            ("bytes received", "radio_bytes", "integer", "", 0), ("our RTK quality (1 fix, 2 float)", "q", "integer", "", 0),
-            ("ratio", "ratio", "number", "", 1), ("baseline", "baseline_m", "number", " m", 0),
+            ("bytes received", "radio_bytes", "integer", "", 0), ("baseline", "baseline_m", "number", " m", 0),
         ])
         out["base corrections"] = rows
     if upload is None:

@@ -170,6 +170,7 @@ def test_page_with_the_real_daemon_and_simulators_on_ptys(tmp_path: Path) -> Non
             page.wait_for_function(f"{VERDICT} === 'DO NOT FLY' || {VERDICT} === 'CHECK WARNINGS'", timeout=30000)
             first_fault = page.inner_text("#fault")
             assert first_fault, "the page went straight to go"
+            page.screenshot(path=str(shots_dir(tmp_path) / "preflight-daemon-red.png"), full_page=True)
             try:
                 wait_verdict(page, "READY TO FLY", timeout_s=120)
             except PlaywrightTimeout:
