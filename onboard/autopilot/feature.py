@@ -173,8 +173,11 @@ class AutopilotLink:
 
     def __init__(self, options: AutopilotOptions, open_link: Callable[[], ByteStream], clock: Clock | None = None,
                  link_name: str = "", corrections: CorrectionsPipe | None = None,
-                 sync_interval_s: float = 0.5) -> None:
+                 sync_interval_s: float = 0.5,
+                 camera_sink: Callable[[dict[str, Any]], None] | None = None) -> None:
         self.options = options
+        self.camera_sink = camera_sink
+        """Receives the `camera_check` records (from the link thread or the caller of `on_flash_marks`)."""
         self._open_link = open_link
         self.clock = clock or SystemClock()
         self.corrections = corrections
@@ -426,9 +429,9 @@ class AutopilotLink:
     def _emit_camera_checks(self) -> None:
         with self._lock:
             records = self.camera.poll(self.lifecycle.gpst_at(self.clock.monotonic_ns()))
-        if self._emit is not None:
+        if self.camera_sink is not None:
             for rec in records:
-                self._emit(rec)
+                self.camera_sink(rec)
 
     def _periodic(self) -> None:
         now = self.clock.monotonic_ns()
@@ -502,10 +505,10 @@ class AutopilotFeature(RecorderFeature):
 
     def on_flight_opened(self, flight: FlightContext) -> None:
         options, open_link, clock, link_name, corrections = self._args
-        self.link = AutopilotLink(options, open_link, clock or flight.clock, link_name, corrections,
-                                  flight.journal_options.sync_interval_s)
         append = flight.append_event
         emit = None if append is None else (lambda record: flight.post(append, record))
+        self.link = AutopilotLink(options, open_link, clock or flight.clock, link_name, corrections,
+                                  flight.journal_options.sync_interval_s, camera_sink=emit)
         self.link.start(flight.flight_dir, emit)
 
     def on_decoded(self, item: Any) -> None:

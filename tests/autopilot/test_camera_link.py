@@ -8,6 +8,7 @@ import datetime as dt
 import math
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -23,7 +24,10 @@ SHUTTER_DELAY_S = 0.08
 def test_feedback_and_flashes_cross_checked_with_attitude(tmp_path: Path) -> None:
     sim = AutopilotSimOptions(arm_at_s=2.0, spool_s=1.0, takeoff_s=2.0, survey_s=14.0, camera_period_s=2.0)
     flashes: dict[int, float] = {}  # img_idx → sim time of its flash
-    with Joined(tmp_path, sim, speed=4.0) as j:
+    checks: list[dict[str, Any]] = []
+    j = Joined(tmp_path, sim, speed=4.0)
+    j.link.camera_sink = checks.append  # the recorder's events.jsonl (AutopilotFeature passes its appender)
+    with j:
         utc0 = j.core.utc_start
         deadline = time.monotonic() + 40
         seen = 0
@@ -40,7 +44,8 @@ def test_feedback_and_flashes_cross_checked_with_attitude(tmp_path: Path) -> Non
         assert seen == 6, f"only {seen} CAMERA_FEEDBACK"
         time.sleep(0.8)  # > decide_after at 4×: the last ones are decided before the end
         snap = j.link.snapshot()
-    checks = [e for e in j.events if e.get("kind") == "camera_check"]
+    assert all(c["kind"] == "camera_check" for c in checks)
+    assert not any(e.get("kind") == "camera_check" for e in j.events)  # lifecycle events stay apart
     matched = [c for c in checks if c["result"] == "matched"]
     lost = [c for c in checks if c["result"] == "shot_without_flash"]
     assert len(matched) >= 4 and len(lost) >= 2, checks
