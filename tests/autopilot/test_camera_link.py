@@ -53,7 +53,10 @@ def test_feedback_and_flashes_cross_checked_with_attitude(tmp_path: Path) -> Non
     for c in matched:
         assert c["shot_source"] == "CAMERA_FEEDBACK"
         assert abs(c["delay_ns"] - SHUTTER_DELAY_S * 1e9) < 2e6  # ms-resolution boot time mapping
-        pose = j.core.flight.pose(flashes[c["shot_index"]])
+        t = flashes[c["shot_index"]]
+        if any(j.core.flight.phase(t + dt_s)[1] != 2 for dt_s in (-0.3, 0.3)):
+            continue  # the stand-in's roll jumps to 0 off the survey lines: no interpolation holds there
+        pose = j.core.flight.pose(t)
         assert c["roll_deg"] == pytest.approx(math.degrees(pose.roll_rad), abs=0.5)
         assert c["pitch_deg"] == pytest.approx(math.degrees(pose.pitch_rad), abs=0.5)
         dyaw = (c["yaw_deg"] - math.degrees(pose.yaw_rad) + 180) % 360 - 180
