@@ -13,7 +13,7 @@ import csv
 import datetime as dt
 import json
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -28,16 +28,48 @@ log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
+class AutopilotAttitude:
+    """The autopilot's body attitude at an exposure (deg: roll, pitch ±180, yaw 0–360 from north), from the
+    onboard camera cross-check (`camera_check` records): a prior for geotag exports before a bundle adjustment
+    (flight controller body frame: the camera's boresight and any gimbal are not in it)."""
+
+    roll_deg: float
+    pitch_deg: float
+    yaw_deg: float
+
+
+@dataclass(frozen=True)
+class CameraCheck:
+    """One `camera_check` record (`onboard.autopilot.camera`): `result` "matched", "shot_without_flash"
+    (the autopilot triggered, no flash mark) or "flash_without_shot"; the autopilot's event (`shot_source`,
+    `shot_index`, `shot_time`), the flash mark (`flash_time`, `flash_count`), `delay_s` flash − shot,
+    `exposure_time` (flash, else shot) and the autopilot's `attitude` there (None when not known)."""
+
+    result: str
+    exposure_time: GpsTime
+    shot_source: str | None = None
+    shot_index: int | None = None
+    shot_time: GpsTime | None = None
+    flash_time: GpsTime | None = None
+    flash_count: int | None = None
+    delay_s: float | None = None
+    attitude: AutopilotAttitude | None = None
+
+
+@dataclass(frozen=True)
 class Mark:
     """One event time from the receiver, before it is tied to an image.
 
-    `count` is the receiver's mark counter (TIM-TM2 `count`) when known, `kind` "flash" or "trigger".
+    `count` is the receiver's mark counter (TIM-TM2 `count`) when known, `kind` "flash" or "trigger";
+    `autopilot_attitude` the autopilot's attitude at this exposure when the onboard camera cross-check logged
+    one (a prior: the exporters do not use it).
     """
 
     time: GpsTime
     kind: str = "flash"
     count: int | None = None
     measured_delay_s: float | None = None
+    autopilot_attitude: AutopilotAttitude | None = None
 
 
 # ------------------------------------------------------------------------------------------------ readers
@@ -83,16 +115,88 @@ def read_events_csv(path: str | Path, default_kind: str = "trigger") -> list[Ima
     return events
 
 
+CAMERA_CHECK_RESULTS = ("matched", "shot_without_flash", "flash_without_shot")
+
+
+def _check_time(rec: dict[str, Any], prefix: str, n: int) -> GpsTime | None:
+    week, tow = rec.get(f"{prefix}_week"), rec.get(f"{prefix}_tow_ns")
+    if week is None and tow is None:
+        return None
+    if not all(isinstance(v, int) and not isinstance(v, bool) for v in (week, tow)):
+        raise InputError(f"camera_check record {n}: {prefix}_week/{prefix}_tow_ns must be whole numbers, "
+                         f"got {week!r}, {tow!r}")
+    assert isinstance(week, int) and isinstance(tow, int)
+    return GpsTime.from_week_tow_ns(week, tow)
+
+
+def _optional(rec: dict[str, Any], key: str, kinds: tuple[type, ...], n: int) -> Any:
+    value = rec.get(key)
+    if value is not None and (isinstance(value, bool) or not isinstance(value, kinds)):
+        raise InputError(f"camera_check record {n}: {key} must be {' or '.join(k.__name__ for k in kinds)}, "
+                         f"got {value!r}")
+    return value
+
+
+def camera_checks_from_records(records: list[dict[str, Any]]) -> list[CameraCheck]:
+    """The `camera_check` records of decoded events.jsonl records, in exposure-time order (other kinds are
+    skipped). Raises `InputError` on a malformed or newer-format one."""
+    out: list[CameraCheck] = []
+    for n, rec in enumerate(records):
+        if rec.get("kind") != "camera_check":
+            continue
+        if rec.get("v") != 1:
+            raise InputError(f"camera_check record {n}: format version {rec.get('v')!r} (this reader knows 1)")
+        result = rec.get("result")
+        if result not in CAMERA_CHECK_RESULTS:
+            raise InputError(f"camera_check record {n}: result must be one of {CAMERA_CHECK_RESULTS}, "
+                             f"got {result!r}")
+        exposure = _check_time(rec, "exposure", n)
+        if exposure is None:
+            raise InputError(f"camera_check record {n}: no exposure time")
+        angles = [_optional(rec, k, (int, float), n) for k in ("roll_deg", "pitch_deg", "yaw_deg")]
+        attitude = None if None in angles else AutopilotAttitude(*(float(a) for a in angles))
+        delay_ns = _optional(rec, "delay_ns", (int,), n)
+        out.append(CameraCheck(
+            result=str(result), exposure_time=exposure, shot_source=_optional(rec, "shot_source", (str,), n),
+            shot_index=_optional(rec, "shot_index", (int,), n), shot_time=_check_time(rec, "shot", n),
+            flash_time=_check_time(rec, "flash", n), flash_count=_optional(rec, "flash_count", (int,), n),
+            delay_s=None if delay_ns is None else delay_ns / NS_PER_S, attitude=attitude))
+    return sorted(out, key=lambda c: c.exposure_time.total_ns)
+
+
+ATTITUDE_MATCH_NS = 1_000_000
+"""A camera_check's exposure and a mark are the same flash when their GPS times agree to 1 ms (both are the
+same TIM-TM2 edge; the tolerance only absorbs a record written with a coarser time)."""
+
+
+def _with_attitude(marks: list[Mark], checks: list[CameraCheck]) -> list[Mark]:
+    by_time = sorted((c.exposure_time.total_ns, c.attitude) for c in checks if c.attitude is not None)
+    if not by_time:
+        return marks
+    times = [t for t, _ in by_time]
+    out = []
+    for m in marks:
+        i = int(np.searchsorted(times, m.time.total_ns))
+        near = [j for j in (i - 1, i) if 0 <= j < len(times) and abs(times[j] - m.time.total_ns) <= ATTITUDE_MATCH_NS]
+        if near:
+            j = min(near, key=lambda j: abs(times[j] - m.time.total_ns))
+            m = replace(m, autopilot_attitude=by_time[j][1])
+        out.append(m)
+    return out
+
+
 def marks_from_records(records: list[dict[str, Any]]) -> list[Mark]:
     """Image marks from decoded events.jsonl records (format of `onboard.timepulse.marks`).
 
     One mark per `pairing` record: its flash time (kind "flash", with the measured pulse→flash delay) or, with
     no flash, its measured pulse time (kind "trigger"). A log without pairing records falls back to its valid
-    flash-channel `mark` records. Raises `InputError` on malformed or newer-format records.
+    flash-channel `mark` records. A `camera_check` record at a mark's time gives it `autopilot_attitude`.
+    Raises `InputError` on malformed or newer-format records.
     """
     from onboard.timepulse.marks import FLASH_CHANNEL, parse_records
 
     marks, pairings, _ = parse_records(records)
+    checks = camera_checks_from_records(records)
     out: list[Mark] = []
     for p in pairings:
         if p.flash_time is not None:
@@ -102,7 +206,7 @@ def marks_from_records(records: list[dict[str, Any]]) -> list[Mark]:
     if not pairings:
         out = [Mark(m.time, "flash", m.count) for m in marks
                if m.channel == FLASH_CHANNEL and m.valid and m.time is not None]
-    return sorted(out, key=lambda m: m.time)
+    return _with_attitude(sorted(out, key=lambda m: m.time), checks)
 
 
 def read_marks_jsonl(path: str | Path) -> list[Mark]:

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from onboard.autopilot.camera import Attitude, CameraCrossCheck, CameraShot, camera_time_gpst
 from onboard.autopilot.corrections import CorrectionsPipe
 from onboard.autopilot.lifecycle import (
     LANDED_STATE_NAMES,
@@ -45,6 +46,7 @@ from onboard.autopilot.tlog import TlogWriter, next_tlog_path
 from onboard.errors import LinkLost
 from onboard.hw.ports import ByteStream, Clock, SystemClock
 from onboard.recorder.feature import FlightContext, RecorderFeature
+from onboard.timepulse.marks import FLASH_CHANNEL
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +64,9 @@ STREAMS: dict[str, int] = {
     "HEARTBEAT": 0, "SYS_STATUS": 1, "SYSTEM_TIME": 2, "GPS_RAW_INT": 24, "ATTITUDE": 30,
     "GLOBAL_POSITION_INT": 33, "CAMERA_FEEDBACK": 180, "EXTENDED_SYS_STATE": 245,
 }
-EVENT_DRIVEN = frozenset({"CAMERA_FEEDBACK"})
+PX4_CAMERA_STREAM = ("CAMERA_TRIGGER", 112)
+"""PX4 reports its camera triggers as CAMERA_TRIGGER (common.xml) instead of ArduPilot's CAMERA_FEEDBACK."""
+EVENT_DRIVEN = frozenset({"CAMERA_FEEDBACK", "CAMERA_TRIGGER"})
 """Sent per camera trigger, not at a rate: its silence says nothing about the stream requests."""
 _ARDUPILOT_MODE_ENUMS = {1: "PLANE_MODE", 2: "COPTER_MODE", 3: "COPTER_MODE", 4: "COPTER_MODE",
                          13: "COPTER_MODE", 14: "COPTER_MODE", 15: "COPTER_MODE", 10: "ROVER_MODE",
@@ -80,7 +84,7 @@ class AutopilotOptions:
     """Interval requested for ATTITUDE and GLOBAL_POSITION_INT (s)."""
     slow_interval_s: float = 1.0
     """Interval requested for HEARTBEAT, EXTENDED_SYS_STATE, SYS_STATUS, SYSTEM_TIME, GPS_RAW_INT,
-    CAMERA_FEEDBACK (s)."""
+    CAMERA_FEEDBACK (CAMERA_TRIGGER on PX4) (s)."""
     heartbeat_interval_s: float = 1.0
     link_timeout_s: float = 3.0
     """The link is down when the autopilot's last heartbeat is older than this (s)."""
@@ -136,6 +140,8 @@ class LinkStatus:
     time_synced: bool = False
     camera_feedback: int = 0
     last_camera_feedback: dict[str, Any] | None = None
+    camera_check: dict[str, Any] | None = None
+    """`onboard.autopilot.camera.CameraCheckCounts`: autopilot camera events vs TIM-TM2 flash marks."""
     rtcm: dict[str, int] = field(default_factory=dict)
     heartbeats_sent: int = 0
     interval_requests: int = 0
@@ -167,8 +173,11 @@ class AutopilotLink:
 
     def __init__(self, options: AutopilotOptions, open_link: Callable[[], ByteStream], clock: Clock | None = None,
                  link_name: str = "", corrections: CorrectionsPipe | None = None,
-                 sync_interval_s: float = 0.5) -> None:
+                 sync_interval_s: float = 0.5,
+                 camera_sink: Callable[[dict[str, Any]], None] | None = None) -> None:
         self.options = options
+        self.camera_sink = camera_sink
+        """Receives the `camera_check` records (from the link thread or the caller of `on_flash_marks`)."""
         self._open_link = open_link
         self.clock = clock or SystemClock()
         self.corrections = corrections
@@ -176,6 +185,7 @@ class AutopilotLink:
         self.lifecycle = FlightLifecycle()
         self.reassembler = GpsRtcmReassembler()
         self.loss = SequenceLoss()
+        self.camera = CameraCrossCheck()
         self._status = LinkStatus(link=link_name)
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -208,6 +218,8 @@ class AutopilotLink:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
+        # no final camera_check flush: the recorder closed events.jsonl before its features (the last
+        # `decide_after_ns` of shots stay undecided; a flight closes ≥ 20 s after landing, so none in practice)
         if self._tlog is not None:
             try:
                 self._tlog.close()
@@ -223,6 +235,7 @@ class AutopilotLink:
             if self._last_heartbeat_ns is not None:
                 st.heartbeat_age_s = round((now - self._last_heartbeat_ns) / 1e9, 3)
                 st.link_up = st.heartbeat_age_s <= self.options.link_timeout_s
+            st.camera_check = dict(self.camera.counts.__dict__)
             st.rtcm = {"fragments": self.reassembler.stats.fragments, "messages": self.reassembler.stats.messages,
                        "dropped": self.reassembler.stats.dropped, "bytes": self.reassembler.stats.bytes_out}
             if self.corrections is not None:
@@ -363,6 +376,10 @@ class AutopilotLink:
         elif kind == "ATTITUDE":
             events += self._boot_ms(msg.time_boot_ms, now)
             st.attitude = {"roll_deg": _deg(msg.roll), "pitch_deg": _deg(msg.pitch), "yaw_deg": _deg(msg.yaw)}
+            at = lc.times.gpst_at_boot_ms(msg.time_boot_ms)
+            if at is not None:
+                self.camera.add_attitude(Attitude(at, st.attitude["roll_deg"], st.attitude["pitch_deg"],
+                                                  st.attitude["yaw_deg"] % 360.0))
         elif kind == "GLOBAL_POSITION_INT":
             events += self._boot_ms(msg.time_boot_ms, now)
             st.position = {"lat_deg": msg.lat / 1e7, "lon_deg": msg.lon / 1e7, "alt_m": msg.alt / 1e3,
@@ -377,10 +394,17 @@ class AutopilotLink:
                           "remaining_pct": None if msg.battery_remaining == -1 else msg.battery_remaining}
             if msg.onboard_control_sensors_present & MAV_SYS_STATUS_PREARM_CHECK:
                 st.prearm_ok = bool(msg.onboard_control_sensors_health & MAV_SYS_STATUS_PREARM_CHECK)
-        elif kind == "CAMERA_FEEDBACK":
+        elif kind in ("CAMERA_FEEDBACK", "CAMERA_TRIGGER"):
+            index = msg.img_idx if kind == "CAMERA_FEEDBACK" else msg.seq
             st.camera_feedback += 1
-            st.last_camera_feedback = {"img_idx": msg.img_idx, "time_usec": msg.time_usec,
-                                       "lat_deg": msg.lat / 1e7, "lon_deg": msg.lng / 1e7}
+            st.last_camera_feedback = {"source": kind, "img_idx": index, "time_usec": msg.time_usec}
+            if kind == "CAMERA_FEEDBACK":
+                st.last_camera_feedback.update(lat_deg=msg.lat / 1e7, lon_deg=msg.lng / 1e7)
+            at = camera_time_gpst(msg.time_usec, lc.times.gpst_at_boot_ms)
+            if at is None:
+                self.camera.add_untimed_shot()
+            else:
+                self.camera.add_shot(CameraShot(kind, int(index), at))
         elif kind == "COMMAND_ACK" and msg.command == MAV_CMD_SET_MESSAGE_INTERVAL:
             st.interval_acks += msg.result == 0
         st.events += len(events)
@@ -394,8 +418,24 @@ class AutopilotLink:
             self._status.time_synced = False
         return events
 
+    def on_flash_marks(self, marks: Any) -> None:
+        """TIM-TM2 marks (`CameraMark`s, from the recorder's loop): the flash edges join the camera cross-check."""
+        with self._lock:
+            for m in marks:
+                if m.channel == FLASH_CHANNEL and m.edge == "falling" and m.valid and m.time is not None:
+                    self.camera.add_flash(m.time, m.count)
+        self._emit_camera_checks()
+
+    def _emit_camera_checks(self) -> None:
+        with self._lock:
+            records = self.camera.poll(self.lifecycle.gpst_at(self.clock.monotonic_ns()))
+        if self.camera_sink is not None:
+            for rec in records:
+                self.camera_sink(rec)
+
     def _periodic(self) -> None:
         now = self.clock.monotonic_ns()
+        self._emit_camera_checks()
         if self._tlog is not None:
             self._tlog.maybe_sync()
         if self._mav.srcSystem == 0:
@@ -429,7 +469,11 @@ class AutopilotLink:
     def _request_streams(self, now: int) -> None:
         assert self._autopilot is not None
         system, component = self._autopilot
-        for name, msg_id in STREAMS.items():
+        streams = dict(STREAMS)
+        if (self._status.autopilot or {}).get("autopilot") == MAV_AUTOPILOT_PX4:
+            del streams["CAMERA_FEEDBACK"]
+            streams[PX4_CAMERA_STREAM[0]] = PX4_CAMERA_STREAM[1]
+        for name, msg_id in streams.items():
             interval_us = round(self.options.interval_s(name) * 1e6)
             self._mav.command_long_send(system, component, MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, interval_us,
                                         0, 0, 0, 0, 0, force_mavlink1=self._mavlink1)
@@ -461,11 +505,16 @@ class AutopilotFeature(RecorderFeature):
 
     def on_flight_opened(self, flight: FlightContext) -> None:
         options, open_link, clock, link_name, corrections = self._args
-        self.link = AutopilotLink(options, open_link, clock or flight.clock, link_name, corrections,
-                                  flight.journal_options.sync_interval_s)
         append = flight.append_event
         emit = None if append is None else (lambda record: flight.post(append, record))
+        self.link = AutopilotLink(options, open_link, clock or flight.clock, link_name, corrections,
+                                  flight.journal_options.sync_interval_s, camera_sink=emit)
         self.link.start(flight.flight_dir, emit)
+
+    def on_decoded(self, item: Any) -> None:
+        marks = getattr(item, "marks", None)  # TimeMarks (TIM-TM2): flash edges for the camera cross-check
+        if self.link is not None and marks:
+            self.link.on_flash_marks(marks)
 
     def status(self) -> dict[str, Any] | None:
         return None if self.link is None else self.link.snapshot()

@@ -13,7 +13,17 @@ from fastapi import FastAPI
 from fastapi.responses import HTMLResponse
 
 from onboard.recorder.status import DEFAULT_STATUS_PATH, read_rtk_status, read_status
-from onboard.web.checks import PreflightOptions, checks_json, overall, preflight_checks, unreadable_snapshot
+from onboard.web.checks import (
+    AUTOPILOT,
+    UPLOAD,
+    PreflightOptions,
+    blocks,
+    checks_json,
+    headline,
+    overall,
+    preflight_checks,
+    unreadable_snapshot,
+)
 
 log = logging.getLogger(__name__)
 
@@ -28,11 +38,32 @@ def _load(status_path: Path) -> tuple[dict[str, Any] | None, str | None, bool]:
         return None, f"status snapshot unreadable: {exc}", True
 
 
-def create_app(status_path: Path | None = None, options: PreflightOptions | None = None) -> FastAPI:
+def _load_beside(status_path: Path, name: str) -> dict[str, Any] | None:
+    """A feature's JSON snapshot beside status.json: None when absent (the feature is not configured),
+    {"unreadable": why} when it is not a JSON object (torn, foreign, unreadable)."""
+    from onboard.recorder.status import _loads  # the snapshot reader's strict JSON (no NaN, bounded nesting)
+
+    try:
+        obj = _loads(status_path.with_name(name).read_bytes())
+    except FileNotFoundError:
+        return None
+    except (ValueError, OSError) as exc:
+        return {"unreadable": f"{name}: {exc}"}
+    if not isinstance(obj, dict) or "unreadable" in obj:
+        return {"unreadable": f"{name} is not a JSON object of ours"}
+    return obj
+
+
+def create_app(status_path: Path | None = None, options: PreflightOptions | None = None,
+               base_stream: str | None = None) -> FastAPI:
     """The status web app for the snapshot at `status_path` (default: `$ONBOARD_STATUS_PATH`, else the
-    recorder's default /run/directgeo/status.json), so `uvicorn --factory onboard.web.app:create_app` works."""
+    recorder's default /run/directgeo/status.json), so `uvicorn --factory onboard.web.app:create_app` works.
+    `base_stream` is the recorder's `rtk.base_stream` (default `$ONBOARD_RTK_BASE_STREAM`, the recorder's own
+    variable), shown without credentials as the base-correction source."""
     if status_path is None:
         status_path = Path(os.environ.get("ONBOARD_STATUS_PATH", str(DEFAULT_STATUS_PATH)))
+    if base_stream is None:
+        base_stream = os.environ.get("ONBOARD_RTK_BASE_STREAM")
     options = options or PreflightOptions()
     app = FastAPI(title="directgeo pre-flight check", version="1")
     page = resources.files("onboard.web").joinpath("preflight.html").read_text(encoding="utf-8")
@@ -52,12 +83,15 @@ def create_app(status_path: Path | None = None, options: PreflightOptions | None
                 rtk = read_rtk_status(status_path)
             except (ValueError, TypeError, OSError) as exc:  # torn or foreign rtk.json: say so, keep the rest
                 rtk = {"unreadable": str(exc)}
+        autopilot = _load_beside(status_path, AUTOPILOT) if status is not None else None
+        upload = _load_beside(status_path, UPLOAD) if status is not None else None
         if unreadable:
             checks = unreadable_snapshot(str(error))
         else:
-            checks = preflight_checks(status, time.time_ns(), options, rtk)
-        return {"overall": overall(checks), "checks": checks_json(checks), "status": status, "rtk": rtk,
-                "error": error}
+            checks = preflight_checks(status, time.time_ns(), options, rtk, autopilot, upload, base_stream)
+        return {"overall": overall(checks), "headline": headline(checks), "checks": checks_json(checks),
+                "blocks": blocks(status, rtk, autopilot, upload, base_stream), "status": status, "rtk": rtk,
+                "autopilot": autopilot, "upload": upload, "error": error}
 
     @app.get("/api/status")
     def status() -> dict[str, Any]:

@@ -153,29 +153,29 @@ def test_page_in_a_real_browser_follows_the_snapshot(live_page: tuple[str, Path]
         page = browser.new_page()
         page.goto(url)
         # no snapshot yet: the page says so
-        page.wait_for_function("document.getElementById('overall').textContent === 'DO NOT FLY'", timeout=10000)
+        page.wait_for_function("document.getElementById('verdict').textContent === 'DO NOT FLY'", timeout=10000)
         assert "no status snapshot" in page.inner_text("#checks")
         write_status(status_path, _healthy(time.time_ns()))
-        page.wait_for_function("document.getElementById('overall').textContent === 'READY TO FLY'", timeout=10000)
+        page.wait_for_function("document.getElementById('verdict').textContent === 'READY TO FLY'", timeout=10000)
         assert page.locator("#sats .bar").count() == 7
         snap = _healthy(time.time_ns())
         snap.config_state, snap.config_error = "failed", "CFG-TP5.flags: NAK from receiver"
         write_status(status_path, snap)
-        page.wait_for_function("document.getElementById('overall').textContent === 'DO NOT FLY'", timeout=10000)
+        page.wait_for_function("document.getElementById('verdict').textContent === 'DO NOT FLY'", timeout=10000)
         assert "CFG-TP5.flags" in page.inner_text("#checks")
         # the daemon runs RTK: its snapshot beside the status adds the RTK line, float → warnings
         write_status(status_path, _healthy(time.time_ns()))
         rtk = _rtk_fixed()
         rtk.q, rtk.ratio = 2, 1.4
         write_status(status_path.with_name(RTK_STATUS_NAME), rtk.to_json())
-        page.wait_for_function("document.getElementById('overall').textContent === 'CHECK WARNINGS'", timeout=10000)
+        page.wait_for_function("document.getElementById('verdict').textContent === 'CHECK WARNINGS'", timeout=10000)
         assert "wait for the fix before take-off" in page.inner_text("#checks")
         write_status(status_path.with_name(RTK_STATUS_NAME), _rtk_fixed().to_json())
-        page.wait_for_function("document.getElementById('overall').textContent === 'READY TO FLY'", timeout=10000)
+        page.wait_for_function("document.getElementById('verdict').textContent === 'READY TO FLY'", timeout=10000)
         assert "fixed: ratio 12.5" in page.inner_text("#checks")
         # a snapshot with a field of the wrong kind: a no-go that names it (the API answered 500 before)
         status_path.write_text(json.dumps({**_healthy(time.time_ns()).to_json(), "epochs": "many"}))
-        page.wait_for_function("document.getElementById('overall').textContent === 'DO NOT FLY'", timeout=10000)
+        page.wait_for_function("document.getElementById('verdict').textContent === 'DO NOT FLY'", timeout=10000)
         assert "status snapshot unreadable: epochs: must be a whole number, got 'many'" in page.inner_text("#checks")
         browser.close()
 
