@@ -241,12 +241,19 @@ class UploadService:
 
     def _delete(self, flight_dir: Path, confirmed: dict[str, str]) -> list[str]:
         """Delete the files the server confirmed (by name and SHA-256, `confirmed`), then the folder if nothing
-        else is left in it (a sub-folder such as radio/ is never uploaded, so never deleted). Returns the names
-        deleted."""
+        else is left in it (a sub-folder such as radio/ is never uploaded, so never deleted). The closed manifest
+        goes last and only with the folder: a folder left without it would look like an unclosed flight, which
+        the recorder's next start resumes. Returns the names deleted."""
+        from onboard.logger.journal import MANIFEST_NAME
         from onboard.upload.client import sha256_file
 
         deleted = []
-        for name, digest in sorted(confirmed.items()):
+        names = sorted(n for n in confirmed if n != MANIFEST_NAME)
+        others = [p for p in flight_dir.iterdir() if p.name not in confirmed]
+        if MANIFEST_NAME in confirmed and not others:
+            names.append(MANIFEST_NAME)
+        for name in names:
+            digest = confirmed[name]
             path = flight_dir / name
             try:
                 if sha256_file(path) != digest:  # changed since the upload: keep it

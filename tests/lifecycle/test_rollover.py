@@ -120,3 +120,24 @@ def test_new_flight_names_sort_after_the_newest(tmp_path: Path) -> None:
     assert d.name > "flight-20300101T000000Z"
     d.mkdir()
     assert new_flight_dir(tmp_path, 0).name > d.name
+
+
+def test_real_time_rtk_starts_again_in_the_next_flight(tmp_path: Path) -> None:
+    """RtkFeature's service cannot start twice: after a roll-over a fresh one runs in the new flight."""
+    from onboard.realtime.service import RtkFeature, RtkServiceOptions
+
+    rtk = RtkFeature(RtkServiceOptions(), None)
+    spy = Spy()
+    rec = RunningRecorder(make_settings(tmp_path), RecorderDeps(open_port=lambda: FakeByteStream()), [spy, rtk])
+    try:
+        wait_until(lambda: spy.context is not None, 10, "flight opened")
+        first = rtk.rtk
+        spy.close("landed")
+        wait_until(lambda: len(spy.calls) >= 3, 10, "roll-over")
+        assert rtk.rtk is not first and rtk.rtk.flight_dir is not None
+        assert rtk.rtk.flight_dir.name == spy.calls[2][1][0]
+        assert all(t.is_alive() for t in rtk.rtk._threads)
+    finally:
+        assert rec.stop() == 0
+    flights = sorted((tmp_path / "data").glob("flight-*"))
+    assert [(f / "solution.pos").is_file() for f in flights] == [True, True]

@@ -177,9 +177,21 @@ def test_delete_after_upload_only_confirmed_files(tmp_path: Path, live: LiveServ
     names = sorted(local_files(flight))
     svc = service_for(settings_for(tmp_path, live.url, upload_delete_after_upload=True))
     assert svc.step() == 0.0
-    assert sorted(p.name for p in flight.iterdir()) == ["radio"]
-    assert UploadQueue(data).done()[flight.name]["deleted"] == names
+    # the closed manifest stays with what is left, so that the recorder never takes the folder for an unclosed flight
+    assert sorted(p.name for p in flight.iterdir()) == ["manifest.json", "radio"]
+    assert UploadQueue(data).done()[flight.name]["deleted"] == [n for n in names if n != "manifest.json"]
     assert sorted(server_files(live)[flight.name]) == names
+
+
+def test_delete_after_upload_removes_the_whole_flight(tmp_path: Path, live: LiveServer) -> None:
+    data = tmp_path / "data"
+    flight = make_flight(data, "flight-20260501T100000Z", 100_000, 8)
+    names = sorted(local_files(flight))
+    svc = service_for(settings_for(tmp_path, live.url, upload_delete_after_upload=True))
+    assert svc.step() == 0.0
+    assert not flight.exists()
+    assert sorted(UploadQueue(data).done()[flight.name]["deleted"]) == names
+    assert svc.step() == 0.2 and svc.status.state == "idle"  # nothing queued, nothing failed
 
 
 def test_a_damaged_local_copy_is_set_aside(tmp_path: Path, live: LiveServer) -> None:
