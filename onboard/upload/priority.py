@@ -31,12 +31,13 @@ def _libc() -> ctypes.CDLL:
     return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
 
 
-def io_class() -> str:
-    """The calling thread's I/O scheduling class ("idle", "best-effort", ...; "unknown" off Linux)."""
+def io_class(pid: int = 0) -> str:
+    """The I/O scheduling class of process (thread) `pid`, 0 = the calling thread ("idle", "best-effort", ...;
+    "unknown" off Linux)."""
     numbers = SYSCALLS.get(platform.machine())
     if numbers is None:
         return "unknown"
-    value = _libc().syscall(numbers[1], IOPRIO_WHO_PROCESS, 0)
+    value = _libc().syscall(numbers[1], IOPRIO_WHO_PROCESS, pid)
     if value < 0:
         return "unknown"
     return IOPRIO_CLASS_NAMES.get(value >> IOPRIO_CLASS_SHIFT, str(value >> IOPRIO_CLASS_SHIFT))

@@ -24,6 +24,7 @@ from onboard.logger.events import read_events
 from onboard.logger.journal import Journal, JournalOptions, iter_journal_bytes, read_manifest
 from onboard.receiver.framing import StreamFramer
 from onboard.recorder.feature import is_rollover
+from onboard.upload.priority import io_class
 from onboard.upload.queue import UploadQueue
 from tests.autopilot.test_e2e import autopilot_json, env, start_standin
 from tests.daemon.helpers import reap, wait_until
@@ -336,6 +337,10 @@ def test_upload_resumes_after_the_server_was_down_and_after_a_reboot(tmp_path: P
         held = server_held(ground, flight.name)
         assert 0 < held < total
         uploader = start_uploader(tmp_path, cfg)
+        wait_until(lambda: upload_json(tmp_path).get("pid") == uploader.pid, 30, "the new uploader's status")
+        # low priority, as the kernel sees the running process: nice (field 19 of /proc/PID/stat) and I/O class
+        assert int(Path(f"/proc/{uploader.pid}/stat").read_text().rsplit(")", 1)[1].split()[16]) >= 10
+        assert io_class(uploader.pid) == "idle" and upload_json(tmp_path)["priority"]["io_class"] == "idle"
         wait_until(lambda: upload_json(tmp_path).get("done") == 1, 90, "upload complete after the restart")
         second_run = upload_json(tmp_path)
         sigterm(uploader)
