@@ -108,6 +108,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="fly the receiver's default mission (hil_sim.scenario / flight), not the short script")
     ap.add_argument("--arm-at", type=float, default=10.0, help="simulated s on the ground before arming")
     ap.add_argument("--survey", type=float, default=30.0, help="simulated s of survey lines in the air")
+    ap.add_argument("--repeat-after", type=float, default=None, metavar="S",
+                    help="fly the script again, arming S simulated s after the first disarm")
     ap.add_argument("--mavlink1", action="store_true", help="MAVLink 1 only: send v1, ignore v2 frames")
     ap.add_argument("--no-gcs-heartbeat", action="store_true", help="do not forward a ground station's heartbeat")
     ap.add_argument("--link-loss", type=_window, action="append", default=[], metavar="AT_S:DURATION_S",

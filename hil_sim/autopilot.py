@@ -57,6 +57,8 @@ class AutopilotSimOptions:
     landing_s: float = 5.0
     disarm_after_s: float = 3.0
     camera_period_s: float = 2.0
+    repeat_after_s: float | None = None
+    """Fly the script a second time, arming this many simulated s after the first disarm (None: once)."""
     mavlink1: bool = False
     gcs_heartbeat: bool = True
     """Also forward a ground station's heartbeat (system 255, type GCS): the companion must ignore it."""
@@ -99,8 +101,16 @@ class ScriptedFlight:
         self.t_land = self.t_air + o.survey_s
         self.t_down = self.t_land + o.landing_s
 
+    def _fold(self, t: float) -> float:
+        """The second flight (`repeat_after_s`) replays the first: its time mapped onto the first's."""
+        if self.o.repeat_after_s is None:
+            return t
+        rearm = self.t_down + self.o.disarm_after_s + self.o.repeat_after_s
+        return t - (rearm - self.o.arm_at_s) if t >= rearm else t
+
     def phase(self, t: float) -> tuple[bool, int, int]:
         """(armed, landed_state, custom_mode) at simulated time `t`."""
+        t = self._fold(t)
         if t < self.o.arm_at_s:
             return False, 1, COPTER_LOITER
         if t < self.t_takeoff:
@@ -120,6 +130,7 @@ class ScriptedFlight:
     def pose(self, t: float) -> Pose:
         """Where the vehicle is and how it is turned at `t`."""
         _, landed, _ = self.phase(t)
+        t = self._fold(t)
         east = north = up = yaw = 0.0
         if landed == 3:
             up = 40.0 * (t - self.t_takeoff) / self.o.takeoff_s
@@ -501,5 +512,5 @@ def options_from_args(args: Any) -> AutopilotSimOptions:
         reboot_at_s=tuple(args.reboot_at), rtcm_messages=rtcm, rtcm_start_s=args.rtcm_start,
         rtcm_interval_s=args.rtcm_interval,
         drop_fragment_rate=args.drop_fragment_rate, reorder_fragments=args.reorder_fragments, seed=args.seed,
-        gcs_heartbeat=not args.no_gcs_heartbeat)
+        gcs_heartbeat=not args.no_gcs_heartbeat, repeat_after_s=getattr(args, "repeat_after", None))
 

@@ -38,6 +38,7 @@ COMMANDS: tuple[tuple[str, str], ...] = (
     ("rtk", "onboard.postpro.rtk_cli:add_rtk_parser"),
     ("base", "onboard.base.cli:add_base_parser"),
     ("web", "onboard.web.cli:add_web_parser"),
+    ("upload-daemon", "onboard.upload.cli:add_upload_daemon_parser"),
 )
 
 

@@ -84,6 +84,22 @@ def tcp_port(value: Any, *, name: str | None = "port") -> int:
     return integer(value, name=name, minimum=1, maximum=65535)
 
 
+def http_url(value: Any, *, name: str | None = None) -> str:
+    """An http:// or https:// URL with a host (e.g. http://ground:8600), returned as given."""
+    from urllib.parse import urlsplit
+
+    text = value if isinstance(value, str) else ""
+    try:
+        parts = urlsplit(text)
+        parts.port  # noqa: B018 (raises ValueError on a bad port)
+    except ValueError:
+        parts = None
+    if parts is None or parts.scheme not in ("http", "https") or not parts.hostname:
+        raise ValueError(f"{_label(name, value)}: must be an http:// or https:// URL with a host, "
+                         "e.g. http://ground:8600")
+    return text
+
+
 def vector3(value: Any, *, name: str | None = None, unit: str = " m", max_abs: float | None = None,
             what: str = "X,Y,Z") -> tuple[float, float, float]:
     """Three finite numbers from "X,Y,Z" (spaces also separate), or a sequence of three; each |v| ≤ `max_abs`."""

@@ -15,6 +15,11 @@ One thread (`autopilot-link`) owns the link:
     (time_boot_ms going back), and when a requested stream stays silent `rerequest_s` (a reboot with its
     streams off, a ground station overriding our rates)
 
+The end of a flight: after a disarm, with landed_state ON_GROUND (or never reported) and the link up for
+`settle_s` (`FlightCloser`), a `flight_over` event goes to events.jsonl and the recorder is asked to close the
+flight and continue into a new one (`FlightContext.close_flight`); across that roll-over the link stays open
+and only the tlog moves to the new flight (`switch_flight`). A flight resumed after a power cut counts as flown.
+
 Every timeout is on the recorder's monotonic clock (never pymavlink's `recv_match`, which uses wall time). We
 send only HEARTBEAT and COMMAND_LONG(SET_MESSAGE_INTERVAL): never corrections, positions or commands that
 change the flight.
@@ -36,6 +41,7 @@ from onboard.autopilot.lifecycle import (
     LANDED_STATE_NAMES,
     MAV_AUTOPILOT_INVALID,
     MAV_TYPE_ONBOARD_CONTROLLER,
+    FlightCloser,
     FlightLifecycle,
     LifecycleEvent,
     SequenceLoss,
@@ -45,7 +51,7 @@ from onboard.autopilot.rtcm_reassembly import GpsRtcmReassembler
 from onboard.autopilot.tlog import TlogWriter, next_tlog_path
 from onboard.errors import LinkLost
 from onboard.hw.ports import ByteStream, Clock, SystemClock
-from onboard.recorder.feature import FlightContext, RecorderFeature
+from onboard.recorder.feature import FlightContext, RecorderFeature, is_rollover, rollover_reason
 from onboard.timepulse.marks import FLASH_CHANNEL
 
 log = logging.getLogger(__name__)
@@ -92,6 +98,9 @@ class AutopilotOptions:
     """A requested stream silent this long (s) while the autopilot's heartbeat comes: request them again."""
     reopen_s: float = 1.0
     read_bytes: int = 4096
+    settle_s: float = 20.0
+    """The flight is over when the autopilot was disarmed and on the ground this long with the link up (s;
+    `FlightCloser`)."""
 
     def interval_s(self, name: str) -> float:
         """The interval requested for message `name` (s)."""
@@ -142,6 +151,10 @@ class LinkStatus:
     last_camera_feedback: dict[str, Any] | None = None
     camera_check: dict[str, Any] | None = None
     """`onboard.autopilot.camera.CameraCheckCounts`: autopilot camera events vs TIM-TM2 flash marks."""
+    settling_s: float | None = None
+    """How long (s) the flight-over conditions have held (disarmed, on the ground, link up); None: they do not."""
+    flights_closed: int = 0
+    """Flights closed by a roll-over since the recorder started."""
     rtcm: dict[str, int] = field(default_factory=dict)
     heartbeats_sent: int = 0
     interval_requests: int = 0
@@ -202,16 +215,37 @@ class AutopilotLink:
         self._mavlink1 = False
         self._mav: Any = None
         self._mavlink: Any = None
+        self._flight_over: Callable[[str], None] | None = None
+        self.closer = FlightCloser(round(options.settle_s * 1e9))
 
     # -- lifecycle --------------------------------------------------------------------------------------
-    def start(self, flight_dir: Path, emit_event: Callable[[dict[str, Any]], None] | None) -> None:
+    def start(self, flight_dir: Path, emit_event: Callable[[dict[str, Any]], None] | None,
+              flight_over: Callable[[str], None] | None = None, resumed: bool = False) -> None:
         """Open the flight's tlog and start the link thread; `emit_event(record)` receives lifecycle events
-        (from the link thread: the caller hands them to the recorder's loop)."""
+        (from the link thread: the caller hands them to the recorder's loop); `flight_over(reason)` is called
+        (from the link thread) when the flight is over (`FlightCloser`; None: never decided here); `resumed`:
+        the flight was resumed after an unclean stop (it may have been flown)."""
         self._tlog = TlogWriter(next_tlog_path(Path(flight_dir)), self.clock, self.sync_interval_s)
         self._status.tlog = self._tlog.path.name
         self._emit = emit_event
+        self._flight_over = flight_over
+        self.closer = FlightCloser(round(self.options.settle_s * 1e9), resumed)
         self._thread = threading.Thread(target=self._run, name="autopilot-link", daemon=True)
         self._thread.start()
+
+    def switch_flight(self, flight_dir: Path) -> None:
+        """The recorder rolled over to a new flight: the tlog continues in `flight_dir` (the swap happens
+        between two packets, so none is lost), the link and its state stay as they are."""
+        tlog = TlogWriter(next_tlog_path(Path(flight_dir)), self.clock, self.sync_interval_s)
+        with self._lock:
+            old, self._tlog = self._tlog, tlog
+            self._status.tlog = tlog.path.name
+            self._status.flights_closed += 1
+        if old is not None:
+            try:
+                old.close()
+            except OSError as exc:
+                log.error("autopilot tlog close failed: %s", exc)
 
     def stop(self) -> None:
         """Stop the thread, close the tlog (fsync'd)."""
@@ -436,8 +470,16 @@ class AutopilotLink:
     def _periodic(self) -> None:
         now = self.clock.monotonic_ns()
         self._emit_camera_checks()
-        if self._tlog is not None:
-            self._tlog.maybe_sync()
+        with self._lock:
+            if self._tlog is not None:
+                self._tlog.maybe_sync()
+            over = self._flight_over_now(now)
+        if over is not None:
+            log.info("autopilot: flight over (%s)", over.detail)
+            if self._emit is not None:
+                self._emit(over.to_record())
+            if self._flight_over is not None:
+                self._flight_over(rollover_reason(f"disarmed and on the ground for {self.options.settle_s:g} s"))
         if self._mav.srcSystem == 0:
             return  # the vehicle's system id is not known yet: a heartbeat from system 0 would be wrong
         if (self._last_sent_heartbeat_ns is None
@@ -451,6 +493,23 @@ class AutopilotLink:
             due = self._requests_due(now)
         if due:
             self._request_streams(now)
+
+    def _flight_over_now(self, now: int) -> LifecycleEvent | None:
+        """The `flight_over` event when the closer says the flight is over now (under the lock)."""
+        if self._flight_over is None:
+            return None
+        lc = self.lifecycle
+        link_up = (self._last_heartbeat_ns is not None
+                   and now - self._last_heartbeat_ns <= self.options.link_timeout_s * 1e9)
+        due = self.closer.update(lc.armed, lc.landed_state, link_up, now)
+        since = self.closer.settling_since_ns
+        self._status.settling_s = None if since is None else round((now - since) / 1e9, 3)
+        if not due:
+            return None
+        self.closer.closed()
+        self._status.settling_s = None
+        self._status.events += 1
+        return LifecycleEvent("flight_over", now, lc.gpst_at(now), {"settle_s": self.options.settle_s})
 
     def _requests_due(self, now: int) -> bool:
         if self._autopilot is None or self._last_heartbeat_ns is None:
@@ -502,14 +561,22 @@ class AutopilotFeature(RecorderFeature):
         self._args = (options, open_link, clock, link_name, corrections)
         self.corrections = corrections
         self.link: AutopilotLink | None = None
+        self._rolling_over = False
 
     def on_flight_opened(self, flight: FlightContext) -> None:
+        if self.link is not None and self._rolling_over:
+            # a roll-over: the link, its thread and its state go on; only the tlog moves to the new flight
+            self._rolling_over = False
+            self.link.switch_flight(flight.flight_dir)
+            return
         options, open_link, clock, link_name, corrections = self._args
         append = flight.append_event
         emit = None if append is None else (lambda record: flight.post(append, record))
         self.link = AutopilotLink(options, open_link, clock or flight.clock, link_name, corrections,
                                   flight.journal_options.sync_interval_s, camera_sink=emit)
-        self.link.start(flight.flight_dir, emit)
+        close = flight.close_flight
+        over = None if close is None else (lambda reason: flight.post(close, reason))
+        self.link.start(flight.flight_dir, emit, over, flight.resumed)
 
     def on_decoded(self, item: Any) -> None:
         marks = getattr(item, "marks", None)  # TimeMarks (TIM-TM2): flash edges for the camera cross-check
@@ -520,5 +587,8 @@ class AutopilotFeature(RecorderFeature):
         return None if self.link is None else self.link.snapshot()
 
     def on_flight_closed(self, reason: str) -> None:
+        if is_rollover(reason):
+            self._rolling_over = True  # keep the link; the tlog stays in the old flight until the next opens
+            return
         if self.link is not None:
             self.link.stop()

@@ -193,3 +193,47 @@ class FlightLifecycle:
         self._last_boot = (time_boot_ms, now_ns)
         self._max_boot_ms = time_boot_ms if self._max_boot_ms is None else max(self._max_boot_ms, time_boot_ms)
         return []
+
+
+class FlightCloser:
+    """When the flight is over (pure: times passed in): after a disarm, with the autopilot's landed_state
+    ON_GROUND (or UNDEFINED: an autopilot that never reports it) and its link alive, held for `settle_ns`.
+
+    A flight is closable once it was flown: landed_state reached IN_AIR since it opened, or, for an autopilot
+    that never reports landed_state, it was armed; `resumed` (a flight resumed after a crash or power cut, whose
+    past is unknown) counts as flown. Arming, leaving the ground, or the link going down restarts the wait: a
+    silent link says nothing about whether the vehicle re-armed. `closed()` starts the count afresh for the
+    next flight.
+    """
+
+    def __init__(self, settle_ns: int, resumed: bool = False) -> None:
+        self.settle_ns = settle_ns
+        self.flown = resumed
+        self._landed_reported = False
+        self._since_ns: int | None = None
+
+    def update(self, armed: bool | None, landed_state: int, link_up: bool, now_ns: int) -> bool:
+        """Feed the latest state (after every message and periodically); True when the flight should close now."""
+        if landed_state != LANDED_UNDEFINED:
+            self._landed_reported = True
+        in_air = landed_state in (LANDED_IN_AIR, LANDED_TAKEOFF, LANDED_LANDING)
+        if in_air or (armed and not self._landed_reported):
+            self.flown = True
+        settled = (self.flown and link_up and armed is False
+                   and landed_state in (LANDED_ON_GROUND, LANDED_UNDEFINED))
+        if not settled:
+            self._since_ns = None
+            return False
+        if self._since_ns is None:
+            self._since_ns = now_ns
+        return now_ns - self._since_ns >= self.settle_ns
+
+    @property
+    def settling_since_ns(self) -> int | None:
+        """Monotonic ns since which the close conditions hold (None: they do not)."""
+        return self._since_ns
+
+    def closed(self) -> None:
+        """The flight was closed: the next one must be flown before it can close."""
+        self.flown = False
+        self._since_ns = None

@@ -474,6 +474,8 @@ class RtkFeature(RecorderFeature):
         self._started = False
 
     def on_flight_opened(self, flight: FlightContext) -> None:
+        if self._started:  # a roll-over: the stopped service cannot start again; a fresh one for the new flight
+            self.rtk = RtkService(self.rtk.options, self.rtk._open_radio, self.rtk.clock)
         self.rtk.start(flight.flight_dir)
         self._started = True
 

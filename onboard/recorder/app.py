@@ -104,7 +104,8 @@ def autopilot_feature(settings: Settings, clock: Clock | None = None,
                                fast_interval_s=settings.autopilot_fast_interval_s,
                                slow_interval_s=settings.autopilot_slow_interval_s,
                                link_timeout_s=settings.autopilot_link_timeout_s,
-                               rerequest_s=settings.autopilot_rerequest_s)
+                               rerequest_s=settings.autopilot_rerequest_s,
+                               settle_s=settings.autopilot_settle_s)
     return AutopilotFeature(options, open_mavlink_link(settings.autopilot_link), clock, settings.autopilot_link,
                             CorrectionsPipe() if with_corrections else None)
 

@@ -45,7 +45,7 @@ from onboard.logger.events import EventLog, read_events
 from onboard.logger.files import FileLayer, OsFileLayer
 from onboard.logger.journal import EVENTS_NAME, Journal, JournalOptions, flight_name, read_manifest
 from onboard.receiver.framing import Frame, StreamFramer
-from onboard.recorder.feature import FlightContext, RecorderFeature
+from onboard.recorder.feature import FlightContext, RecorderFeature, is_rollover
 from onboard.recorder.sdnotify import SdNotifier, WatchdogGate
 from onboard.recorder.settings import Settings, receiver_options
 from onboard.recorder.status import SatelliteStatus, StatusSnapshot, write_status
@@ -62,6 +62,7 @@ from onboard.timepulse.marks import (
     pps_anchors,
     timepulse_record,
 )
+from onboard.upload.queue import UploadQueue
 
 log = logging.getLogger(__name__)
 
@@ -136,19 +137,32 @@ class DataDirLock:
             self._fd = None
 
 
+def _flights(data_dir: Path) -> list[Path]:
+    return sorted(p for p in data_dir.iterdir() if p.is_dir() and p.name.startswith("flight-"))
+
+
 def choose_flight_dir(data_dir: Path, wall_ns: int) -> Path:
     """The flight to record into: the latest flight if it was not closed cleanly (resume after a crash or
     power cut, in a new segment), else a new `flight-YYYYmmddTHHMMSSZ` directory."""
-    flights = sorted(p for p in data_dir.iterdir() if p.is_dir() and p.name.startswith("flight-"))
+    flights = _flights(data_dir)
     if flights:
         last = flights[-1]
         manifest = read_manifest(last)
         if manifest is None or not manifest.closed:
             return last
+    return new_flight_dir(data_dir, wall_ns)
+
+
+def new_flight_dir(data_dir: Path, wall_ns: int) -> Path:
+    """A new flight directory named after `wall_ns` (not created) that sorts after every existing flight: two
+    flights in the same second, or a wall clock stepped back (a Pi without RTC), get a `-NN` suffix."""
+    flights = _flights(data_dir)
     name = flight_name(wall_ns)
+    if flights and name <= flights[-1].name:
+        name = flights[-1].name  # the newest flight's name plus a suffix still sorts after it
     candidate = data_dir / name
     n = 1
-    while candidate.exists():  # two flights in the same second: suffix keeps names sorting in order
+    while candidate.exists():
         candidate = data_dir / f"{name}-{n:02d}"
         n += 1
     return candidate
@@ -229,6 +243,11 @@ class Recorder:
         )
         self.journal: Journal | None = None
         self.events: EventLog | None = None
+        self._journal_options = JournalOptions()
+        self._queue = UploadQueue(settings.data_dir) if settings.upload_url else None
+        """Closed flights are queued for the uploader (`onboard.upload`) when `upload.url` is set."""
+        self.flights_closed = 0
+        """Flights closed by a roll-over while recording went on (the autopilot saw the flight end)."""
         self.exit_code = EXIT_OK
         self.stop_reason: str | None = None
         self._stop_thread = threading.Event()
@@ -357,13 +376,18 @@ class Recorder:
         self._resume_pairing(flight_dir / EVENTS_NAME)
         self.status.flight = flight_dir.name
         self.status.flight_dir = str(flight_dir)
+        self._journal_options = options
         self._setup_decoder()
-        context = FlightContext(flight_dir=flight_dir, clock=self.clock, journal_options=options,
-                                status_path=s.status_path, post=self._post, request_stop=self.request_stop,
-                                append_event=self._append_event)
+        if self._queue is not None:
+            try:
+                for name in self._queue.promote_closed(flight_dir.name):
+                    log.info("upload queue: %s was closed before a crash: ready to upload", name)
+            except OSError as exc:
+                log.warning("upload queue not readable: %s", exc)
+        manifest = self.journal.manifest
+        resumed = manifest.restarts > 0 or any(seg.recovered for seg in manifest.segments)
         self._features_open = True
-        for feature in self.features:
-            self._feature_call(feature, feature.on_flight_opened, context)
+        self._open_features(flight_dir, resumed, None)
         for sig in (signal.SIGTERM, signal.SIGINT):
             try:
                 self._loop.add_signal_handler(sig, self.request_stop, f"signal {sig.name}", EXIT_OK)
@@ -402,8 +426,81 @@ class Recorder:
         if self._loop is not None:
             self._loop.call_soon_threadsafe(self.request_stop, reason, exit_code)
 
+    def _open_features(self, flight_dir: Path, resumed: bool, previous: Path | None) -> None:
+        context = FlightContext(flight_dir=flight_dir, clock=self.clock, journal_options=self._journal_options,
+                                status_path=self.settings.status_path, post=self._post,
+                                request_stop=self.request_stop, append_event=self._append_event,
+                                close_flight=self.close_flight, resumed=resumed, previous_flight_dir=previous)
+        for feature in self.features:
+            self._feature_call(feature, feature.on_flight_opened, context)
+
+    def _enqueue(self, flight_dir: Path, ready: bool) -> None:
+        """Queue a closing (`ready` False) or closed flight for the uploader; a failure is logged, never stops
+        recording (the flight stays on disk and can be queued by hand)."""
+        if self._queue is None:
+            return
+        try:
+            self._queue.enqueue(flight_dir.name, ready, self.clock.wall_ns())
+        except OSError as exc:
+            log.error("upload queue: %s not queued: %s", flight_dir.name, exc)
+
+    def close_flight(self, reason: str) -> None:
+        """Close the current flight and continue recording into a new one without a gap (loop only).
+
+        The new journal and event log are opened first; the reader thread's next append goes to the new journal
+        (the swap happens under the journal lock, between two appends); then the old flight is closed (segment
+        fsync'd and hashed, final manifest with `reason`), the features get `on_flight_closed(reason)` and
+        `on_flight_opened(next)`, and the old flight is queued for upload. If the new flight cannot be opened,
+        recording goes on in the old one."""
+        if self.journal is None or self.journal.closed or (self._stopped is not None and self._stopped.is_set()):
+            return
+        reason = reason if is_rollover(reason) else f"rollover: {reason}"
+        started_ns = self.clock.monotonic_ns()
+        old_dir = self.journal.flight_dir
+        new_dir = new_flight_dir(self.settings.data_dir, self.clock.wall_ns())
+        try:
+            journal = Journal(new_dir, self.clock, self._journal_options, self.deps.files)
+            events = EventLog(new_dir / EVENTS_NAME, self.clock, self.settings.journal_sync_interval_s,
+                              self.deps.files)
+        except OSError as exc:
+            log.error("cannot open the next flight %s (%s): recording goes on in %s", new_dir, exc, old_dir.name)
+            return
+        self._enqueue(old_dir, ready=False)
+        with self._journal_lock:
+            old_journal, self.journal = self.journal, journal
+        old_events, self.events = self.events, events
+        close_record = {"type": "flight", "event": "closed", "reason": reason, "next_flight": new_dir.name,
+                        "host_wall_ns": self.clock.wall_ns(), "host_monotonic_ns": self.clock.monotonic_ns(),
+                        "bytes": old_journal.bytes_written}
+        try:
+            if old_events is not None:
+                for rec in self._pairer.flush():
+                    old_events.append(rec)
+                old_events.append(close_record)
+                old_events.close()
+            old_journal.close(reason)
+        except OSError as exc:
+            log.error("closing the flight %s failed: %s (the next start recovers it)", old_dir.name, exc)
+        self._pairer = PairingRecorder(self._pairing_options())
+        self.flights_closed += 1
+        self.status.flight = new_dir.name
+        self.status.flight_dir = str(new_dir)
+        self.status.events = events.records
+        log.info("flight %s closed (%s); recording into %s", old_dir.name, reason, new_dir.name)
+        for feature in self.features:
+            self._feature_call(feature, feature.on_flight_closed, reason)
+        self._open_features(new_dir, False, old_dir)
+        self._append_event({"type": "flight", "event": "opened", "previous_flight": old_dir.name,
+                            "host_wall_ns": self.clock.wall_ns(), "host_monotonic_ns": self.clock.monotonic_ns()})
+        self._enqueue(old_dir, ready=True)
+        self._write_status()
+        log.info("roll-over done in %.1f ms (the journal lock was held only for the swap)",
+                 (self.clock.monotonic_ns() - started_ns) / 1e6)
+
     def _close_flight(self) -> None:
         reason = self.stop_reason or "stopped"
+        if self.journal is not None:
+            self._enqueue(self.journal.flight_dir, ready=False)
         try:
             if self.events is not None:
                 for rec in self._pairer.flush():
@@ -418,6 +515,8 @@ class Recorder:
             log.error("closing the flight failed: %s", exc)
             self.status.message = f"{reason}; closing failed: {exc}"
         self._close_features(reason)
+        if self.journal is not None and self.journal.closed:
+            self._enqueue(self.journal.flight_dir, ready=True)
         if self._port is not None:
             self._port.close()
             self._port = None
@@ -469,10 +568,11 @@ class Recorder:
                 continue
             if data:
                 mono, wall = self.clock.monotonic_ns(), self.clock.wall_ns()
-                if not self._journal_op(functools.partial(self.journal.append, data, mono, wall)):
+                if not self._journal_op(functools.partial(Journal.append, data=data, rx_monotonic_ns=mono,
+                                                          rx_wall_ns=wall)):
                     return
                 self._post(self._on_bytes, data, mono)
-            if not self._sync_for_marks() or not self._journal_op(self.journal.maybe_sync):
+            if not self._sync_for_marks() or not self._journal_op(Journal.maybe_sync):
                 return
             request = self._reopen_request
             if request is not None:
@@ -492,21 +592,24 @@ class Recorder:
     def _idle_sync(self) -> None:
         assert self.journal is not None
         if self._sync_for_marks():
-            self._journal_op(self.journal.maybe_sync)
+            self._journal_op(Journal.maybe_sync)
 
     def _sync_for_marks(self) -> bool:
         """fsync now if the loop saw a time mark since the last call (reader thread); False if that failed."""
         if not self._mark_sync.is_set():
             return True
         self._mark_sync.clear()
-        assert self.journal is not None
-        return self._journal_op(self.journal.sync_now)
+        return self._journal_op(Journal.sync_now)
 
-    def _journal_op(self, op: Callable[[], Any]) -> bool:
-        """Run a journal write/sync; on an OS error stop the recorder (ENOSPC → disk full). False if failed."""
+    def _journal_op(self, op: Callable[[Journal], Any]) -> bool:
+        """Run a journal write/sync `op(journal)` on the current journal, resolved under the journal lock (a
+        roll-over swaps it between two ops); on an OS error stop the recorder (ENOSPC → disk full). False if
+        failed."""
         try:
             with self._journal_lock:
-                op()
+                journal = self.journal
+                assert journal is not None
+                op(journal)
             return True
         except OSError as exc:
             if exc.errno in (errno.ENOSPC, errno.EDQUOT):

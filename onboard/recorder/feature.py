@@ -14,8 +14,14 @@ event loop, in the order the features were given:
     status()                   every status snapshot (~1 s) and at close: a JSON-able dict written as
                                `status_name` beside the recorder's status.json (through `write_status`), or
                                None for nothing
-    on_flight_closed(reason)   once, after the journal was closed, before the last snapshot: stop threads,
+    on_flight_closed(reason)   after the journal was closed, before the last snapshot: stop threads,
                                close files
+
+A flight can also end while recording goes on (`FlightContext.close_flight`: the autopilot link after landing):
+the recorder closes the flight and opens the next one between two appends of the receiver's bytes, and calls
+`on_flight_closed(reason)` with a roll-over reason (`is_rollover(reason)`) then `on_flight_opened(next)`. A
+feature that keeps a link open (the autopilot's) may keep it across a roll-over and move only its files; one
+that stops its threads at close must be able to start again in the next flight.
 
 A hook must return quickly (it runs on the loop that also times marks and pets the watchdog): slow work goes to
 the feature's own threads, which hand results back with `flight.post(fn, *args)` (run on the loop, in order).
@@ -45,7 +51,10 @@ class FlightContext:
     (a feature's snapshot goes beside it); `post(fn, *args)` runs `fn(*args)` on the recorder's loop in posting
     order (safe from any thread); `request_stop(reason, exit_code)` stops the recorder (loop only);
     `append_event(record)` appends one JSON-able record to the flight's events.jsonl (loop only: from a thread,
-    `post(append_event, record)`; None when the recorder keeps no event log).
+    `post(append_event, record)`; None when the recorder keeps no event log); `close_flight(reason)` closes this
+    flight and continues recording into a new one without a gap (loop only; None when the recorder cannot);
+    `resumed` the flight was resumed after an unclean stop (its past is unknown: maybe mid-air); `previous_flight_dir`
+    the flight closed just before this one by a roll-over (None at start).
     """
 
     flight_dir: Path
@@ -55,6 +64,23 @@ class FlightContext:
     post: Callable[..., None]
     request_stop: Callable[[str, int], None]
     append_event: Callable[[dict[str, Any]], None] | None = None
+    close_flight: Callable[[str], None] | None = None
+    resumed: bool = False
+    previous_flight_dir: Path | None = None
+
+
+ROLLOVER_PREFIX = "rollover: "
+"""Start of the close reason of a flight closed while recording continues into the next one."""
+
+
+def rollover_reason(why: str) -> str:
+    """The close reason of a roll-over (`why`: e.g. "disarmed, on the ground for 20 s")."""
+    return ROLLOVER_PREFIX + why
+
+
+def is_rollover(reason: str) -> bool:
+    """Whether `on_flight_closed(reason)` will be followed by `on_flight_opened` (recording goes on)."""
+    return reason.startswith(ROLLOVER_PREFIX)
 
 
 class RecorderFeature:
@@ -84,4 +110,5 @@ class RecorderFeature:
         return None
 
     def on_flight_closed(self, reason: str) -> None:
-        """The flight is closed (`reason` why the recorder stopped): stop threads, close files."""
+        """The flight is closed (`reason` why; `is_rollover(reason)`: the next flight opens at once): stop threads,
+        close files."""

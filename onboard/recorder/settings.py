@@ -65,6 +65,14 @@ class Settings:
     autopilot_slow_interval_s: float = 1.0
     autopilot_link_timeout_s: float = 3.0
     autopilot_rerequest_s: float = 5.0
+    autopilot_settle_s: float = 20.0
+    upload_url: str = ""
+    upload_token_file: str = ""
+    upload_delete_after_upload: bool = False
+    upload_chunk_mib: float = 4.0
+    upload_backoff_min_s: float = 5.0
+    upload_backoff_max_s: float = 300.0
+    upload_poll_s: float = 5.0
 
 
 RTK_ENGINE = "rtk.engine."
@@ -102,6 +110,14 @@ KEYS: Mapping[str, str] = MappingProxyType(
         "autopilot.slow_interval_s": "autopilot_slow_interval_s",
         "autopilot.link_timeout_s": "autopilot_link_timeout_s",
         "autopilot.rerequest_s": "autopilot_rerequest_s",
+        "autopilot.settle_s": "autopilot_settle_s",
+        "upload.url": "upload_url",
+        "upload.token_file": "upload_token_file",
+        "upload.delete_after_upload": "upload_delete_after_upload",
+        "upload.chunk_mib": "upload_chunk_mib",
+        "upload.backoff_min_s": "upload_backoff_min_s",
+        "upload.backoff_max_s": "upload_backoff_max_s",
+        "upload.poll_s": "upload_poll_s",
     }
 )
 MODELS = ("auto", "lea6t", "m8t")
@@ -166,6 +182,11 @@ BOUNDS: Mapping[str, Bound] = MappingProxyType(
         "autopilot.slow_interval_s": Bound(0, 10, " s", True),
         "autopilot.link_timeout_s": Bound(0, 60, " s", True),
         "autopilot.rerequest_s": Bound(0, 300, " s", True),
+        "autopilot.settle_s": Bound(0, 3600, " s", True),
+        "upload.chunk_mib": Bound(0.01, 1024, " MiB", why="each chunk is held in memory twice"),
+        "upload.backoff_min_s": Bound(0, 3600, " s", True),
+        "upload.backoff_max_s": Bound(0, 86400, " s", True),
+        "upload.poll_s": Bound(0, 3600, " s", True),
         # receiver options the receiver profile does not bound itself
         "receiver.ant_cable_delay_ns": Bound(-32768, 32767, " ns", why="CFG-TP5 holds it in 16 signed bits"),
         "receiver.pulse_len_ms": Bound(0, 3000, " ms", True, "shorter than the camera period, at most 3 s"),
@@ -346,6 +367,16 @@ def validate(s: Settings) -> None:
             parse_link_spec(s.autopilot_link)
         except ValueError as exc:
             raise ConfigFileError(f"autopilot.link {exc}") from exc
+    if s.upload_url:
+        try:
+            check.http_url(s.upload_url, name="upload.url")
+        except ValueError as exc:
+            raise ConfigFileError(str(exc)) from exc
+        if not s.upload_token_file:
+            raise ConfigFileError("upload.url needs upload.token_file (the file holding the ground API's token)")
+    if s.upload_backoff_max_s < s.upload_backoff_min_s:
+        raise ConfigFileError(f"upload.backoff_max_s {s.upload_backoff_max_s:g}: must be ≥ upload.backoff_min_s "
+                              f"({s.upload_backoff_min_s:g} s)")
     try:
         takeoff_position_ecef_m(s)
     except ValueError as exc:

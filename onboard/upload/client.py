@@ -43,6 +43,11 @@ class UploadError(OnboardError):
     """The upload cannot complete (server refusal, corrupted local file, retries exhausted)."""
 
 
+class LocalCopyDamaged(UploadError):
+    """The flight on the card no longer matches its manifest (a segment changed or is missing): retrying cannot
+    help, and it is never uploaded as if good."""
+
+
 @dataclass(frozen=True)
 class UploaderOptions:
     """Chunking and retry policy."""
@@ -77,6 +82,8 @@ class UploadReport:
     chunks_sent: int = 0
     retries: int = 0
     files: dict[str, str] = field(default_factory=dict)
+    sha256: dict[str, str] = field(default_factory=dict)
+    """name → SHA-256 (hex) of every file, as the server confirmed it at the end (`_verify`)."""
 
 
 def sha256_file(path: Path) -> str:
@@ -112,13 +119,13 @@ def build_upload_manifest(flight_dir: str | Path, roles: dict[str, str] | None =
         size, digest = p.stat().st_size, sha256_file(p)
         seg = recorded.get(p.name)
         if seg is not None and (seg.bytes != size or seg.sha256 != digest):
-            raise UploadError(f"{p}: {size} bytes sha256 {digest[:12]}… but the manifest recorded {seg.bytes} bytes "
+            raise LocalCopyDamaged(f"{p}: {size} bytes sha256 {digest[:12]}… but the manifest recorded {seg.bytes} bytes "
                               f"sha256 {seg.sha256[:12]}…: local copy damaged, not uploaded")
         role = (roles or {}).get(p.name) or ROLE_BY_NAME.get(p.name) or ROLE_BY_SUFFIX.get(p.suffix)
         entries.append(FileEntry(p.name, size, digest, role))
     missing = set(recorded) - {e.name for e in entries}
     if missing:
-        raise UploadError(f"segments listed in the manifest are missing: {', '.join(sorted(missing))}")
+        raise LocalCopyDamaged(f"segments listed in the manifest are missing: {', '.join(sorted(missing))}")
     if not entries:
         raise InputError(f"{d} holds no file to upload")
     return name, entries
@@ -128,7 +135,13 @@ class Uploader:
     """Uploads flight folders to one ground API with a bearer token."""
 
     def __init__(self, base_url: str, token: str, options: UploaderOptions | None = None,
-                 client: httpx.Client | None = None, sleep: Callable[[float], None] = time.sleep) -> None:
+                 client: httpx.Client | None = None, sleep: Callable[[float], None] = time.sleep,
+                 before_chunk: Callable[[], None] | None = None,
+                 on_chunk: Callable[[int], None] | None = None) -> None:
+        """`before_chunk()` is called before every chunk is sent (it may raise to stop the upload there: the
+        next run resumes from the server's offset); `on_chunk(n_bytes)` after every chunk the server took."""
+        self.before_chunk = before_chunk
+        self.on_chunk = on_chunk
         self.options = options or UploaderOptions()
         self.client = client or httpx.Client(base_url=base_url, timeout=self.options.timeout_s)
         self.headers = {"Authorization": f"Bearer {token}"}
@@ -176,6 +189,7 @@ class Uploader:
                 continue
             self._upload_file(report, d / e.name, e)
         self._verify(report, entries)
+        report.sha256 = {e.name: e.sha256 for e in entries}
         return report
 
     def _verify(self, report: UploadReport, entries: list[FileEntry]) -> None:
@@ -203,6 +217,8 @@ class Uploader:
             while True:
                 if offset >= entry.size and entry.size > 0:
                     break
+                if self.before_chunk is not None:
+                    self.before_chunk()
                 fh.seek(offset)
                 chunk = fh.read(self.chunk_bytes)
                 r = self._request(report, "PUT", url, params={"offset": offset}, content=chunk,
@@ -212,6 +228,8 @@ class Uploader:
                     body = r.json()
                     report.bytes_sent += len(chunk)
                     report.chunks_sent += 1
+                    if self.on_chunk is not None:
+                        self.on_chunk(len(chunk))
                     offset = int(body["received"])
                     if body["status"] == "complete":
                         break
@@ -261,7 +279,7 @@ def file_role(text: str, *, name: str | None = None) -> tuple[str, str]:
     return file_name.strip(), role.strip()
 
 
-def _read_token(token_file: Path | None) -> str:
+def read_token(token_file: Path | None) -> str:
     """The API token from `token_file`, else $DIRECTGEO_TOKEN; ValueError when unreadable or empty."""
     if token_file is None:
         token = os.environ.get("DIRECTGEO_TOKEN", "")
@@ -302,7 +320,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     try:
-        token = _read_token(args.token_file)
+        token = read_token(args.token_file)
     except ValueError as exc:
         return report_error("upload", str(exc), EXIT_USAGE)
     roles = dict(args.role)

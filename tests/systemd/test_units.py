@@ -16,6 +16,7 @@ from onboard.recorder.daemon import EXIT_DISK_FULL
 SYSTEMD_DIR = Path(__file__).resolve().parents[2] / "systemd"
 RECORDER = SYSTEMD_DIR / "directgeo-recorder.service"
 WEB = SYSTEMD_DIR / "directgeo-web.service"
+UPLOAD = SYSTEMD_DIR / "directgeo-upload.service"
 
 
 def unit(path: Path) -> configparser.RawConfigParser:
@@ -54,8 +55,23 @@ def test_web_unit_after_not_requires_recorder() -> None:
     assert u["Service"]["RestartPreventExitStatus"].split() == ["2"]  # usage/configuration: do not loop
 
 
+def test_upload_unit_low_priority_after_not_requires_recorder() -> None:
+    u = unit(UPLOAD)
+    svc = u["Service"]
+    assert "python -m onboard upload-daemon" in svc["ExecStart"]
+    assert "directgeo-recorder.service" in u["Unit"]["After"] and "network-online.target" in u["Unit"]["After"]
+    for key in ("Requires", "BindsTo", "PartOf", "Requisite"):
+        assert "directgeo-recorder" not in u["Unit"].get(key, ""), key
+    assert int(svc["Nice"]) >= 10 and svc["IOSchedulingClass"] == "idle"
+    assert svc["Restart"] == "on-failure" and svc["RestartPreventExitStatus"].split() == [str(EXIT_USAGE)]
+    assert svc["User"] == "directgeo"  # the recorder's user: it reads (and may delete) the flights
+    assert "/var/lib/directgeo" in svc["ReadWritePaths"] and "/run/directgeo" in svc["ReadWritePaths"]
+    assert svc["ProtectSystem"] == "strict" and svc["NoNewPrivileges"] == "yes"
+    assert "PrivateNetwork" not in svc  # it talks to the ground app
+
+
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze is not installed here")
-@pytest.mark.parametrize("path", [RECORDER, WEB], ids=lambda p: p.name)
+@pytest.mark.parametrize("path", [RECORDER, WEB, UPLOAD], ids=lambda p: p.name)
 def test_systemd_analyze_verify(tmp_path: Path, path: Path) -> None:
     """Verify a copy whose interpreter path points at this virtualenv (verify checks ExecStart exists)."""
     text = path.read_text().replace("/opt/directgeo/.venv/bin/python", sys.executable)
