@@ -75,8 +75,11 @@ def test_link_loss_and_return(tmp_path: Path) -> None:
     sim = dataclasses.replace(QUICK, arm_at_s=100.0, link_loss=((6.0, 10.0),))
     with Joined(tmp_path, sim) as j:
         j.run_until(lambda s: s["link_up"], 10, "link up")
-        j.run_until(lambda s: not s["link_up"], 15, "link lost")
+        lost = j.run_until(lambda s: not s["link_up"], 15, "link lost")
         snap = j.run_until(lambda s: s["link_up"] and j.sim_time() > 16.0, 15, "link back")
+        # the streams are asked again at the link's next periodic step after the heartbeat returns: wait for it
+        # (the snapshot of "link back" may come just before it on a loaded machine)
+        j.run_until(lambda s: s["interval_requests"] > lost["interval_requests"], 10, "streams asked again")
         report = j.core.report()
     assert snap["packets_lost"] == 0  # the outage is down time, not packet loss (the numbers wrapped meanwhile)
     assert requested_ids(report, after_s=16.0) == set(STREAMS.values())  # asked again when it came back
