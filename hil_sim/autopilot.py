@@ -6,9 +6,10 @@ them (as ArduPilot: only its HEARTBEAT comes unasked), answers with COMMAND_ACK,
 given RTCM3 messages as a ground station's inject forwarded by the autopilot (system 255, fragmented as MAVProxy
 does): from a file, or live, message by message as the base station's stream arrives (`inject_rtcm`, fed by the
 shell from a serial device, pty or TCP stream: a ground station reading the base's radio). With
-`hold_until_go` it does not arm before `give_go` (the pre-flight page said "go"). Faults: link loss, reboot (boot clock back to 0, streams off, a short silence), heartbeat stop, dropped
-and reordered fragments, MAVLink 1 only (v2 frames ignored). It also records what it hears (heartbeats by
-sender, interval requests, anything else sent to it), for tests: `report()`.
+`hold_until_go` it does not arm before `give_go` (the pre-flight page said "go"). Faults: link loss, reboot
+(boot clock back to 0, streams off, a short silence), heartbeat stop, dropped and reordered fragments, MAVLink
+1 only (v2 frames ignored). It also records what it hears (heartbeats by sender, interval requests, anything
+else sent to it), for tests: `report()`.
 
 `AutopilotSim` is the thin shell: a pty (raw mode: in cooked mode almost no frame survives) or a UDP socket
 sending to the companion, stepped every 10 ms of real time; simulated time runs `speed`× real time (or comes
