@@ -40,6 +40,7 @@ def test_the_demo_flies_uploads_and_processes_every_stage(tmp_path: Path) -> Non
     assert stages["corrections: base → radio → GPS_RTCM_DATA → companion"]["figures"]["foreign_messages"] == 0
     pairing = stages["pair pulses and flashes"]["figures"]
     assert pairing["missing"] == 0 and pairing["max_delay_error_ns"] <= 1000
+    assert abs(pairing["mean_delay_ms"] - pairing["true_mean_delay_ms"]) < 0.001  # ms: within 1 µs
     adjustment = stages["final adjustment"]
     assert adjustment["figures"]["checkpoint_rms_m"]["3d"] <= 0.03
     assert abs(adjustment["figures"]["delay_s"] - adjustment["figures"]["true_delay_s"]) < 0.002
