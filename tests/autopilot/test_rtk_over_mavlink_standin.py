@@ -136,3 +136,56 @@ def test_shell_reads_a_live_stream_and_a_go_file(tmp_path: Any) -> None:
         assert sim.core.go_s is not None
     finally:
         sim.stop()
+
+
+@pytest.mark.timeout(60)
+def test_cli_injects_a_live_tcp_stream_and_waits_for_the_go_file(tmp_path: Any) -> None:
+    """`python -m hil_sim autopilot --rtcm-stream tcp://... --go-file F`: a caster's messages are injected as they
+    come, and the vehicle stays disarmed until F appears."""
+    import json
+    import os
+    import signal
+    import socket
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    messages = [rtcm_frame(n, i) for i, n in enumerate(SIZES)]
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    port = server.getsockname()[1]
+    go, report = tmp_path / "go", tmp_path / "report.json"
+    project = Path(__file__).resolve().parents[2]
+    proc = subprocess.Popen([sys.executable, "-m", "hil_sim", "autopilot", "--speed", "10", "--arm-at", "2",
+                             "--rtcm-stream", f"tcp://127.0.0.1:{port}", "--go-file", str(go), "--report",
+                             str(report)], cwd=project, env=dict(os.environ, PYTHONPATH=str(project)),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+
+    def read() -> dict[str, Any]:
+        try:
+            return dict(json.loads(report.read_text()))
+        except (OSError, ValueError):
+            return {}
+
+    try:
+        server.settimeout(20)
+        conn, _ = server.accept()
+        conn.sendall(b"".join(messages))
+        deadline = time.monotonic() + 20
+        while read().get("rtcm_live", {}).get("messages", 0) < len(messages) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        first = read()
+        assert first["rtcm_live"]["messages"] == len(messages) and first["rtcm_stream_bytes"] == sum(SIZES)
+        assert first["go_s"] is None and first["sim_time_s"] > 2.0  # past --arm-at, still waiting for the go
+        go.touch()
+        deadline = time.monotonic() + 10
+        while read().get("go_s") is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert read()["go_s"] is not None
+        conn.close()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=30)
+        server.close()
+    assert proc.returncode == 0
