@@ -121,6 +121,10 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--rtcm", help="file of RTCM3 bytes to inject as GPS_RTCM_DATA (one message per interval)")
     ap.add_argument("--rtcm-start", type=float, default=1.0, help="simulated s before the first RTCM message")
     ap.add_argument("--rtcm-interval", type=float, default=0.5, help="simulated s between RTCM messages")
+    ap.add_argument("--rtcm-stream", metavar="SPEC",
+                    help="live RTCM3 to inject, message by message as it arrives (a ground station on the base's "
+                         "radio): serial:DEV@BAUD (a serial device or pty) or tcp://HOST:PORT")
+    ap.add_argument("--go-file", metavar="PATH", help="stay disarmed on the ground until PATH exists (a pre-flight go)")
     ap.add_argument("--drop-fragment-rate", type=float, default=0.0, help="probability per GPS_RTCM_DATA fragment")
     ap.add_argument("--reorder-fragments", action="store_true", help="shuffle each message's fragments")
     ap.add_argument("--report", help="JSON file: what the stand-in heard and sent (rewritten twice a second)")
@@ -242,8 +246,18 @@ def run_autopilot(args: argparse.Namespace) -> int:
         from hil_sim.scenario import Scenario
 
         flight = MissionFlight(Scenario.default(seed=args.seed))
+    stream = None
+    if args.rtcm_stream:
+        from onboard.hw.net_stream import open_base_stream
+
+        try:
+            stream = open_base_stream(args.rtcm_stream)
+        except ValueError as exc:
+            print(f"hil_sim autopilot: --rtcm-stream {args.rtcm_stream!r}: {exc}", file=sys.stderr)
+            return 2
     sim = AutopilotSim(options, speed=args.speed, udp_target=target,
-                       report_path=Path(args.report) if args.report else None, flight=flight)
+                       report_path=Path(args.report) if args.report else None, flight=flight, rtcm_stream=stream,
+                       go_file=Path(args.go_file) if args.go_file else None)
     done = _wait_for_signal()
     print(sim.start(), flush=True)
     try:

@@ -4,12 +4,17 @@
 take-off, survey lines with camera triggers, land, disarm), streams off until SET_MESSAGE_INTERVAL asks for
 them (as ArduPilot: only its HEARTBEAT comes unasked), answers with COMMAND_ACK, and GPS_RTCM_DATA carrying
 given RTCM3 messages as a ground station's inject forwarded by the autopilot (system 255, fragmented as MAVProxy
-does). Faults: link loss, reboot (boot clock back to 0, streams off, a short silence), heartbeat stop, dropped
-and reordered fragments, MAVLink 1 only (v2 frames ignored). It also records what it hears (heartbeats by
-sender, interval requests, anything else sent to it), for tests: `report()`.
+does): from a file, or live, message by message as the base station's stream arrives (`inject_rtcm`, fed by the
+shell from a serial device, pty or TCP stream: a ground station reading the base's radio). With
+`hold_until_go` it does not arm before `give_go` (the pre-flight page said "go"). Faults: link loss, reboot
+(boot clock back to 0, streams off, a short silence), heartbeat stop, dropped and reordered fragments, MAVLink
+1 only (v2 frames ignored). It also records what it hears (heartbeats by sender, interval requests, anything
+else sent to it), for tests: `report()`.
 
 `AutopilotSim` is the thin shell: a pty (raw mode: in cooked mode almost no frame survives) or a UDP socket
-sending to the companion, stepped every 10 ms of real time; simulated time runs `speed`× real time.
+sending to the companion, stepped every 10 ms of real time; simulated time runs `speed`× real time (or comes
+from `time_source`, to share the receivers' clock). It reads the live RTCM stream in its own thread and turns a
+go file appearing into `give_go`.
 """
 
 from __future__ import annotations
@@ -23,12 +28,16 @@ import select
 import socket
 import threading
 import time
+from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from onboard.autopilot.rtcm_reassembly import fragment_rtcm
+from onboard.errors import LinkLost
 from onboard.formats.atomic import write_json_atomic
+from onboard.hw.ports import ByteStream
 
 log = logging.getLogger(__name__)
 
@@ -71,6 +80,10 @@ class AutopilotSimOptions:
     rtcm_interval_s: float = 0.5
     drop_fragment_rate: float = 0.0
     reorder_fragments: bool = False
+    hold_until_go: bool = False
+    """Stay disarmed on the ground until `AutopilotCore.give_go` (a pre-flight go). The short script is then
+    flown from the go on (armed at max(arm_at_s, go)); the mission, tied to the receivers' world, cannot wait:
+    a go after its arming time is reported as `go_late_s` and the vehicle arms at the go."""
     seed: int = 1
     utc_start: _dt.datetime = field(default_factory=lambda: _dt.datetime.now(_dt.UTC))
 
@@ -107,6 +120,14 @@ class ScriptedFlight:
             return t
         rearm = self.t_down + self.o.disarm_after_s + self.o.repeat_after_s
         return t - (rearm - self.o.arm_at_s) if t >= rearm else t
+
+    arm_s_movable = True
+    """The script can be flown later (after a late go); the mission cannot (the receivers' world flies on)."""
+
+    @property
+    def arm_s(self) -> float:
+        """Simulated time of arming (s)."""
+        return self.o.arm_at_s
 
     def phase(self, t: float) -> tuple[bool, int, int]:
         """(armed, landed_state, custom_mode) at simulated time `t`."""
@@ -163,6 +184,13 @@ class MissionFlight:
         self.spool_s, self.disarm_after_s = spool_s, disarm_after_s
         self.camera_period_s = scenario.camera.period_s
         self.utc_start = scenario.start.to_utc()
+
+    arm_s_movable = False
+
+    @property
+    def arm_s(self) -> float:
+        """Simulated time of arming (s since the scenario's start)."""
+        return float(self.traj.takeoff_s - self.spool_s)
 
     def phase(self, t: float) -> tuple[bool, int, int]:
         """(armed, landed_state, custom_mode) at simulated time `t` (s since the scenario's start)."""
@@ -236,12 +264,38 @@ class AutopilotCore:
         self.sent: dict[str, int] = {}
         self.rtcm_intact: list[int] = []
         self.rtcm_broken: list[int] = []
+        self._live: deque[bytes] = deque()  # appended by the shell's reader thread, taken by step()
+        self.rtcm_live = {"messages": 0, "intact": 0, "broken": 0, "bytes": 0, "too_long": 0}
+        self.rtcm_fragments = 0
+        self.go_s: float | None = None
         self.utc_start = self.flight.utc_start
 
     # -- the flight --------------------------------------------------------------------------------------
     def phase(self, t: float) -> tuple[bool, int, int]:
-        """(armed, landed_state, custom_mode) at simulated time `t`."""
-        return self.flight.phase(t)
+        """(armed, landed_state, custom_mode) at simulated time `t` (disarmed on the ground while waiting for
+        the go, with `hold_until_go`)."""
+        if self.o.hold_until_go and (self.go_s is None or t < self.go_s):
+            return False, 1, COPTER_LOITER
+        return self.flight.phase(self._flight_t(t))
+
+    def give_go(self, t: float) -> None:
+        """The pre-flight check said go at simulated time `t` (the first call counts)."""
+        if self.go_s is None:
+            self.go_s = t
+            log.info("go at %.1f s (arming planned at %.1f s)", t, self.flight.arm_s)
+
+    def _flight_t(self, t: float) -> float:
+        """The flight's own time at `t`: the short script is flown later after a late go (held before its
+        arming until then); the mission keeps the receivers' time."""
+        if not self.o.hold_until_go or not self.flight.arm_s_movable:
+            return t
+        if self.go_s is None:
+            return min(t, self.flight.arm_s - 1e-3)
+        return t - max(0.0, self.go_s - self.flight.arm_s)
+
+    def inject_rtcm(self, message: bytes) -> None:
+        """One RTCM3 message of the live stream (from any thread): sent as GPS_RTCM_DATA at the next step."""
+        self._live.append(bytes(message))
 
     # -- I/O of the core -----------------------------------------------------------------------------------
     def receive(self, data: bytes, t: float) -> None:
@@ -332,7 +386,7 @@ class AutopilotCore:
     def _stream(self, msg_id: int, t: float) -> None:
         mav = self.mav
         _, landed, _ = self.phase(t)
-        p = self.flight.pose(t)
+        p = self.flight.pose(self._flight_t(t))
         lat, lon = round(p.lat_deg * 1e7), round(p.lon_deg * 1e7)
         boot = self._boot_ms(t)
         if msg_id == MSG["EXTENDED_SYS_STATE"]:
@@ -356,7 +410,7 @@ class AutopilotCore:
             self._send(mav.system_time_encode(usec, boot))
 
     def _camera(self, t: float) -> None:
-        if not self.flight.camera_active(t):
+        if not self.phase(t)[0] or not self.flight.camera_active(self._flight_t(t)):
             self._camera_next = None
             return
         if self._camera_next is None:
@@ -367,7 +421,7 @@ class AutopilotCore:
         self._img_idx += 1
         if MSG["CAMERA_FEEDBACK"] not in self.intervals:
             return  # ArduPilot sends it on the links asking for it
-        p = self.flight.pose(t)
+        p = self.flight.pose(self._flight_t(t))
         self._send(self.mav.camera_feedback_encode(int(t * 1e6), 0, 0, self._img_idx, round(p.lat_deg * 1e7),
                                                    round(p.lon_deg * 1e7), p.alt_m, p.relative_alt_m,
                                                    math.degrees(p.roll_rad), math.degrees(p.pitch_rad),
@@ -379,30 +433,62 @@ class AutopilotCore:
             self._next_rtcm += o.rtcm_interval_s
             index = self._rtcm_index
             self._rtcm_index += 1
-            fragments = fragment_rtcm(o.rtcm_messages[index], self._rtcm_seq)
-            self._rtcm_seq = (self._rtcm_seq + 1) % 32
-            kept = [f for f in fragments if self.rng.random() >= o.drop_fragment_rate]
-            (self.rtcm_intact if len(kept) == len(fragments) else self.rtcm_broken).append(index)
-            if o.reorder_fragments and len(kept) > 1:
-                self.rng.shuffle(kept)
-            for flags, data in kept:
-                self._send(self.gcs.gps_rtcm_data_encode(flags, len(data), data.ljust(180, b"\0")), self.gcs)
+            (self.rtcm_intact if self._inject(o.rtcm_messages[index]) else self.rtcm_broken).append(index)
+        live = self.rtcm_live
+        while self._live:
+            message = self._live.popleft()
+            live["messages"] += 1
+            live["bytes"] += len(message)
+            try:
+                live["intact" if self._inject(message) else "broken"] += 1
+            except ValueError:  # over 4 × 180 bytes: no ground station can inject it either
+                live["too_long"] += 1
+
+    def _inject(self, message: bytes) -> bool:
+        """Send one RTCM message as the ground station's GPS_RTCM_DATA fragments, losing and shuffling them as
+        the faults say; True when every fragment was sent."""
+        o = self.o
+        fragments = fragment_rtcm(message, self._rtcm_seq)
+        self._rtcm_seq = (self._rtcm_seq + 1) % 32
+        kept = [f for f in fragments if self.rng.random() >= o.drop_fragment_rate]
+        if o.reorder_fragments and len(kept) > 1:
+            self.rng.shuffle(kept)
+        self.rtcm_fragments += len(fragments)
+        for flags, data in kept:
+            self._send(self.gcs.gps_rtcm_data_encode(flags, len(data), data.ljust(180, b"\0")), self.gcs)
+        return len(kept) == len(fragments)
 
     def report(self) -> dict[str, Any]:
         """What the stand-in heard and sent (JSON-able)."""
         return {"heard_heartbeats": list(self.heard.values()), "interval_requests": self.interval_requests,
                 "other_messages": self.other_messages, "ignored_mavlink2": self.ignored_v2, "sent": self.sent,
                 "reboots": self._reboots_done, "rtcm_sent": self._rtcm_index, "rtcm_intact": self.rtcm_intact,
-                "rtcm_broken": self.rtcm_broken}
+                "rtcm_broken": self.rtcm_broken, "rtcm_live": dict(self.rtcm_live),
+                "rtcm_fragments": self.rtcm_fragments, "go_s": self.go_s,
+                "arm_s": self.flight.arm_s, "go_late_s": None if self.go_s is None or self.flight.arm_s_movable
+                else round(max(0.0, self.go_s - self.flight.arm_s), 3)}
 
 
 class AutopilotSim:
-    """The shell: the core on a raw pty (`start()` returns its slave path) or sending to UDP `udp_target`."""
+    """The shell: the core on a raw pty (`start()` returns its slave path) or sending to UDP `udp_target`.
+
+    `rtcm_stream` opens the live RTCM3 source (a ground station's serial port on the base's radio, or a TCP
+    caster: `onboard.hw.net_stream.open_base_stream`), read in its own thread, reopened when lost; `go_file`
+    gives the go when it appears; `time_source` returns the simulated seconds since the flight's start (the
+    receivers' clock), instead of this shell's own."""
 
     def __init__(self, options: AutopilotSimOptions, speed: float = 1.0, udp_target: tuple[str, int] | None = None,
                  report_path: Path | None = None, report_interval_s: float = 0.5,
-                 flight: ScriptedFlight | MissionFlight | None = None) -> None:
+                 flight: ScriptedFlight | MissionFlight | None = None,
+                 rtcm_stream: Callable[[], ByteStream] | None = None, go_file: Path | None = None,
+                 time_source: Callable[[], float] | None = None) -> None:
         self.core = AutopilotCore(options, flight)
+        self.rtcm_stream = rtcm_stream
+        self.go_file = go_file
+        self.time_source = time_source
+        self.rtcm_stream_bytes = 0
+        self.rtcm_stream_error: str | None = None
+        self._reader: threading.Thread | None = None
         self.speed = speed
         self.udp_target = udp_target
         self.report_path = report_path
@@ -429,33 +515,82 @@ class AutopilotSim:
         self._t0 = time.monotonic()
         self._thread = threading.Thread(target=self._run, name="hil-autopilot", daemon=True)
         self._thread.start()
+        if self.rtcm_stream is not None:
+            self._reader = threading.Thread(target=self._read_rtcm, name="hil-autopilot-rtcm", daemon=True)
+            self._reader.start()
         return where
 
     def sim_time(self) -> float:
-        """Simulated seconds since start."""
+        """Simulated seconds since start (or `time_source()`)."""
+        if self.time_source is not None:
+            return self.time_source()
         return (time.monotonic() - self._t0) * self.speed
+
+    def give_go(self) -> None:
+        """The go, now (see `AutopilotCore.give_go`)."""
+        self.core.give_go(self.sim_time())
 
     def stop(self) -> None:
         """Stop, write the last report, close."""
         self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5)
+        for thread in (self._thread, self._reader):
+            if thread is not None:
+                thread.join(timeout=5)
         self._write_report()
         if self._pty is not None:
             self._pty.close()
         if self._sock is not None:
             self._sock.close()
 
+    def report(self) -> dict[str, Any]:
+        """The core's report with the shell's counters (JSON-able)."""
+        return {**self.core.report(), "sim_time_s": round(self.sim_time(), 3),
+                "rtcm_stream_bytes": self.rtcm_stream_bytes, "rtcm_stream_error": self.rtcm_stream_error}
+
     def _write_report(self) -> None:
         if self.report_path is not None:
-            write_json_atomic(self.report_path, {**self.core.report(), "sim_time_s": round(self.sim_time(), 3)},
-                              fsync=False)
+            write_json_atomic(self.report_path, self.report(), fsync=False)
+
+    def _read_rtcm(self) -> None:
+        """The live RTCM source → whole, CRC-valid RTCM3 messages → the core's inject (what a ground station does
+        with the base's serial stream); anything else in the stream is skipped."""
+        from onboard.receiver.framing import Protocol, StreamFramer
+
+        assert self.rtcm_stream is not None
+        framer = StreamFramer()
+        port: ByteStream | None = None
+        while not self._stop.is_set():
+            if port is None:
+                try:
+                    port = self.rtcm_stream()
+                    self.rtcm_stream_error = None
+                except LinkLost as exc:
+                    self.rtcm_stream_error = str(exc)
+                    self._stop.wait(0.5)
+                    continue
+            try:
+                data = port.read(4096)
+            except LinkLost as exc:
+                self.rtcm_stream_error = str(exc)
+                port.close()
+                port = None
+                continue
+            self.rtcm_stream_bytes += len(data)
+            for frame in framer.feed(data):
+                if frame.protocol is Protocol.RTCM3:
+                    self.core.inject_rtcm(bytes(frame.raw))
+        if port is not None:
+            port.close()
 
     def _run(self) -> None:
-        next_report = 0.0
+        next_report = next_go_check = 0.0
         try:
             while not self._stop.is_set():
                 t = self.sim_time()
+                if self.go_file is not None and self.core.go_s is None and time.monotonic() >= next_go_check:
+                    next_go_check = time.monotonic() + 0.1
+                    if self.go_file.exists():
+                        self.core.give_go(t)
                 for data in self._read():
                     self.core.receive(data, t)
                 for frame in self.core.step(t):
@@ -507,7 +642,8 @@ def options_from_args(args: Any) -> AutopilotSimOptions:
     """The stand-in's options from `python -m hil_sim autopilot` arguments."""
     rtcm = rtcm_messages_from_file(args.rtcm) if args.rtcm else ()
     return dataclasses.replace(
-        AutopilotSimOptions(), system_id=args.system_id, arm_at_s=args.arm_at, survey_s=args.survey,
+        AutopilotSimOptions(), hold_until_go=bool(getattr(args, "go_file", None)), system_id=args.system_id,
+        arm_at_s=args.arm_at, survey_s=args.survey,
         mavlink1=args.mavlink1, link_loss=tuple(args.link_loss), heartbeat_stop=tuple(args.heartbeat_stop),
         reboot_at_s=tuple(args.reboot_at), rtcm_messages=rtcm, rtcm_start_s=args.rtcm_start,
         rtcm_interval_s=args.rtcm_interval,
