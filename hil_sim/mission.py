@@ -173,8 +173,12 @@ def _preflight(url: str) -> dict[str, Any]:
         return {}
 
 
+SETTLE_S = 3.0
+"""The demo's `autopilot.settle_s` (wall s): the companion closes the flight this long after the disarm."""
+
+
 def record_flight(args: argparse.Namespace, out: Path, standin_options: Any = None, radio_options: Any = None,
-                  ) -> tuple[list[StageResult], dict[str, Any]]:
+                  server: GroundServer | None = None) -> tuple[list[StageResult], dict[str, Any]]:
     """Stage 1: the system on the ground and in the air.
 
     Simulated hardware (this process): the rover and base receivers on ptys, the base station's radio (two
@@ -186,6 +190,9 @@ def record_flight(args: argparse.Namespace, out: Path, standin_options: Any = No
     pre-flight page (`onboard web`), read over HTTP until its overall state is "ok".
     `standin_options` (`hil_sim.autopilot.AutopilotSimOptions`, e.g. with dropped fragments or extra RTCM
     messages) and `radio_options` (`hil_sim.radio.RadioOptions`) replace the defaults; the go gate stays on.
+    With a `server`, the companion closes the flight itself after landing (disarmed and on the ground for
+    `SETTLE_S`) and its upload daemon (`onboard upload-daemon`) sends the closed flight to the server; the stage
+    waits for both and times the upload from the close.
     """
     from hil_sim.autopilot import AutopilotSim, AutopilotSimOptions, MissionFlight
     from hil_sim.pty_server import ReceiverEmulator
@@ -235,10 +242,14 @@ def record_flight(args: argparse.Namespace, out: Path, standin_options: Any = No
             base_args=["--radio", radio_tx, "--radio-baud", "57600", "--position", base_pos])
         procs["rover"], dirs["rover"], statuses["rover"] = _start_recorder(
             "rover", rover_port, out, args.camera_period, meas_rate_ms,
-            # TODO(flight close + automatic upload, issue 15 items 3-4): when the [upload] settings land, add
-            # `[upload] url = ... token_file = ...` and a short settle time here; the daemon then closes the
-            # flight after landing and uploads it itself (see upload_flight below).
-            extra_config=f'[rtk]\nbase_stream = "mavlink"\n[autopilot]\nlink = "serial:{autopilot_port}@921600"\n')
+            extra_config=f'[rtk]\nbase_stream = "mavlink"\n[autopilot]\nlink = "serial:{autopilot_port}@921600"\n'
+                         f"settle_s = {SETTLE_S}\n" + ("" if server is None else
+                         f'[upload]\nurl = "{server.url}"\ntoken_file = "{server.token_file}"\npoll_s = 0.5\n'))
+        if server is not None:
+            # the drone's automatic upload, a process of its own as on the Pi (directgeo-upload.service)
+            procs["upload"] = _popen(["-m", "onboard", "upload-daemon", "--config", str(out / "rover.toml"),
+                                      "--data-dir", str(dirs["rover"]), "--status", str(statuses["rover"])],
+                                     out / "rover-upload.log")
         procs["web"] = _popen(["-m", "onboard", "web", "--status", str(statuses["rover"]), "--host", "127.0.0.1",
                                "--port", str(web_port)], out / "preflight-web.log")
         for name in ("rover", "base"):
@@ -253,14 +264,12 @@ def record_flight(args: argparse.Namespace, out: Path, standin_options: Any = No
                 if proc.poll() is not None:
                     raise RuntimeError(f"the {name} process exited early (see {out}/{name}*.log)")
             if "go_s" not in go and time.monotonic() >= next_poll:
-                # The go/no-go: the pre-flight page's overall state, as the pilot reads it.
-                # TODO(pre-flight go/no-go line, issue 15 item 6): read its go/no-go field (and its autopilot
-                # block) here instead of `overall` once the page has them.
+                # The go/no-go: the pre-flight page's verdict ("ok" = go), as the pilot reads its top line.
                 next_poll = time.monotonic() + 0.5
                 page = _preflight(preflight_url)
                 if page.get("overall") == "ok":
                     standin.give_go()
-                    go.update(go_s=round(done, 1), checks=page.get("checks"))
+                    go.update(go_s=round(done, 1), checks=page.get("checks"), headline=page.get("headline"))
                 elif page:
                     go["last_no_go"] = [f"{c['name']}: {c['detail']}" for c in page.get("checks", [])
                                         if c.get("level") != "ok"]
@@ -269,10 +278,13 @@ def record_flight(args: argparse.Namespace, out: Path, standin_options: Any = No
             time.sleep(0.2)
         _progress("flying", flight_s, flight_s)
         end = rover.sim_time()
+        if server is not None:
+            auto = _wait_close_and_upload(statuses["rover"], procs, 120.0)
+            go["auto_upload"] = auto
     finally:
-        # TODO(flight close after landing, issue 15 item 3): the daemon will close the flight itself after
-        # disarm + settle time; until then the flight is closed by stopping the daemon, as before.
-        codes = {name: _stop(p) for name, p in procs.items()}
+        # the upload daemon first (it would upload the flight the companion closes at SIGTERM too)
+        codes = {name: _stop(procs.pop(name)) for name in ("upload",) if name in procs}
+        codes |= {name: _stop(p) for name, p in procs.items()}
         standin.stop()
         radio.stop()
         rover.stop()
@@ -284,6 +296,31 @@ def record_flight(args: argparse.Namespace, out: Path, standin_options: Any = No
                      "lost_over_budget": ch.bytes_lost_budget}
     return stages, {"world": world, "scenario": scenario, "start": scenario.start, "end": end, "dirs": dirs,
                     "statuses": statuses, "radio": radio_figures, "standin": standin.report(), "go": go}
+
+
+def _wait_close_and_upload(status_path: Path, procs: dict[str, subprocess.Popen[bytes]],
+                           timeout_s: float) -> dict[str, Any]:
+    """Wait until the companion has closed the flight by itself (autopilot.json `flights_closed`) and its upload
+    daemon reports it uploaded (upload.json `done`); returns the wall times (s) of both from the call."""
+    t0 = time.monotonic()
+    autopilot_json, upload_json = status_path.with_name("autopilot.json"), status_path.with_name("upload.json")
+    times: dict[str, Any] = {}
+
+    def closed_and_uploaded() -> bool:
+        for name, proc in procs.items():
+            if proc.poll() is not None:
+                raise RuntimeError(f"the {name} process exited early (exit {proc.returncode})")
+        if "closed_s" not in times and int(_status(autopilot_json).get("flights_closed") or 0) >= 1:
+            times["closed_s"] = round(time.monotonic() - t0, 2)
+        up = _status(upload_json)
+        if "closed_s" in times and int(up.get("done") or 0) >= 1:
+            times["uploaded_s"] = round(time.monotonic() - t0, 2)
+            times["upload"] = {k: up.get(k) for k in ("done", "queued", "last_result", "last_error", "bytes_sent")}
+            return True
+        return False
+
+    _wait(closed_and_uploaded, timeout_s, "the companion to close the flight and upload it by itself")
+    return times
 
 
 def _go_result(go: dict[str, Any], standin: dict[str, Any]) -> StageResult:
@@ -305,14 +342,18 @@ def _go_result(go: dict[str, Any], standin: dict[str, Any]) -> StageResult:
 def _recording_result(name: str, data_dir: Path, status_path: Path, code: int) -> StageResult:
     from onboard.logger.journal import read_manifest
     from onboard.receiver.decode import iter_journal
+    from onboard.recorder.feature import is_rollover
     from onboard.rtk.types import ObsEpoch
 
     st = _status(status_path)
     flights = sorted(data_dir.glob("flight-*"))
     if not flights:
         return StageResult(f"record {name}", False, f"no flight directory under {data_dir}")
-    flight = flights[-1]
-    manifest = read_manifest(flight)
+    # the flight the companion closed by itself after landing (recording went on into a next one), else the last
+    manifests = {f: read_manifest(f) for f in flights}
+    flown = [f for f, m in manifests.items() if m is not None and m.close_reason and is_rollover(m.close_reason)]
+    flight = flown[0] if flown else flights[-1]
+    manifest = manifests[flight]
     problems = _verify_segments(flight, manifest)
     epochs = sum(isinstance(e, ObsEpoch) for e in iter_journal(flight))
     figures = {
@@ -539,7 +580,9 @@ def realtime_rtk(rover: Path, ctx: dict[str, Any]) -> StageResult:
     """The rover companion's real-time RTK (`<flight>/solution.pos`, corrections only through the autopilot's
     GPS_RTCM_DATA) against the simulator's truth: a cold start, as a user gets it."""
     pos = rover / "solution.pos"
-    rtk = _status(ctx["statuses"]["rover"].with_name("rtk.json"))
+    # rtk.json describes the flight being recorded: after the automatic close that is the next one
+    rolled_over = bool(ctx.get("go", {}).get("auto_upload"))
+    rtk = {} if rolled_over else _status(ctx["statuses"]["rover"].with_name("rtk.json"))
     if not pos.exists():
         return StageResult("real-time RTK (onboard, corrections over MAVLink)", False, f"no {pos}")
     figures, summary = track_figures(pos, ctx["world"])
@@ -548,7 +591,7 @@ def realtime_rtk(rover: Path, ctx: dict[str, Any]) -> StageResult:
                    dropped_epochs=rtk.get("dropped_epochs"), engine_ms_max=rtk.get("engine_ms_max"))
     ok = figures["epochs"] > 0 and figures["wrong_fixes"] == 0 and figures["fix_ratio"] > 0
     return StageResult("real-time RTK (onboard, corrections over MAVLink)", ok,
-                       f"{summary}; {rtk.get('base_epochs')} base epochs received", figures,
+                       summary + ("" if rolled_over else f"; {rtk.get('base_epochs')} base epochs received"), figures,
                        {"solution": str(pos), "corrections_journal": str(rover / "radio")})
 
 
@@ -590,13 +633,16 @@ def autopilot_events(rover: Path, ctx: dict[str, Any]) -> StageResult:
     at = {e["event"]: (e["gps_week"] * 604800 + e["gps_tow_ns"] / 1e9) - (start.week * 604800 + start.tow_s)
           for e in events if isinstance(e.get("gps_week"), int)}
     truth = {"takeoff": ctx["world"].trajectory.takeoff_s, "landed": ctx["world"].trajectory.landing_s}
-    ok = names == ["armed", "takeoff", "landed", "disarmed"]
+    # flight_over: the companion closed the flight by itself after the settle time (the demo's automatic close)
+    ok = names[:4] == ["armed", "takeoff", "landed", "disarmed"] and names[4:] in ([], ["flight_over"])
+    tlog = rover / "autopilot.tlog"
+    tlog_bytes = tlog.stat().st_size if tlog.exists() else 0  # autopilot.json describes the current flight
     listed = ", ".join(f"{n} at {at.get(n, float('nan')):.0f} s" for n in names)
     summary = (f"events {listed} "
                f"(mission: take-off {truth['takeoff']:.0f} s, touchdown {truth['landed']:.0f} s); "
-               f"{snap.get('tlog_bytes')} B of .tlog, {snap.get('camera_feedback')} CAMERA_FEEDBACK, packet loss "
+               f"{tlog_bytes} B of .tlog, {snap.get('camera_feedback')} CAMERA_FEEDBACK, packet loss "
                f"{snap.get('packet_loss')}")
-    return StageResult("autopilot link", ok, summary, {"events": at, "truth_s": truth, "tlog_bytes": snap.get("tlog_bytes"),
+    return StageResult("autopilot link", ok, summary, {"events": at, "truth_s": truth, "tlog_bytes": tlog_bytes,
                                                        "camera_feedback": snap.get("camera_feedback")},
                        {"tlog": str(rover / "autopilot.tlog")})
 
@@ -608,23 +654,27 @@ def _server_flight(client: Any, name: str) -> dict[str, Any] | None:
     return None
 
 
-def upload_flight(rover: Path, server: GroundServer) -> StageResult:
-    """The closed flight to the ground server with the real uploader; the server's files compared byte for
-    byte with the drone's.
-
-    TODO(automatic upload, issue 15 item 4): once the daemon uploads closed flights itself, wait here for its
-    upload.json to report this flight done (and take the time from it) instead of running the uploader."""
+def upload_flight(rover: Path, server: GroundServer, auto: dict[str, Any] | None = None) -> StageResult:
+    """The closed flight on the ground server, compared byte for byte with the drone's files. With `auto` (what
+    `record_flight` saw: the companion closed the flight after landing and its upload daemon sent it, no command
+    run) only the comparison is made; without it the flight is sent here with the real uploader."""
     import hashlib
 
-    t = time.monotonic()
-    proc = subprocess.run([sys.executable, "-m", "onboard.upload", "--url", server.url, "--token-file",
-                           str(server.token_file), str(rover)], cwd=PROJECT_ROOT, capture_output=True, text=True,
-                          timeout=300, check=False, env=dict(os.environ, PYTHONPATH=str(PROJECT_ROOT)))
-    wall_s = time.monotonic() - t
     local = {p.name: p for p in rover.iterdir() if p.is_file() and not p.name.startswith(".")}
     size = sum(p.stat().st_size for p in local.values())
-    if proc.returncode != 0:
-        return StageResult("upload", False, f"uploader failed: {proc.stderr.strip()[-400:]}")
+    if auto is not None:
+        wall_s = float(auto["uploaded_s"]) - float(auto["closed_s"])
+        how = "by the companion's upload daemon after it closed the flight, no command run"
+    else:
+        t = time.monotonic()
+        proc = subprocess.run([sys.executable, "-m", "onboard.upload", "--url", server.url, "--token-file",
+                               str(server.token_file), str(rover)], cwd=PROJECT_ROOT, capture_output=True,
+                              text=True, timeout=300, check=False, env=dict(os.environ, PYTHONPATH=str(PROJECT_ROOT)))
+        wall_s = time.monotonic() - t
+        how = "uploader process included"
+        if proc.returncode != 0:
+            return StageResult("upload", False, f"uploader failed: {proc.stderr.strip()[-400:]}")
+    wall_s = max(wall_s, 1e-3)
     from onboard.logger.journal import read_manifest
 
     manifest = read_manifest(rover)
@@ -636,10 +686,11 @@ def upload_flight(rover: Path, server: GroundServer) -> StageResult:
     differ = [n for n, p in local.items() if not (held / n).is_file()
               or hashlib.sha256((held / n).read_bytes()).digest() != hashlib.sha256(p.read_bytes()).digest()]
     ok = not differ and flight["status"] == "complete"
-    figures = {"files": len(local), "bytes": size, "wall_s": wall_s, "throughput_mb_s": size / 1e6 / wall_s,
+    figures = {"automatic": auto is not None, "closed_after_s": None if auto is None else auto["closed_s"],
+               "files": len(local), "bytes": size, "wall_s": wall_s, "throughput_mb_s": size / 1e6 / wall_s,
                "server_flight_id": flight["id"], "differ": differ}
-    summary = (f"{len(local)} files, {size / 1e6:.2f} MB in {wall_s:.1f} s ({size / 1e6 / wall_s:.1f} MB/s, "
-               f"uploader process included); on the server: "
+    summary = (f"{len(local)} files, {size / 1e6:.2f} MB in {wall_s:.1f} s after the close ({how}); on the "
+               f"server: "
                + ("every file byte-identical" if not differ else f"DIFFERENT: {', '.join(differ)}"))
     return StageResult("upload", ok, summary, figures, {"server_files": str(held)})
 
@@ -770,13 +821,13 @@ def main(args: argparse.Namespace) -> int:
     ctx: dict[str, Any] = {}
     try:
         server.wait_ready()
-        flown, ctx = record_flight(args, out)
+        flown, ctx = record_flight(args, out, server=server)
         stages += flown
         rover, base = _flight_dir(stages, "record rover"), _flight_dir(stages, "record base")
         if rover is not None:
             stages.append(autopilot_events(rover, ctx))
             stages.append(check_pairing(rover, ctx))
-            stages.append(upload_flight(rover, server))
+            stages.append(upload_flight(rover, server, ctx["go"].get("auto_upload")))
         if rover is not None and base is not None:
             stages.append(corrections_chain(rover, base, ctx))
             stages.append(realtime_rtk(rover, ctx))

@@ -33,6 +33,9 @@ def test_the_demo_flies_uploads_and_processes_every_stage(tmp_path: Path) -> Non
     assert proc.returncode == 0
     assert stages["pre-flight go"]["figures"]["go_s"] < stages["pre-flight go"]["figures"]["arm_planned_s"]
     assert stages["upload"]["figures"]["differ"] == []  # every file byte-identical on the server
+    # closed by the companion after landing and uploaded by its upload daemon: no command ran the uploader
+    assert stages["upload"]["figures"]["automatic"] is True
+    assert "flight_over" in stages["autopilot link"]["figures"]["events"]
     realtime, ground = stages["real-time RTK (onboard, corrections over MAVLink)"], stages[RTK_COLD]
     for rtk in (realtime, ground):
         assert rtk["figures"]["epochs"] > 500 and rtk["figures"]["wrong_fixes"] == 0, rtk["summary"]
