@@ -71,6 +71,7 @@ def test_noise_free_calibration_returns_antenna_minus_optical_centre() -> None:
     assert all(np.linalg.norm(r) < 1e-9 for r in cal.camera_residuals_m.values())
 
 
+@pytest.mark.slow
 def test_noisy_calibration_errors_within_three_sigma_over_seeds() -> None:
     z = []
     for seed in range(8):

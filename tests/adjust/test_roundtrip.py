@@ -116,6 +116,7 @@ def test_relative_control_without_gcp_is_refused(
         adjust(problem_factory(block), opts)
 
 
+@pytest.mark.slow
 def test_relative_control_cancels_a_gnss_bias(block_factory: Any, problem_factory: Any, quiet: dict) -> None:
     """A 25 cm constant GNSS offset (wrong fix / datum) ruins absolute control but not differenced control."""
     bias = (0.25, -0.15, 0.2)
@@ -137,6 +138,7 @@ def test_relative_control_cancels_a_gnss_bias(block_factory: Any, problem_factor
     assert relative.relative_control and relative.to_dict()["relative_control"] is True
 
 
+@pytest.mark.slow
 def test_relative_control_cancels_a_bias_that_jumps_between_lines(
     block_factory: Any, problem_factory: Any, quiet: dict
 ) -> None:

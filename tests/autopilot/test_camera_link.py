@@ -21,6 +21,7 @@ pytestmark = pytest.mark.timeout(120)
 SHUTTER_DELAY_S = 0.08
 
 
+@pytest.mark.slow
 def test_feedback_and_flashes_cross_checked_with_attitude(tmp_path: Path) -> None:
     sim = AutopilotSimOptions(arm_at_s=2.0, spool_s=1.0, takeoff_s=2.0, survey_s=14.0, camera_period_s=2.0)
     flashes: dict[int, float] = {}  # img_idx → sim time of its flash

@@ -23,6 +23,7 @@ def requested_ids(core_report: dict, after_s: float = -1.0) -> set[int]:
     return {r["message_id"] for r in core_report["interval_requests"] if r["t_s"] > after_s}
 
 
+@pytest.mark.slow
 def test_heartbeat_streams_and_flight(tmp_path: Path) -> None:
     with Joined(tmp_path, QUICK) as j:
         snap = j.run_until(lambda s: s["landed_state"] == "in_air", 20, "in the air")
@@ -39,6 +40,7 @@ def test_heartbeat_streams_and_flight(tmp_path: Path) -> None:
     assert report["other_messages"] == {}  # read-only: nothing but heartbeats and interval requests
 
 
+@pytest.mark.slow
 def test_ground_station_heartbeat_does_not_count(tmp_path: Path) -> None:
     """The stand-in forwards a GCS heartbeat (system 255, disarmed) between the autopilot's: armed never flaps."""
     sim = dataclasses.replace(QUICK, arm_at_s=1.0, survey_s=30.0)
@@ -51,6 +53,7 @@ def test_ground_station_heartbeat_does_not_count(tmp_path: Path) -> None:
     assert snap["autopilot"]["system_id"] == 1 and snap["packet_loss"] == 0.0
 
 
+@pytest.mark.slow
 def test_reboot_requests_streams_again(tmp_path: Path) -> None:
     sim = dataclasses.replace(QUICK, arm_at_s=100.0, reboot_at_s=(8.0,))
     with Joined(tmp_path, sim) as j:
@@ -62,6 +65,7 @@ def test_reboot_requests_streams_again(tmp_path: Path) -> None:
     assert [e["event"] for e in j.events] == ["reboot"]
 
 
+@pytest.mark.slow
 def test_heartbeat_stop_link_down_then_back(tmp_path: Path) -> None:
     sim = dataclasses.replace(QUICK, arm_at_s=100.0, heartbeat_stop=((6.0, 10.0),))
     with Joined(tmp_path, sim) as j:
@@ -71,6 +75,7 @@ def test_heartbeat_stop_link_down_then_back(tmp_path: Path) -> None:
         j.run_until(lambda s: s["link_up"] and j.sim_time() > 16.0, 15, "link up again")
 
 
+@pytest.mark.slow
 def test_link_loss_and_return(tmp_path: Path) -> None:
     sim = dataclasses.replace(QUICK, arm_at_s=100.0, link_loss=((6.0, 10.0),))
     with Joined(tmp_path, sim) as j:
@@ -96,6 +101,7 @@ def test_mavlink1_only_autopilot(tmp_path: Path) -> None:
     assert requested_ids(report) == set(STREAMS.values())
 
 
+@pytest.mark.slow
 def test_corrections_reach_the_pipe_whole_or_not_at_all(tmp_path: Path) -> None:
     msgs = tuple(rtcm_frame(n, i) for i, n in enumerate([100, 180, 360, 540, 720, 250, 181, 500] * 4))
     sim = dataclasses.replace(QUICK, arm_at_s=100.0, rtcm_messages=msgs, rtcm_interval_s=0.1,

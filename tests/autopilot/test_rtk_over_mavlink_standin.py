@@ -138,6 +138,7 @@ def test_shell_reads_a_live_stream_and_a_go_file(tmp_path: Any) -> None:
         sim.stop()
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(60)
 def test_cli_injects_a_live_tcp_stream_and_waits_for_the_go_file(tmp_path: Any) -> None:
     """`python -m hil_sim autopilot --rtcm-stream tcp://... --go-file F`: a caster's messages are injected as they

@@ -120,6 +120,7 @@ def _solutions(qs: list[int], finite: list[bool]) -> list[Solution]:
            lambda k: k or "missing"), previous=st.booleans(),
        qs=st.lists(st.sampled_from([Q_FIX, Q_FLOAT, Q_SINGLE, Q_NONE]), max_size=6),
        finite=st.lists(st.booleans(), min_size=6, max_size=6), equals=st.booleans())
+@pytest.mark.slow
 def test_rtk_arguments(elmask: str | None, base_pos: str | None, init_pos: str | None, direction: str | None,
                        rover: str, out_kind: str, previous: bool, qs: list[int], finite: list[bool], equals: bool,
                        capsys: pytest.CaptureFixture[str]) -> None:
@@ -205,6 +206,7 @@ DAMAGE = st.sampled_from(["none", "delete_events", "garbage_events", "truncate_e
 @settings(FUZZ, max_examples=40)
 @given(damages=st.lists(DAMAGE, min_size=1, max_size=3), extra=st.lists(st.sampled_from(PATH_KINDS), max_size=2),
        junk=st.binary(max_size=64), as_json=st.booleans())
+@pytest.mark.slow
 def test_check_arguments(damages: list[str], extra: list[str], junk: bytes, as_json: bool,
                          capsys: pytest.CaptureFixture[str]) -> None:
     from tests.logger.test_check import make_flight

@@ -160,6 +160,7 @@ def test_a_second_recorder_on_the_same_data_dir_refuses_and_leaves_the_first_unt
     assert third.stop() == 0
 
 
+@pytest.mark.slow
 def test_two_recorder_processes_the_second_exits_2_with_one_error_line(tmp_path: Path) -> None:
     """Two `python -m onboard run` on one data directory (real processes; the port is a pty that stays silent)."""
     import pty

@@ -55,6 +55,7 @@ def _epoch_frame(t: GpsTime) -> bytes:
     return rxm_raw(epoch)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(60)
 def test_recorder_times_gpio_trigger_pulses(tmp_path: Path) -> None:
     """In-process recorder with gpiozero MockFactory pins: a raw epoch gives the coarse anchor, PPS edges the
@@ -102,6 +103,7 @@ def test_recorder_times_gpio_trigger_pulses(tmp_path: Path) -> None:
     assert pairings and pairings[0]["pulse_source"] == "gpio" and "pulse_without_flash" in pairings[0]["flags"]
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(60)
 def test_gpio_flash_edge_paired_with_gpio_trigger_and_fsynced_at_once(tmp_path: Path) -> None:
     """gpio.flash_pin: a hot-shoe falling edge on a pulled-up MockFactory pin becomes a GPS-timed flash mark

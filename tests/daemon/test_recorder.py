@@ -82,6 +82,7 @@ def test_port_disappears_and_returns_flight_continues_and_config_is_reapplied(tm
     assert recorded(settings.data_dir) == b"".join(numbered_frame(n) for n in range(20))
 
 
+@pytest.mark.slow
 def test_time_mark_is_fsynced_at_once(tmp_path: Path) -> None:
     """A TIM-TM2 triggers an immediate fsync, well before the 1 s sync interval."""
     from onboard.logger.files import RecordingFileLayer

@@ -24,6 +24,7 @@ def test_status_roundtrip_and_schema(tmp_path: Path) -> None:
         read_status(tmp_path / "x.json")
 
 
+@pytest.mark.slow
 def test_status_readers_never_see_a_partial_file(tmp_path: Path) -> None:
     """A reader polling while the writer rewrites 500 times always parses a complete snapshot."""
     path = tmp_path / "s.json"

@@ -52,6 +52,7 @@ def notifier(path: Path) -> SdNotifier:
     return SdNotifier({"NOTIFY_SOCKET": str(path), "WATCHDOG_USEC": "400000", "WATCHDOG_PID": str(os.getpid())})
 
 
+@pytest.mark.slow
 def test_unplugged_receiver_keeps_petting(tmp_path: Path) -> None:
     """No receiver at all: the writer is idle but alive, so systemd must not restart us."""
     srv = NotifySocket(tmp_path / "notify")
@@ -71,6 +72,7 @@ def test_unplugged_receiver_keeps_petting(tmp_path: Path) -> None:
     srv.close()
 
 
+@pytest.mark.slow
 def test_wedged_writer_stops_petting(tmp_path: Path) -> None:
     """An fsync that never returns (a dead SD card): the loop still runs, but no WATCHDOG=1 goes out."""
     release = threading.Event()

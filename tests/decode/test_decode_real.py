@@ -226,6 +226,7 @@ def test_subframes_sfrb_and_sfrbx() -> None:
     assert len(sfrbx) == 165 and {s.prn for s in sfrbx} == {3} and all(s.bits == 30 for s in sfrbx)
 
 
+@pytest.mark.slow
 def test_m8p_rawx_glonass_and_reference_week() -> None:
     stats = DecodeStats()
     epochs = [i for i in iter_file(shared_file(M8P_ROVER), stats) if isinstance(i, ObsEpoch)]

@@ -197,6 +197,7 @@ def resume_upload(srv: Any, settings: ApiSettings, folder: Path) -> Any:
     return rep
 
 
+@pytest.mark.slow
 def test_interrupted_upload_resumes_to_byte_identical_files(api_settings: ApiSettings, tmp_path: Path) -> None:
     """Link lost after 3 chunks, server restarted on the same SQLite file: the next run sends only the rest."""
     folder = _flight_folder(tmp_path / "onboard")
@@ -347,6 +348,7 @@ def test_unfinished_jobs_survive_a_restart_and_flight_names_are_unique(api_setti
         srv.stop()
 
 
+@pytest.mark.slow
 def test_uploader_adapts_to_the_server_chunk_limit(live: LiveServer, tmp_path: Path) -> None:
     """Uploader configured for 1 MiB chunks, server limit 64 KiB: chunks are halved until accepted."""
     folder = _flight_folder(tmp_path, sizes=(400_000,))

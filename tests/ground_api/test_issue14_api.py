@@ -28,6 +28,7 @@ EMPTY = hashlib.sha256(b"").hexdigest()
     (jobfuncs.exits, "SystemExit: 2"), (jobfuncs.interrupted, "KeyboardInterrupt"),
     (jobfuncs.hangs, "exceeded the time limit of 3 s"),
 ])
+@pytest.mark.slow
 def test_every_job_ends(tmp_path: Path, func, message: str) -> None:  # type: ignore[no-untyped-def]
     """Case 5: SystemExit escaped `except Exception` and left the job running forever; now each ends failed."""
     t0 = time.monotonic()
@@ -101,6 +102,7 @@ _JSONISH = st.recursive(st.one_of(st.none(), st.booleans(), st.floats(), st.inte
        params=st.dictionaries(st.sampled_from(["lever_arm", "delay", "delay_sigma", "crs", "estimate", "base_pos",
                                                "direction", "elmask_deg", "capture_times", "events", "x"]),
                               _JSONISH, max_size=4))
+@pytest.mark.slow
 def test_fuzz_job_route(client: TestClient, kind: str, params: dict) -> None:  # type: ignore[type-arg]
     """60 drawn job bodies on a flight without usable files: always a clean 422 (never 500, never a job)."""
     fid = _complete_flight(client, {"n.txt": "raw"})

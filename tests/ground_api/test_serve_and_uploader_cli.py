@@ -208,6 +208,7 @@ def test_full_disk_rejects_the_chunk_and_keeps_what_was_stored(tmp_path: Path) -
         proc.wait(timeout=20)
 
 
+@pytest.mark.slow
 def test_serve_refuses_an_unusable_database_url(tmp_path: Path) -> None:
     """A DATABASE_URL whose driver is missing or whose file cannot be created: exit 2 with the reason."""
     for url in ("postgresql+nosuchdriver://u@db/flights", f"sqlite:///{tmp_path}/missing/dir/x.sqlite3"):

@@ -17,6 +17,7 @@ SETTINGS = ApiSettings(data_dir=Path("/srv/directgeo"), token="x" * 16)
 LIMITS = Limits(max_file_bytes=1000, max_flight_bytes=1500, max_chunk_bytes=100, max_files_per_flight=3)
 
 
+@pytest.mark.slow
 @settings(max_examples=500, deadline=None)
 @given(st.lists(st.sampled_from([*"ab./\\:\x00 -_+~$*?\n", "..", "é", "\u202e", "%2e"]), max_size=12).map("".join))
 def test_any_accepted_name_stays_inside_the_flight_dir(name: str) -> None:

@@ -80,6 +80,7 @@ def test_adjust_free_recovers_truth_and_exports_utm(tmp_path: Path) -> None:
     assert html.count("data:image/png;base64,") >= 4 and "http://" not in html and "https://" not in html
 
 
+@pytest.mark.slow
 def test_adjust_fixed_values_are_kept(tmp_path: Path) -> None:
     truth = write_synthetic_flight(tmp_path, n_lines=2)
     lever = ",".join(str(v) for v in truth.lever_arm_m)
@@ -131,6 +132,7 @@ def _events_jsonl_from_csv(d: Path, drop: int | None = None) -> list[str]:
     return [r[0] for r in rows]
 
 
+@pytest.mark.slow
 def test_events_jsonl_matched_by_exif_capture_times(tmp_path: Path) -> None:
     """Onboard events.jsonl + photos whose EXIF clock is 1 h 12.3 s off GPS, one flash missed: the image without
     a mark is flagged and left out, every other image adjusted (delay now = exposure − flash ≈ 65 ms here)."""
@@ -226,6 +228,7 @@ def _calibration_csv(path: Path, box_shift_m: float = 0.0, noise_m: float = 0.00
     return r2 @ phase_centre + t2
 
 
+@pytest.mark.slow
 def test_calibrate_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """`python -m ground calibrate` prints the lever arm to pass to adjust; a moved box is flagged (exit 1)."""
     truth = _calibration_csv(tmp_path / "before.csv")

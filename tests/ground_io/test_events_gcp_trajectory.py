@@ -182,6 +182,7 @@ def test_missing_geoid_grid_is_an_error() -> None:
             crsmod.ecef_to_crs(p, "EPSG:2154+5720", max_datum_error_m=tolerance_m)
 
 
+@pytest.mark.slow
 def test_datum_mixing_is_refused() -> None:
     """WGS 84 → ETRS89/RGF93 (null shift, 1 m) and → ITRF2014 (identity, unknown accuracy) are refused by
     default; the same datum (UTM on WGS 84) is a plain conversion; a stated tolerance lets a 1 m shift through."""

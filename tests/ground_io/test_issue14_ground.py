@@ -30,6 +30,7 @@ def _to_ecef(xyz: np.ndarray, crs: str) -> np.ndarray:
     return crsmod.crs_to_ecef(xyz, crs)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("crs", ["EPSG:4979", "EPSG:32630"])
 def test_every_export_equals_the_adjusted_camera_centres_to_1mm(tmp_path: Path, crs: str) -> None:
     """Case 1: opk.csv (was `:.4f` in degrees, up to 6.5 m off), geo.txt, pix4d.csv, metashape.txt: each centre,
@@ -70,6 +71,7 @@ def _move_gcp(folder: Path, name: str, dx_m: float, keep: tuple[str, ...] | None
     (folder / "gcp.csv").write_text("\n".join(",".join(r) for r in out) + "\n")
 
 
+@pytest.mark.slow
 def test_a_gcp_moved_10_km_is_excluded_by_leave_one_out(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Case 2: one GCP 10 km off passed with σ₀ 43 141 and a 1.9 km lever arm; now it is excluded (named in the
     warnings and results), and the lever arm, delay and check points are those of the good data."""
@@ -102,6 +104,7 @@ def test_an_untestable_blunder_is_refused_and_accepted_only_with_its_true_accura
     assert min(float(line.split()[7]) for line in geo) > 1.0
 
 
+@pytest.mark.slow
 def test_export_accuracy_is_the_one_reached(tmp_path: Path) -> None:
     """Case 2: geo.txt's accuracies are the per-camera σ the adjustment reached (results.json cameras)."""
     write_synthetic_flight(tmp_path, n_lines=2)
@@ -230,6 +233,7 @@ def adjusted(tmp_path_factory: pytest.TempPathFactory) -> dict:  # type: ignore[
 WRITERS = ["geo.txt", "pix4d.csv", "metashape.txt", "opk.csv", "micmac.xml", "report.html", "results.json"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("writer", WRITERS)
 def test_a_full_disk_leaves_the_previous_good_file(tiny_disk: Path, writer: str, adjusted: dict) -> None:  # type: ignore[type-arg]
     """Case 6: each ground writer on a full disk raises OSError, keeps the previous file, leaves no temp file."""

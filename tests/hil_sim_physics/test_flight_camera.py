@@ -84,6 +84,7 @@ def test_trajectory_is_c1_velocity_is_the_derivative_of_position(traj: Trajector
         assert np.linalg.norm(vp - vm) < 1e-3, f"velocity jump at t={t}"
 
 
+@pytest.mark.slow
 def test_attitude_wobble_stays_within_3_deg_and_is_smooth(traj: Trajectory) -> None:
     rolls, pitches, yaw_dev = [], [], []
     prev = None

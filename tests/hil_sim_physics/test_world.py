@@ -192,6 +192,7 @@ def test_m8t_clock_drifts_with_992_ms_tags_and_steps_occasionally() -> None:
     assert biases[jumps[0]] - biases[jumps[0] - 1] == pytest.approx(1e-3 + 20 * rx.clock_drift_s_s, abs=1e-8)
 
 
+@pytest.mark.slow
 def test_observables_reproduce_from_the_seed_in_any_call_order() -> None:
     w1, w2, w3 = make_world(seed=7), make_world(seed=7), make_world(seed=8)
     ts = [nominal(w1, x) for x in (10.0, 11.0, 300.0)]

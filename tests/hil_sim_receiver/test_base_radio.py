@@ -19,6 +19,7 @@ from hil_sim.receiver import ReceiverOptions
 pytestmark = pytest.mark.timeout(60)
 
 
+@pytest.mark.slow
 def test_base_and_rover_emulators_run_side_by_side_on_their_own_ptys(pty_client_factory) -> None:
     from hil_sim.scenario import Scenario
     from hil_sim.world import World
@@ -71,6 +72,7 @@ def test_radio_channel_budget_drops_whole_chunks() -> None:
         RadioOptions(gap_min_s=30.0, gap_max_s=20.0)
 
 
+@pytest.mark.slow
 def test_radio_link_forwards_between_ptys_and_goes_silent_in_a_dropout() -> None:
     link = RadioLink(RadioOptions(mean_interval_s=3.0, gap_min_s=5.0, gap_max_s=5.0, seed=2), speed=10.0)
     tx, rx = link.start()

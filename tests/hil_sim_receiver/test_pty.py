@@ -50,6 +50,7 @@ def is_ack(frame) -> bool:
     return frame is not None and frame.msg_id == 0x01
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model", ["lea6t", "m8t"])
 def test_factory_state_answers_mon_ver_at_9600_and_streams_nmea(model, standin_world, emulator_factory,
                                                                  pty_client_factory) -> None:
@@ -64,6 +65,7 @@ def test_factory_state_answers_mon_ver_at_9600_and_streams_nmea(model, standin_w
     assert not client.ubx(0x02, 0x15) and not client.ubx(0x02, 0x10)
 
 
+@pytest.mark.slow
 def test_client_at_the_wrong_rate_gets_only_garbage(standin_world, emulator_factory, pty_client_factory) -> None:
     emu = emulator_factory("m8t", standin_world)
     client = pty_client_factory(emu.path, 115200)  # receiver still at its factory 9600
@@ -74,6 +76,7 @@ def test_client_at_the_wrong_rate_gets_only_garbage(standin_world, emulator_fact
     assert emu.bytes_garbled_in > 0 and emu.core.stats.frames_in == 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model", ["lea6t", "m8t"])
 def test_configuration_sequence_with_baud_change_then_raw_epochs(model, standin_world, emulator_factory,
                                                                  pty_client_factory) -> None:
@@ -137,6 +140,7 @@ def test_frame_written_just_before_the_client_switches_rate_is_still_received(st
     assert ack is not None and ack.msg_id == 1 and UBXReader.parse(prt.raw).baudRate == 115200
 
 
+@pytest.mark.slow
 def test_time_marks_arrive_over_the_pty(standin_world, emulator_factory, pty_client_factory) -> None:
     t0 = standin_world.start
     flashes = [t0.add_s(4.3 + 2 * k + 0.064) for k in range(3)]
@@ -156,6 +160,7 @@ def test_time_marks_arrive_over_the_pty(standin_world, emulator_factory, pty_cli
         assert m.newFallingEdge == 1 and abs(GpsTime.from_ms_subms(m.wnF, m.towMsF, m.towSubMsF).diff_ns(f)) < 50
 
 
+@pytest.mark.slow
 def test_corrupt_bytes_fault_breaks_checksums_but_frames_still_arrive(standin_world, emulator_factory,
                                                                       pty_client_factory) -> None:
     emu = emulator_factory("m8t", standin_world, speed=5.0, faults=FaultOptions(seed=2, corrupt_byte_rate=0.003))
@@ -166,6 +171,7 @@ def test_corrupt_bytes_fault_breaks_checksums_but_frames_still_arrive(standin_wo
     assert sum(f.protocol is Protocol.NMEA for f in client.frames) > 20
 
 
+@pytest.mark.slow
 def test_port_disappears_and_comes_back_at_the_link(tmp_path: Path, standin_world, emulator_factory,
                                                     pty_client_factory) -> None:
     link = tmp_path / "gnss0"
@@ -194,6 +200,7 @@ def test_port_disappears_and_comes_back_at_the_link(tmp_path: Path, standin_worl
     assert again.request(0x0A, 0x04, reply=(0x0A, 0x04))[0] is not None
 
 
+@pytest.mark.slow
 def test_silent_receiver_never_answers_over_the_pty(standin_world, emulator_factory, pty_client_factory) -> None:
     emu = emulator_factory("lea6t", standin_world, silent=True)
     client = pty_client_factory(emu.path, 9600)

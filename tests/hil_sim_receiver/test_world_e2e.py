@@ -40,6 +40,7 @@ def cfg(client, name: str, head: dict) -> None:
     assert ack is not None and ack.msg_id == 0x01, f"{name} not ACKed"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model", ["lea6t", "m8t"])
 def test_configured_receiver_on_the_world_streams_raw_subframes_and_marks(model: str, pty_client_factory) -> None:
     world = make_world(model)

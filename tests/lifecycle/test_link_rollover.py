@@ -31,6 +31,7 @@ def tlog_stamps(path: Path) -> list[int]:
     return out
 
 
+@pytest.mark.slow
 def test_flight_over_once_and_tlog_moves(tmp_path: Path) -> None:
     f1, f2 = tmp_path / "f1", tmp_path / "f2"
     f1.mkdir()

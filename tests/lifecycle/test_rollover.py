@@ -10,6 +10,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from onboard.hw.fake import FakeByteStream
 from onboard.logger.events import read_events
 from onboard.logger.journal import iter_journal_bytes, read_manifest
@@ -40,6 +42,7 @@ class Spy(RecorderFeature):
         self.context.post(self.context.close_flight, why)
 
 
+@pytest.mark.slow
 def test_rollover_loses_no_byte(tmp_path: Path) -> None:
     port = FakeByteStream()
     settings = make_settings(tmp_path, upload_url="http://127.0.0.1:9", upload_token_file=str(tmp_path / "t"))
@@ -122,6 +125,7 @@ def test_new_flight_names_sort_after_the_newest(tmp_path: Path) -> None:
     assert new_flight_dir(tmp_path, 0).name > d.name
 
 
+@pytest.mark.slow
 def test_real_time_rtk_starts_again_in_the_next_flight(tmp_path: Path) -> None:
     """RtkFeature's service cannot start twice: after a roll-over a fresh one runs in the new flight."""
     from onboard.realtime.service import RtkFeature, RtkServiceOptions

@@ -89,6 +89,7 @@ def write_autopilot(settings: Settings, **snap: Any) -> None:
     settings.status_path.with_name("autopilot.json").write_text(json.dumps(snap))
 
 
+@pytest.mark.slow
 def test_oldest_first_byte_identical_and_status(tmp_path: Path, live: LiveServer) -> None:
     data = tmp_path / "data"
     newer = make_flight(data, "flight-20260501T120000Z", 300_000, 2)
@@ -114,6 +115,7 @@ def test_oldest_first_byte_identical_and_status(tmp_path: Path, live: LiveServer
     assert done[older.name]["files"] == expected[older.name] and done[older.name]["deleted"] == []
 
 
+@pytest.mark.slow
 def test_never_while_armed_and_paused_when_arming_mid_upload(tmp_path: Path, live: LiveServer) -> None:
     data = tmp_path / "data"
     flight = make_flight(data, "flight-20260501T100000Z", 400_000, 3)
@@ -169,6 +171,7 @@ def test_backoff_when_the_server_is_unreachable(tmp_path: Path) -> None:
     assert UploadQueue(tmp_path / "data").next_ready() is not None  # still queued
 
 
+@pytest.mark.slow
 def test_delete_after_upload_only_confirmed_files(tmp_path: Path, live: LiveServer) -> None:
     data = tmp_path / "data"
     flight = make_flight(data, "flight-20260501T100000Z", 100_000, 5)
@@ -194,6 +197,7 @@ def test_delete_after_upload_removes_the_whole_flight(tmp_path: Path, live: Live
     assert svc.step() == 0.2 and svc.status.state == "idle"  # nothing queued, nothing failed
 
 
+@pytest.mark.slow
 def test_a_damaged_local_copy_is_set_aside(tmp_path: Path, live: LiveServer) -> None:
     data = tmp_path / "data"
     bad = make_flight(data, "flight-20260501T100000Z", 50_000, 6)

@@ -171,6 +171,7 @@ def test_emulator_factory_timepulse_is_the_real_neo_m8t_dump() -> None:
     assert got[0][6 + 28] == 0xF7
 
 
+@pytest.mark.slow
 def test_silent_receiver_named_in_the_report_and_its_bytes_still_arrive() -> None:
     """Nothing raised beyond MON-VER's ConfigRejected; every message named; NMEA kept flowing meanwhile."""
     opts = ReceiverOptions(ack_timeout_s=0.2, retries=0)

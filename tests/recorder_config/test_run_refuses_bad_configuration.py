@@ -104,6 +104,7 @@ def test_read_only_data_dir(tmp_path: Path) -> None:
         assert not any(data.iterdir())
 
 
+@pytest.mark.slow
 def test_status_path_that_cannot_be_written(tmp_path: Path) -> None:
     data = tmp_path / "d"
     _refused(_run(["--data-dir", str(data), "--status", "/proc/directgeo/status.json"], tmp_path),
@@ -115,6 +116,7 @@ def test_status_path_that_cannot_be_written(tmp_path: Path) -> None:
     _nothing_recorded(data)
 
 
+@pytest.mark.slow
 def test_missing_serial_port_is_a_console_warning_once(tmp_path: Path) -> None:
     """The port that does not exist: one WARNING on the console (the journal under systemd) naming it, however
     often the recorder retries, and the recorder keeps running (the receiver may be plugged in later)."""

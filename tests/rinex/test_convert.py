@@ -50,6 +50,7 @@ def test_m8p_gps_observations_equal_rtklib(m8p_converted: Path) -> None:
     assert (all_lli & 1).any() and (all_lli & 2).any()
 
 
+@pytest.mark.slow
 def test_m8p_observation_records_are_byte_identical_to_rtklib(m8p_converted: Path) -> None:
     """Every observation line (GPS and GLONASS) matches RTKLIB's text; only event records sit elsewhere."""
     ours = [line for line in _body(m8p_converted / "rover-20181004-1237.obs") if " 5  0" not in line[29:]]
@@ -136,6 +137,7 @@ def test_cli_prints_what_it_wrote(tmp_path: Path, capsys: pytest.CaptureFixture[
 
 # ----------------------------------------------------------------------------------------------- failure paths
 
+@pytest.mark.slow
 def test_truncated_gzip_is_salvaged_with_a_warning(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A gzip log cut short converts up to the cut; the warning names the compressed offset (was: refused)."""
     src = shared_file(f"{M8P}/raw/rover-20181004-1237.ubx.gz")
@@ -152,6 +154,7 @@ def test_truncated_gzip_is_salvaged_with_a_warning(tmp_path: Path, capsys: pytes
     assert 0.3 * whole.obs.epochs < len(obs.epochs) < whole.obs.epochs
 
 
+@pytest.mark.slow
 def test_corrupt_gzip_is_salvaged_up_to_the_damage(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     src = shared_file(f"{M8P}/raw/rover-20181004-1237.ubx.gz")
     blob = bytearray(src.read_bytes())
@@ -280,6 +283,7 @@ def _flight_from_log(log: Path, flight: Path, segment_bytes: int) -> None:
     journal.close()
 
 
+@pytest.mark.slow
 def test_journal_with_a_middle_segment_deleted_says_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Issue 14 case 7: 374 of 554 epochs came back with exit 0 and no word."""
     flight = tmp_path / "flight-20181004T123700Z"

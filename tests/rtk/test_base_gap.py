@@ -66,6 +66,7 @@ def test_a_20_s_radio_gap_keeps_the_fix_without_wrong_fixes_and_fakes_no_slips(f
     assert all(x[1] <= 0.10 for x in out if x[0] == Q_FIX)
 
 
+@pytest.mark.slow
 def test_rover_slip_inside_a_radio_gap_is_caught_where_it_happens(flight):
     world, rover, base = flight
     rover = copy.deepcopy(rover)

@@ -67,6 +67,7 @@ def test_defaults_reproduce_the_former_hard_coded_values() -> None:
     assert o.hold_elmask_deg <= o.ar_elmask_deg  # every fixed satellite is held
 
 
+@pytest.mark.slow
 def test_min_fix_sats_limits_the_satellites_a_fix_rests_on(nav, epochs) -> None:
     sols, _ = _run(nav, epochs, RtkOptions())
     n_sats = max(s.ns for s in sols)

@@ -79,6 +79,7 @@ def test_iono_states_fix_the_right_integers_and_less_biased_than_the_ambiguity_w
     assert err_off.size and np.sqrt(np.mean(err**2)) < np.sqrt(np.mean(err_off**2))
 
 
+@pytest.mark.slow
 def test_no_iono_states_on_short_baselines(nav):
     """Below iono_min_baseline_km the filter is the one without them (short baselines unchanged)."""
     o = ON

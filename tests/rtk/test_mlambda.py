@@ -32,6 +32,7 @@ def test_teunissen_textbook_example():
     assert res.ratio == pytest.approx(res.sq_dist[1] / res.sq_dist[0])
 
 
+@pytest.mark.slow
 def test_matches_brute_force_on_random_problems():
     rng = np.random.default_rng(3)
     for _ in range(25):

@@ -108,6 +108,7 @@ def test_combined_run_on_m8p_with_the_lossy_rtcm_base_fixes_more_than_forward_an
     assert out["combined"] >= 0.97 and out["combined"] > out["forward"]  # 99.2 % vs 96.3 %
 
 
+@pytest.mark.slow
 def test_known_take_off_point_and_static_start_only_shape_the_forward_pass():
     """They describe the first epoch in time; the backward pass starts at the last one."""
     d = "gnss/geonet-0759-3040-20050402/"

@@ -102,6 +102,7 @@ def _visible_prns(nav: Nav) -> list[int]:
     return sorted(int(p) for p in obs.sv_id)
 
 
+@pytest.mark.slow
 def test_five_satellites_never_give_a_wrong_fix(nav):
     prns = _visible_prns(nav)[:5]
     sols, truths, _ = _run(nav, 60, RtkOptions(), velocity_enu_m_s=(2.0, 1.0, 0.0), noise=True, prns=prns)
@@ -205,6 +206,7 @@ def _gap_tamper(prn: int, gap: range, cycles: float, doppler: bool):
                        # continuous: the ambiguity is kept
      (12.0, True, 1)],  # the Doppler bridge sees the jump (beyond its 2 cycles/s × 4 s threshold)
 )
+@pytest.mark.slow
 def test_phase_gap_without_lli_is_a_slip_unless_the_doppler_bridges_it(nav, cycles, doppler, slips):
     """A receiver may lose lock inside a phase gap and come back whole cycles off without setting LLI; still
     floating (no hold to catch it through the residuals), the filter would absorb the jump into the position."""

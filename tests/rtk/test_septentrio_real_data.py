@@ -47,6 +47,7 @@ def _run(options: RtkOptions, n: int | None = None) -> tuple[list[Solution], Rtk
     return sols, st
 
 
+@pytest.mark.slow
 def test_moving_septentrio_fixes_as_many_epochs_as_rtklib_243_and_none_wrong():
     """RTKLIB 2.4.3 fixes 110 of the 360 epochs (one of them 1.1 m off), demo5 none; the engine fixed none
     before its noise model covered the drifting 5.3 km phase and the geodetic code. Every fix within 10 cm
@@ -62,6 +63,7 @@ def test_moving_septentrio_fixes_as_many_epochs_as_rtklib_243_and_none_wrong():
     assert np.sqrt(np.mean(errs[:, 0] ** 2 + errs[:, 1] ** 2)) < 0.03
 
 
+@pytest.mark.slow
 def test_float_covariance_covers_the_float_error():
     """AR off: after the first minute the float's 3D error stays inside the 99.9 % ellipsoid of its own
     covariance at ≥ 98 % of the epochs (the white-noise model: 60 of 296 epochs outside, up to χ² = 61)."""
@@ -79,6 +81,7 @@ def test_float_covariance_covers_the_float_error():
     assert np.mean(maha_a > CHI2_3DOF_999) <= 0.02, np.sort(maha_a)[-10:]
 
 
+@pytest.mark.slow
 def test_code_scatter_lowers_the_code_variance_of_geodetic_receivers_only():
     """Septentrio/Trimble code-minus-carrier scatters ~0.02 of the u-blox-tuned code model: its code variance is
     scaled down (≤ 0.3, never below the floor). The u-blox M8P rover/base pair (0.1-0.25) keeps the model."""

@@ -57,6 +57,7 @@ def test_a_45_s_gap_goes_single_past_30_s_never_wrong_and_fixes_after() -> None:
     assert r["air fix %"] >= 99.0  # stale epochs excluded
 
 
+@pytest.mark.slow
 def test_known_take_off_point_fixes_at_the_first_epoch() -> None:
     r = _run("m8t", known_start=True)
     assert r["q"][0] == Q_FIX and r["first fix s"] == 0.0

@@ -25,6 +25,7 @@ ROVER_REF = np.array([3774088.9931, -601661.8217, 5089321.3853])  # README: mean
 REF_TIME = GpsTime.from_week_tow_s(2021, 391088.0)  # rover's first epoch (2018-10-04 12:38 GPST)
 
 
+@pytest.mark.slow
 def test_rtcm_base_epochs_equal_convbins_rinex_of_the_same_stream() -> None:
     base = read_base_observations(shared_file(M8P + "rtcm3/base-20181004-1236.rtcm3.gz"), REF_TIME)
     assert base.kind == "rtcm3"
@@ -62,6 +63,7 @@ def test_rover_raw_log_with_the_lossy_rtcm_base_fixes_at_the_reference() -> None
     assert np.max(err) < 0.10  # no wrong fix, with the base from 1005 and the week from the rover
 
 
+@pytest.mark.slow
 def test_mixed_ubx_rtcm_base_log_uses_the_more_complete_source() -> None:
     # The M8P base log interleaves RAWX (every ~3-4 s) with the RTCM3 it sent (1077 on ~2 of 3 epochs).
     base = read_base_observations(shared_file(M8P + "raw/base-20181004-1236.ubx.gz"), REF_TIME)

@@ -159,6 +159,7 @@ def test_submit_never_blocks_and_counts_drops(world, tmp_path) -> None:
     assert svc.snapshot()["dropped_epochs"] == 498
 
 
+@pytest.mark.slow
 def test_unplugged_radio_is_reopened_and_corrections_resume(world, tmp_path) -> None:
     frames = _base_frames(world, 40)
     streams: list[FakeByteStream] = []

@@ -15,6 +15,7 @@ mock = pytest.importorskip("gpiozero.pins.mock")
 gpio_edges = pytest.importorskip("onboard.hw.gpio_edges")
 
 
+@pytest.mark.slow
 def test_gpio_trigger_edges_pair_with_flashes_at_the_delay() -> None:
     factory = mock.MockFactory()
     try:

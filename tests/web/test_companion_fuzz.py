@@ -56,6 +56,7 @@ def _answer(page: tuple[TestClient, Path], name: str, content: dict[str, Any]) -
     return body
 
 
+@pytest.mark.slow
 @settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(key=st.sampled_from(AP_KEYS), value=json_values)
 def test_any_autopilot_value_answers_200(page: tuple[TestClient, Path], key: str, value: Any) -> None:

@@ -104,6 +104,7 @@ def test_any_value_in_any_field_is_read_or_named(name: str, value: Any) -> None:
     json.dumps(checks_json(preflight_checks(checked, time.time_ns())), allow_nan=False)
 
 
+@pytest.mark.slow
 @settings(max_examples=HTTP_EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(name=st.sampled_from(FIELDS), value=json_values)
 def test_any_value_in_any_field_answers_200(page: tuple[TestClient, Path], name: str, value: Any) -> None:
@@ -153,6 +154,7 @@ def test_the_cases_of_the_issue(page: tuple[TestClient, Path]) -> None:
                                             "baseline_m", "last_gpst", "ttff_s", "errors", "restarts",
                                             "max_first_fix_baseline_km", "dropped_epochs", "radio_error"]),
                            json_values, max_size=8))
+@pytest.mark.slow
 def test_any_rtk_snapshot_answers_200(page: tuple[TestClient, Path], rtk: dict[str, Any]) -> None:
     _client, status_path = page
     status_path.with_name(RTK_STATUS_NAME).write_text(json.dumps(rtk))
