@@ -21,10 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from onboard.formats.rinex_nav import read_rinex_nav
 from onboard.formats.rinex_obs import read_rinex_obs
 from onboard.gnsstime import GpsTime
-from onboard.rtk.ephemeris import EphemerisStore
+from onboard.postpro.inputs import read_navigation
 from onboard.rtk.geodesy import ecef_to_enu
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.postpro import postprocess
@@ -47,15 +46,7 @@ class Case:
 
 
 def _nav(*paths: Path) -> Nav:
-    store = EphemerisStore()
-    iono = None
-    for p in paths:
-        f = read_rinex_nav(p)
-        for e in f.ephemerides:
-            store.add(e)
-        if f.iono_alpha is not None and f.iono_beta is not None:
-            iono = (f.iono_alpha, f.iono_beta)
-    return Nav(store, iono)
+    return read_navigation(paths)
 
 
 def _static(ref: np.ndarray) -> Callable[[GpsTime], np.ndarray]:
