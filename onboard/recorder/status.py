@@ -196,13 +196,19 @@ def read_status(path: Path) -> dict[str, Any]:
     return check_snapshot(obj)
 
 
-def read_rtk_status(status_path: Path) -> dict[str, Any] | None:
-    """The real-time RTK snapshot beside the status snapshot at `status_path`, None when the daemon runs no RTK
-    (no file). Raises ValueError when it is not JSON (half-written, foreign), TypeError when not a JSON object."""
+def read_feature_status(status_path: Path, name: str) -> dict[str, Any] | None:
+    """A feature's snapshot `name` (rtk.json, autopilot.json, upload.json) beside the status snapshot at
+    `status_path`, None when the feature is not running (no file). Raises ValueError when it is not strict JSON
+    (half-written, foreign), TypeError when not a JSON object, OSError when unreadable."""
     try:
-        obj = _loads(Path(status_path).with_name(RTK_STATUS_NAME).read_bytes())
+        obj = _loads(Path(status_path).with_name(name).read_bytes())
     except FileNotFoundError:
         return None
     if not isinstance(obj, dict):
-        raise TypeError(f"{RTK_STATUS_NAME} is not a JSON object")
+        raise TypeError(f"{name} is not a JSON object")
     return obj
+
+
+def read_rtk_status(status_path: Path) -> dict[str, Any] | None:
+    """The real-time RTK snapshot beside the status snapshot (`read_feature_status` of rtk.json)."""
+    return read_feature_status(status_path, RTK_STATUS_NAME)

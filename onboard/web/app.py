@@ -12,7 +12,7 @@ from typing import Any
 from fastapi import FastAPI
 from fastapi.responses import HTMLResponse
 
-from onboard.recorder.status import DEFAULT_STATUS_PATH, read_rtk_status, read_status
+from onboard.recorder.status import DEFAULT_STATUS_PATH, read_feature_status, read_rtk_status, read_status
 from onboard.web.checks import (
     AUTOPILOT,
     UPLOAD,
@@ -41,15 +41,13 @@ def _load(status_path: Path) -> tuple[dict[str, Any] | None, str | None, bool]:
 def _load_beside(status_path: Path, name: str) -> dict[str, Any] | None:
     """A feature's JSON snapshot beside status.json: None when absent (the feature is not configured),
     {"unreadable": why} when it is not a JSON object (torn, foreign, unreadable)."""
-    from onboard.recorder.status import _loads  # the snapshot reader's strict JSON (no NaN, bounded nesting)
-
     try:
-        obj = _loads(status_path.with_name(name).read_bytes())
-    except FileNotFoundError:
-        return None
+        obj = read_feature_status(status_path, name)
     except (ValueError, OSError) as exc:
         return {"unreadable": f"{name}: {exc}"}
-    if not isinstance(obj, dict) or "unreadable" in obj:
+    except TypeError:
+        return {"unreadable": f"{name} is not a JSON object of ours"}
+    if obj is not None and "unreadable" in obj:
         return {"unreadable": f"{name} is not a JSON object of ours"}
     return obj
 
