@@ -340,6 +340,7 @@ def _go_result(go: dict[str, Any], standin: dict[str, Any]) -> StageResult:
 
 
 def _recording_result(name: str, data_dir: Path, status_path: Path, code: int) -> StageResult:
+    from onboard.logger.check import check_flight
     from onboard.logger.journal import read_manifest
     from onboard.receiver.decode import iter_journal
     from onboard.recorder.feature import is_rollover
@@ -354,7 +355,8 @@ def _recording_result(name: str, data_dir: Path, status_path: Path, code: int) -
     flown = [f for f, m in manifests.items() if m is not None and m.close_reason and is_rollover(m.close_reason)]
     flight = flown[0] if flown else flights[-1]
     manifest = manifests[flight]
-    problems = _verify_segments(flight, manifest)
+    # what `onboard check` reports: segment sizes and SHA-256 against the manifest, index, event log
+    problems = check_flight(flight).problems
     epochs = sum(isinstance(e, ObsEpoch) for e in iter_journal(flight))
     figures = {
         "receiver": f"{st.get('receiver_model')} {st.get('receiver_sw_version')}",
@@ -365,23 +367,9 @@ def _recording_result(name: str, data_dir: Path, status_path: Path, code: int) -
     }
     ok = code == 0 and st.get("config_state") == "verified" and epochs > 0 and not problems
     summary = (f"{figures['receiver']}, configuration {figures['configuration']}, {epochs} raw epochs, "
-               f"{figures['bytes']} bytes in {figures['segments']} segment(s), SHA-256 "
-               f"{'verified' if not problems else 'MISMATCH'}")
+               f"{figures['bytes']} bytes in {figures['segments']} segment(s), onboard check "
+               f"{'passed (SHA-256 verified)' if not problems else 'FAILED: ' + '; '.join(problems)}")
     return StageResult(f"record {name}", ok, summary, figures, {"flight": str(flight)})
-
-
-def _verify_segments(flight: Path, manifest: Any) -> list[str]:
-    """Names of the manifest's segments whose size or SHA-256 does not match the file on disk."""
-    import hashlib
-
-    if manifest is None:
-        return ["no manifest"]
-    bad = []
-    for seg in manifest.segments:
-        data = (flight / seg.name).read_bytes() if (flight / seg.name).exists() else b""
-        if len(data) != seg.bytes or hashlib.sha256(data).hexdigest() != seg.sha256:
-            bad.append(seg.name)
-    return bad
 
 
 def check_pairing(rover_flight: Path, ctx: dict[str, Any]) -> StageResult:
