@@ -642,6 +642,15 @@ def _server_flight(client: Any, name: str) -> dict[str, Any] | None:
     return None
 
 
+def _run_uploader(server: GroundServer, folder: Path, roles: dict[str, str] | None = None,
+                  ) -> subprocess.CompletedProcess[str]:
+    """`python -m onboard.upload` of `folder` to `server` (file roles as NAME=ROLE), output captured."""
+    return subprocess.run([sys.executable, "-m", "onboard.upload", "--url", server.url, "--token-file",
+                           str(server.token_file), *(f"--role={k}={v}" for k, v in (roles or {}).items()),
+                           str(folder)], cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=300,
+                          check=False, env=dict(os.environ, PYTHONPATH=str(PROJECT_ROOT)))
+
+
 def upload_flight(rover: Path, server: GroundServer, auto: dict[str, Any] | None = None) -> StageResult:
     """The closed flight on the ground server, compared byte for byte with the drone's files. With `auto` (what
     `record_flight` saw: the companion closed the flight after landing and its upload daemon sent it, no command
@@ -655,9 +664,7 @@ def upload_flight(rover: Path, server: GroundServer, auto: dict[str, Any] | None
         how = "by the companion's upload daemon after it closed the flight, no command run"
     else:
         t = time.monotonic()
-        proc = subprocess.run([sys.executable, "-m", "onboard.upload", "--url", server.url, "--token-file",
-                               str(server.token_file), str(rover)], cwd=PROJECT_ROOT, capture_output=True,
-                              text=True, timeout=300, check=False, env=dict(os.environ, PYTHONPATH=str(PROJECT_ROOT)))
+        proc = _run_uploader(server, rover)
         wall_s = time.monotonic() - t
         how = "uploader process included"
         if proc.returncode != 0:
@@ -709,10 +716,7 @@ def ground_processing(rover: Path, base: Path, out: Path, ctx: dict[str, Any], s
         (office / name).write_bytes(Path(src).read_bytes())
     roles = {"rover.ubx": "rover_obs", "images.txt": "orientations", "capture_times.csv": "capture_times",
              "gcp.csv": "gcp"}
-    proc = subprocess.run([sys.executable, "-m", "onboard.upload", "--url", server.url, "--token-file",
-                           str(server.token_file), *(f"--role={k}={v}" for k, v in roles.items()), str(office)],
-                          cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=300, check=False,
-                          env=dict(os.environ, PYTHONPATH=str(PROJECT_ROOT)))
+    proc = _run_uploader(server, office, roles)
     if proc.returncode != 0:
         return [StageResult("ground RTK job", False, f"processing set upload failed: {proc.stderr.strip()[-400:]}")]
     lever = np.asarray(world.scenario.flight.lever_arm_cam_m) + np.random.default_rng(seed).normal(0, 0.003, 3)
