@@ -8,7 +8,9 @@ does): from a file, or live, message by message as the base station's stream arr
 shell from a serial device, pty or TCP stream: a ground station reading the base's radio). With
 `hold_until_go` it does not arm before `give_go` (the pre-flight page said "go"). Faults: link loss, reboot
 (boot clock back to 0, streams off, a short silence), heartbeat stop, dropped and reordered fragments, MAVLink
-1 only (v2 frames ignored). It also records what it hears (heartbeats by sender, interval requests, anything
+1 only (v2 frames ignored). CAMERA_FEEDBACK comes per trigger of the simulated receiver's camera
+(`camera_from_receiver`, a combined run: the autopilot logs the images the receiver's TimePulse triggered, at
+the trigger's UTC) or, alone, on its own timer along the survey lines. It also records what it hears (heartbeats by sender, interval requests, anything
 else sent to it), for tests: `report()`.
 
 `AutopilotSim` is the thin shell: a pty (raw mode: in cooked mode almost no frame survives) or a UDP socket
@@ -37,6 +39,7 @@ from typing import Any
 from onboard.autopilot.rtcm_reassembly import fragment_rtcm
 from onboard.errors import LinkLost
 from onboard.formats.atomic import write_json_atomic
+from onboard.gnsstime import GpsTime
 from onboard.hw.ports import ByteStream
 
 log = logging.getLogger(__name__)
@@ -84,6 +87,16 @@ class AutopilotSimOptions:
     """Stay disarmed on the ground until `AutopilotCore.give_go` (a pre-flight go). The short script is then
     flown from the go on (armed at max(arm_at_s, go)); the mission, tied to the receivers' world, cannot wait:
     a go after its arming time is reported as `go_late_s` and the vehicle arms at the go."""
+    camera_from_receiver: bool = False
+    """CAMERA_FEEDBACK once per trigger pulse of the simulated receiver's camera (`AutopilotCore.camera_trigger`,
+    fed by `hil_sim.receiver.ReceiverCore.on_camera_pulse`) instead of the stand-in's own timer on the survey
+    lines: in a combined run the autopilot logs exactly the images the receiver's camera was triggered for."""
+    camera_latency_s: tuple[float, float] = (0.005, 0.030)
+    """Range (s, uniform) from the trigger to the CAMERA_FEEDBACK leaving the autopilot (its scheduler loop and
+    the telemetry queue); with `camera_from_receiver`."""
+    camera_time_sigma_s: float = 0.001
+    """1-σ error (s, Gaussian) of the autopilot's own GPS-derived UTC at the trigger (`time_usec`: ArduPilot
+    stamps the image with its GPS time extrapolated on its own clock); with `camera_from_receiver`."""
     seed: int = 1
     utc_start: _dt.datetime = field(default_factory=lambda: _dt.datetime.now(_dt.UTC))
 
@@ -109,6 +122,8 @@ class ScriptedFlight:
         self.o = o
         self.camera_period_s = o.camera_period_s
         self.utc_start = o.utc_start
+        self.gps_start = GpsTime.from_utc(o.utc_start)
+        """GPS time of simulated time 0."""
         self.t_takeoff = o.arm_at_s + o.spool_s
         self.t_air = self.t_takeoff + o.takeoff_s
         self.t_land = self.t_air + o.survey_s
@@ -184,6 +199,8 @@ class MissionFlight:
         self.spool_s, self.disarm_after_s = spool_s, disarm_after_s
         self.camera_period_s = scenario.camera.period_s
         self.utc_start = scenario.start.to_utc()
+        self.gps_start: GpsTime = scenario.start
+        """GPS time of simulated time 0 (the scenario's start, the receivers' clock)."""
 
     arm_s_movable = False
 
@@ -256,6 +273,10 @@ class AutopilotCore:
         self._rtcm_seq = 0
         self._camera_next: float | None = None
         self._img_idx = 0
+        self._triggers: deque[GpsTime] = deque()  # the receiver camera's pulses (its thread), taken by step()
+        self._trigger_due_s: float | None = None
+        self._camera_rng = random.Random(options.seed * 1000 + 180)  # apart from the fragment faults' draws
+        self.camera_truth = {"triggers": 0, "without_flash": 0, "unseen_in_reboot": 0, "feedback_sent": 0}
         self._reboots_done = 0
         self.heard: dict[str, dict[str, Any]] = {}
         self.interval_requests: list[dict[str, Any]] = []
@@ -292,6 +313,13 @@ class AutopilotCore:
         if self.go_s is None:
             return min(t, self.flight.arm_s - 1e-3)
         return t - max(0.0, self.go_s - self.flight.arm_s)
+
+    def camera_trigger(self, event: Any) -> None:
+        """The receiver's camera was triggered (a `hil_sim.camera.CameraEvent`, from any thread; with
+        `camera_from_receiver`): CAMERA_FEEDBACK for it follows after `camera_latency_s`."""
+        self.camera_truth["triggers"] += 1
+        self.camera_truth["without_flash"] += getattr(event, "flash_time", None) is None
+        self._triggers.append(event.pulse_time)
 
     def inject_rtcm(self, message: bytes) -> None:
         """One RTCM3 message of the live stream (from any thread): sent as GPS_RTCM_DATA at the next step."""
@@ -343,6 +371,7 @@ class AutopilotCore:
             self.silent_until = t + o.reboot_silence_s
             self.intervals.clear()
             self._next.clear()
+            self._img_idx = 0  # ArduPilot's image counter starts again at boot
             log.info("autopilot reboot at %.1f s", t)
         if t < self.silent_until:
             self._out.out.clear()
@@ -409,7 +438,42 @@ class AutopilotCore:
             usec = (utc - _dt.datetime(1970, 1, 1, tzinfo=_dt.UTC)) // _dt.timedelta(microseconds=1)
             self._send(mav.system_time_encode(usec, boot))
 
+    def _camera_from_receiver(self, t: float) -> None:
+        """CAMERA_FEEDBACK for each trigger of the receiver's camera, as ArduPilot reports a trigger: `time_usec`
+        its GPS-derived UTC µs at the trigger, img_idx counting up, position and attitude at the trigger; sent
+        `camera_latency_s` after it. A trigger while the autopilot reboots is never seen."""
+        while self._triggers:
+            pulse = self._triggers[0]
+            pulse_s = pulse.diff_s(self.flight.gps_start)
+            if self._trigger_due_s is None:
+                self._trigger_due_s = pulse_s + self._camera_rng.uniform(*self.o.camera_latency_s)
+            if t < self._trigger_due_s:
+                return
+            self._triggers.popleft()
+            self._trigger_due_s = None
+            if self.boot_t <= pulse_s < self.silent_until:
+                self.camera_truth["unseen_in_reboot"] += 1
+                continue
+            self._img_idx += 1
+            if MSG["CAMERA_FEEDBACK"] not in self.intervals:
+                continue  # ArduPilot sends it on the links asking for it
+            stamp = pulse.add_ns(round(self._camera_rng.gauss(0.0, self.o.camera_time_sigma_s) * 1e9))
+            usec = (stamp.to_utc() - _dt.datetime(1970, 1, 1, tzinfo=_dt.UTC)) // _dt.timedelta(microseconds=1)
+            self._send_camera_feedback(usec, self.flight.pose(self._flight_t(pulse_s)))
+            self.camera_truth["feedback_sent"] += 1
+
+    def _send_camera_feedback(self, time_usec: int, p: Pose) -> None:
+        self._send(self.mav.camera_feedback_encode(time_usec, 0, 0, self._img_idx, round(p.lat_deg * 1e7),
+                                                   round(p.lon_deg * 1e7), p.alt_m, p.relative_alt_m,
+                                                   math.degrees(p.roll_rad), math.degrees(p.pitch_rad),
+                                                   math.degrees(p.yaw_rad), 0.0, 0))
+
     def _camera(self, t: float) -> None:
+        """The stand-in's own camera (without `camera_from_receiver`): a trigger every camera period on the
+        survey lines, stamped with the simulated time in µs (µs since boot for the companion, until a reboot)."""
+        if self.o.camera_from_receiver:
+            self._camera_from_receiver(t)
+            return
         if not self.phase(t)[0] or not self.flight.camera_active(self._flight_t(t)):
             self._camera_next = None
             return
@@ -421,11 +485,7 @@ class AutopilotCore:
         self._img_idx += 1
         if MSG["CAMERA_FEEDBACK"] not in self.intervals:
             return  # ArduPilot sends it on the links asking for it
-        p = self.flight.pose(self._flight_t(t))
-        self._send(self.mav.camera_feedback_encode(int(t * 1e6), 0, 0, self._img_idx, round(p.lat_deg * 1e7),
-                                                   round(p.lon_deg * 1e7), p.alt_m, p.relative_alt_m,
-                                                   math.degrees(p.roll_rad), math.degrees(p.pitch_rad),
-                                                   math.degrees(p.yaw_rad), 0.0, 0))
+        self._send_camera_feedback(int(t * 1e6), self.flight.pose(self._flight_t(t)))
 
     def _rtcm(self, t: float) -> None:
         o = self.o
@@ -464,7 +524,7 @@ class AutopilotCore:
                 "other_messages": self.other_messages, "ignored_mavlink2": self.ignored_v2, "sent": self.sent,
                 "reboots": self._reboots_done, "rtcm_sent": self._rtcm_index, "rtcm_intact": self.rtcm_intact,
                 "rtcm_broken": self.rtcm_broken, "rtcm_live": dict(self.rtcm_live),
-                "rtcm_fragments": self.rtcm_fragments, "go_s": self.go_s,
+                "rtcm_fragments": self.rtcm_fragments, "go_s": self.go_s, "camera": dict(self.camera_truth),
                 "arm_s": self.flight.arm_s, "go_late_s": None if self.go_s is None or self.flight.arm_s_movable
                 else round(max(0.0, self.go_s - self.flight.arm_s), 3)}
 

@@ -221,9 +221,11 @@ def record_flight(args: argparse.Namespace, out: Path, standin_options: Any = No
         return rover.sim_time().diff_s(t0)
 
     mission = MissionFlight(scenario)
-    options = dataclasses.replace(standin_options or AutopilotSimOptions(seed=args.seed), hold_until_go=True)
+    options = dataclasses.replace(standin_options or AutopilotSimOptions(seed=args.seed), hold_until_go=True,
+                                  camera_from_receiver=True)
     standin = AutopilotSim(options, speed=args.speed,
                            flight=mission, time_source=sim_s, report_path=out / "autopilot-standin.json")
+    rover.core.on_camera_pulse = standin.core.camera_trigger  # the autopilot logs the rover camera's triggers
     procs: dict[str, subprocess.Popen[bytes]] = {}
     dirs: dict[str, Path] = {}
     statuses: dict[str, Path] = {}
@@ -610,11 +612,45 @@ def corrections_chain(rover: Path, base: Path, ctx: dict[str, Any]) -> StageResu
                        {"base_sent": str(base / "radio-tx.rtcm3")})
 
 
+def camera_check_vs_truth(records: list[dict[str, Any]], world: Any) -> dict[str, Any]:
+    """The companion's camera cross-check (`camera_check` records of events.jsonl) against the simulator: each
+    autopilot shot is the receiver camera's trigger pulse nearest its time (within 50 ms: the autopilot's own
+    GPS time is ms-accurate); the check must say "matched" exactly when the simulated camera flashed, and find
+    no flash without a shot (every flash follows a trigger the autopilot logged)."""
+    from onboard.gnsstime import GpsTime
+
+    shot_times = [GpsTime(r["shot_week"], r["shot_tow_ns"]) for r in records if r.get("shot_week") is not None]
+    truth = [] if not shot_times else world.camera_events(min(shot_times).add_s(-1.0), max(shot_times).add_s(1.0))
+    pulses = [ev.pulse_time.total_ns for ev in truth]
+    counts = {"shots": 0, "matched": 0, "shots_without_flash": 0, "flashes_without_shot": 0,
+              "simulated_missed_flashes": 0, "disagree_with_truth": 0, "no_such_pulse": 0}
+    for rec in records:
+        result = rec.get("result")
+        if result == "flash_without_shot":
+            counts["flashes_without_shot"] += 1
+            continue
+        counts["shots"] += 1
+        counts["matched" if result == "matched" else "shots_without_flash"] += 1
+        shot_ns = GpsTime(rec["shot_week"], rec["shot_tow_ns"]).total_ns
+        i = min(range(len(pulses)), key=lambda j: abs(pulses[j] - shot_ns), default=None)
+        if i is None or abs(pulses[i] - shot_ns) > 50_000_000:
+            counts["no_such_pulse"] += 1
+            continue
+        flashed = truth[i].flash_time is not None
+        counts["simulated_missed_flashes"] += not flashed
+        counts["disagree_with_truth"] += flashed != (result == "matched")
+    return counts
+
+
 def autopilot_events(rover: Path, ctx: dict[str, Any]) -> StageResult:
-    """The autopilot link: lifecycle events in events.jsonl (GPS time) and the .tlog."""
+    """The autopilot link: lifecycle events in events.jsonl (GPS time), the .tlog, and the camera cross-check
+    (the autopilot's CAMERA_FEEDBACK beside the TIM-TM2 flash marks) against the simulated camera."""
+    from onboard.autopilot.camera import CAMERA_CHECK_KIND
     from onboard.logger.events import read_events
 
-    events = [r for r in read_events(rover / "events.jsonl").records if r.get("type") == "autopilot"]
+    records = read_events(rover / "events.jsonl").records
+    camera = camera_check_vs_truth([r for r in records if r.get("kind") == CAMERA_CHECK_KIND], ctx["world"])
+    events = [r for r in records if r.get("type") == "autopilot"]
     names = [e.get("event") for e in events]
     snap = _status(ctx["statuses"]["rover"].with_name("autopilot.json"))
     start = ctx["start"]
@@ -623,15 +659,21 @@ def autopilot_events(rover: Path, ctx: dict[str, Any]) -> StageResult:
     truth = {"takeoff": ctx["world"].trajectory.takeoff_s, "landed": ctx["world"].trajectory.landing_s}
     # flight_over: the companion closed the flight by itself after the settle time (the demo's automatic close)
     ok = names[:4] == ["armed", "takeoff", "landed", "disarmed"] and names[4:] in ([], ["flight_over"])
+    ok = ok and camera["shots"] > 0 and camera["disagree_with_truth"] == camera["no_such_pulse"] == 0
+    ok = ok and camera["flashes_without_shot"] == 0
     tlog = rover / "autopilot.tlog"
     tlog_bytes = tlog.stat().st_size if tlog.exists() else 0  # autopilot.json describes the current flight
     listed = ", ".join(f"{n} at {at.get(n, float('nan')):.0f} s" for n in names)
     summary = (f"events {listed} "
                f"(mission: take-off {truth['takeoff']:.0f} s, touchdown {truth['landed']:.0f} s); "
-               f"{tlog_bytes} B of .tlog, {snap.get('camera_feedback')} CAMERA_FEEDBACK, packet loss "
-               f"{snap.get('packet_loss')}")
+               f"{tlog_bytes} B of .tlog, packet loss {snap.get('packet_loss')}; camera cross-check of this "
+               f"flight: {camera['shots']} CAMERA_FEEDBACK, {camera['matched']} matched to a flash mark, "
+               f"{camera['shots_without_flash']} without flash (simulated missed flashes "
+               f"{camera['simulated_missed_flashes']}), {camera['flashes_without_shot']} flashes without a shot, "
+               f"{camera['disagree_with_truth'] + camera['no_such_pulse']} disagreeing with the simulator")
     return StageResult("autopilot link", ok, summary, {"events": at, "truth_s": truth, "tlog_bytes": tlog_bytes,
-                                                       "camera_feedback": snap.get("camera_feedback")},
+                                                       "camera_feedback": snap.get("camera_feedback"),
+                                                       "camera_check": camera},
                        {"tlog": str(rover / "autopilot.tlog")})
 
 

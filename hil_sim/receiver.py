@@ -329,6 +329,9 @@ class ReceiverCore:
         self._rng = np.random.default_rng(options.faults.seed + 17)
         self.dropped_flash_reports: list[enc.TimeMarkReport] = []
         """TIM-TM2 flash-line reports withheld by the `drop_flash_mark_rate` fault (truth for tests)."""
+        self.on_camera_pulse: Callable[[Any], None] | None = None
+        """Called with each camera event whose trigger pulse this receiver emitted (after the TIMEPULSE gate),
+        as the pulse is produced: the autopilot stand-in's CAMERA_FEEDBACK follows the same camera."""
         end = getattr(world, "end", None)
         self.t_end: GpsTime | None = end if isinstance(end, GpsTime) else None
         self._ended_logged = False
@@ -759,6 +762,8 @@ class ReceiverCore:
                 self.stats.pulses_suppressed += 1
                 continue
             self._check_camera_period(pulse_t)
+            if self.on_camera_pulse is not None:
+                self.on_camera_pulse(ev)
             if self.options.trigger_extint:
                 self._pending_edges.append((pulse_t, 1, True))
                 self._pending_edges.append((pulse_t.add_s(self._pulse_length_s(pulse_t)), 1, False))

@@ -30,6 +30,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -247,13 +248,21 @@ class AutopilotLink:
             except OSError as exc:
                 log.error("autopilot tlog close failed: %s", exc)
 
-    def stop(self) -> None:
-        """Stop the thread, close the tlog (fsync'd)."""
+    def stop_thread(self) -> None:
+        """Stop the link thread (idempotent); the tlog stays open until `stop`."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
-        # no final camera_check flush: the recorder closed events.jsonl before its features (the last
-        # `decide_after_ns` of shots stay undecided; a flight closes ≥ 20 s after landing, so none in practice)
+
+    def final_camera_checks(self) -> list[dict[str, Any]]:
+        """Every camera shot and flash not yet decided, decided now (`CameraCrossCheck.poll(final=True)`): the
+        recording stops, no partner can come any more. Call after `stop_thread`."""
+        with self._lock:
+            return self.camera.poll(self.lifecycle.gpst_at(self.clock.monotonic_ns()), final=True)
+
+    def stop(self) -> None:
+        """Stop the thread, close the tlog (fsync'd)."""
+        self.stop_thread()
         if self._tlog is not None:
             try:
                 self._tlog.close()
@@ -458,9 +467,10 @@ class AutopilotLink:
             for m in marks:
                 if m.channel == FLASH_CHANNEL and m.edge == "falling" and m.valid and m.time is not None:
                     self.camera.add_flash(m.time, m.count)
-        self._emit_camera_checks()
+        self.emit_camera_checks()
 
-    def _emit_camera_checks(self) -> None:
+    def emit_camera_checks(self) -> None:
+        """Hand the camera checks that can be decided now to `camera_sink`."""
         with self._lock:
             records = self.camera.poll(self.lifecycle.gpst_at(self.clock.monotonic_ns()))
         if self.camera_sink is not None:
@@ -469,7 +479,7 @@ class AutopilotLink:
 
     def _periodic(self) -> None:
         now = self.clock.monotonic_ns()
-        self._emit_camera_checks()
+        self.emit_camera_checks()
         with self._lock:
             if self._tlog is not None:
                 self._tlog.maybe_sync()
@@ -551,7 +561,14 @@ class AutopilotFeature(RecorderFeature):
     """The autopilot link as a recorder feature: `AutopilotLink` started when the flight opens (its tlog in the
     flight directory), its lifecycle events appended to events.jsonl on the recorder's loop, its snapshot
     `autopilot.json`, stopped when the flight closes. `corrections` (when RTK takes its base from MAVLink)
-    receives the reassembled RTCM3."""
+    receives the reassembled RTCM3.
+
+    The link's records (lifecycle events, camera checks) wait in a queue that the recorder's loop empties into
+    events.jsonl (`_drain`, posted per record); when the flight closes (`on_flight_closing`, the event log still
+    open) the queue is emptied into it at once, so none is lost or lands in the wrong flight: at a stop the
+    link thread is stopped first and every undecided camera check is decided (final: the recording ends); at a
+    roll-over the checks decidable now are written and the undecided ones (a shot whose flash mark may still
+    come) stay pending, decided in the next flight."""
 
     name = "autopilot"
     status_name = AUTOPILOT_STATUS_NAME
@@ -562,6 +579,15 @@ class AutopilotFeature(RecorderFeature):
         self.corrections = corrections
         self.link: AutopilotLink | None = None
         self._rolling_over = False
+        self._records: deque[dict[str, Any]] = deque()  # from the link thread, written on the loop
+        self._append: Callable[[dict[str, Any]], None] | None = None
+
+    def _drain(self) -> None:
+        """The queued records into the current flight's events.jsonl (on the recorder's loop)."""
+        while self._records:
+            record = self._records.popleft()
+            if self._append is not None:
+                self._append(record)
 
     def on_flight_opened(self, flight: FlightContext) -> None:
         if self.link is not None and self._rolling_over:
@@ -570,8 +596,12 @@ class AutopilotFeature(RecorderFeature):
             self.link.switch_flight(flight.flight_dir)
             return
         options, open_link, clock, link_name, corrections = self._args
-        append = flight.append_event
-        emit = None if append is None else (lambda record: flight.post(append, record))
+        emit = None
+        if flight.append_event is not None:
+            def emit(record: dict[str, Any]) -> None:
+                self._records.append(record)
+                flight.post(self._drain)
+        self._append = flight.append_event
         self.link = AutopilotLink(options, open_link, clock or flight.clock, link_name, corrections,
                                   flight.journal_options.sync_interval_s, camera_sink=emit)
         close = flight.close_flight
@@ -585,6 +615,16 @@ class AutopilotFeature(RecorderFeature):
 
     def status(self) -> dict[str, Any] | None:
         return None if self.link is None else self.link.snapshot()
+
+    def on_flight_closing(self, reason: str) -> None:
+        if self.link is None:
+            return
+        if is_rollover(reason):
+            self.link.emit_camera_checks()
+        else:
+            self.link.stop_thread()  # nothing more comes from the link: its queue is complete
+            self._records.extend(self.link.final_camera_checks())
+        self._drain()
 
     def on_flight_closed(self, reason: str) -> None:
         if is_rollover(reason):

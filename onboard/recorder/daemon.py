@@ -447,7 +447,8 @@ class Recorder:
     def close_flight(self, reason: str) -> None:
         """Close the current flight and continue recording into a new one without a gap (loop only).
 
-        The new journal and event log are opened first; the reader thread's next append goes to the new journal
+        The new journal and event log are opened first; the features' `on_flight_closing(reason)` append their last
+        records to the old flight's event log; the reader thread's next append goes to the new journal
         (the swap happens under the journal lock, between two appends); then the old flight is closed (segment
         fsync'd and hashed, final manifest with `reason`), the features get `on_flight_closed(reason)` and
         `on_flight_opened(next)`, and the old flight is queued for upload. If the new flight cannot be opened,
@@ -466,6 +467,7 @@ class Recorder:
             log.error("cannot open the next flight %s (%s): recording goes on in %s", new_dir, exc, old_dir.name)
             return
         self._enqueue(old_dir, ready=False)
+        self._features_closing(reason)  # their last records go into the old flight's event log, still current
         with self._journal_lock:
             old_journal, self.journal = self.journal, journal
         old_events, self.events = self.events, events
@@ -501,6 +503,8 @@ class Recorder:
         reason = self.stop_reason or "stopped"
         if self.journal is not None:
             self._enqueue(self.journal.flight_dir, ready=False)
+        if self._features_open:
+            self._features_closing(reason)
         try:
             if self.events is not None:
                 for rec in self._pairer.flush():
@@ -527,6 +531,11 @@ class Recorder:
         self.status.port_open = False
         self._write_status()
         self.deps.notifier.notify(STOPPING=1, STATUS=f"stopped: {reason}")
+
+    def _features_closing(self, reason: str) -> None:
+        """`on_flight_closing(reason)` of every feature, while the flight's event log is open."""
+        for feature in self.features:
+            self._feature_call(feature, feature.on_flight_closing, reason)
 
     def _close_features(self, reason: str) -> None:
         self._features_open = False

@@ -14,6 +14,10 @@ event loop, in the order the features were given:
     status()                   every status snapshot (~1 s) and at close: a JSON-able dict written as
                                `status_name` beside the recorder's status.json (through `write_status`), or
                                None for nothing
+    on_flight_closing(reason)  the flight is about to close (a stop or a roll-over): the event log is still
+                               open and `flight.append_event` still writes into this flight; append the last
+                               records (what is queued, what can be decided now); the receiver's reader has
+                               stopped when the recording stops (not at a roll-over)
     on_flight_closed(reason)   after the journal was closed, before the last snapshot: stop threads,
                                close files
 
@@ -108,6 +112,10 @@ class RecorderFeature:
     def status(self) -> dict[str, Any] | None:
         """This feature's snapshot (JSON-able), written as `status_name`; None: nothing to write now."""
         return None
+
+    def on_flight_closing(self, reason: str) -> None:
+        """The flight is about to close (`is_rollover(reason)`: recording goes on): the event log is still open;
+        append this flight's last records now."""
 
     def on_flight_closed(self, reason: str) -> None:
         """The flight is closed (`reason` why; `is_rollover(reason)`: the next flight opens at once): stop threads,

@@ -15,6 +15,7 @@ Why these settings (u-blox 6 receiver description, u-blox M8 receiver descriptio
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 US_PER_S = 1_000_000
@@ -26,6 +27,8 @@ TIMEPULSE = 0
 TIMEPULSE2 = 1
 GRID_GPS = 1
 TIME_REF_GPS = 1  # legacy CFG-TP timeRef
+CABLE_DELAY_MIN_NS, CABLE_DELAY_MAX_NS = -32768, 32767
+"""antCableDelay (CFG-TP5) and antennaCableDelay (legacy CFG-TP) are I2 fields, ns."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,10 +45,26 @@ class PulseSpec:
             raise ValueError(f"pulse period must be > 0 µs, got {self.period_us}")
         if not 0 < self.length_us < self.period_us:
             raise ValueError(f"pulse length must be > 0 and < the period ({self.period_us} µs), got {self.length_us}")
+        if (isinstance(self.ant_cable_delay_ns, bool) or not isinstance(self.ant_cable_delay_ns, int)
+                or not CABLE_DELAY_MIN_NS <= self.ant_cable_delay_ns <= CABLE_DELAY_MAX_NS):
+            raise ValueError(f"antenna cable delay must be an integer number of ns within {CABLE_DELAY_MIN_NS}–"
+                             f"{CABLE_DELAY_MAX_NS} (a 16-bit field), got {self.ant_cable_delay_ns!r}")
+
+
+def _finite(name: str, value: object) -> float:
+    """`value` as a finite float; ValueError naming the setting for NaN, ±inf, a bool or a non-number."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return float(value)
 
 
 def camera_pulse_spec(period_s: float, pulse_len_ms: float, rising: bool, ant_cable_delay_ns: int = 50) -> PulseSpec:
-    """The camera trigger pulse from user units; ValueError (naming the setting) outside 2–3 s or a bad length."""
+    """The camera trigger pulse from user units (s, ms, ns); ValueError naming the setting for a non-finite or
+    non-numeric value, a period outside 2–3 s, a length not within (0, period), a cable delay out of range."""
+    period_s = _finite("camera_period_s", period_s)
+    pulse_len_ms = _finite("pulse_len_ms", pulse_len_ms)
+    if not isinstance(rising, bool):
+        raise ValueError(f"pulse_rising must be true or false, got {rising!r}")  # noqa: TRY004 (settings errors are ValueError)
     if not CAMERA_PERIOD_MIN_S <= period_s <= CAMERA_PERIOD_MAX_S:
         raise ValueError(f"camera_period_s must be within {CAMERA_PERIOD_MIN_S}–{CAMERA_PERIOD_MAX_S} s, got {period_s}")
     period_us = round(period_s * US_PER_S)

@@ -44,12 +44,24 @@ def _messages(data: bytes) -> list[bytes]:
     return [bytes(f.raw) for f in framer.feed(data)]
 
 
+MISSED_FLASH = 0.1
+"""Probability the simulated camera misses a flash: enough missed flashes for the camera cross-check to count."""
+
+
+@pytest.fixture(scope="module")
+def flown(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any], list[Any]]:
+    """One combined run (base, radio cable, autopilot stand-in, rover companion) for the tests of this module."""
+    tmp_path = tmp_path_factory.mktemp("rtk-over-mavlink")
+    ctx, stages = _fly(tmp_path)
+    return tmp_path, ctx, stages
+
+
 def _fly(tmp_path: Path) -> tuple[dict[str, Any], list[Any]]:
     from hil_sim.__main__ import build_parser
     from hil_sim.mission import record_flight
 
     args = build_parser().parse_args(["flight", "--flight-s", str(FLIGHT_S), "--ground-s", "90", "--speed", "6",
-                                      "--out", str(tmp_path)])
+                                      "--missed-flash", str(MISSED_FLASH), "--out", str(tmp_path)])
     synthetic = tuple(rtcm_frame(n, k, msg_type=4001) for k, n in enumerate(SIZES_180K * 40))
     standin = AutopilotSimOptions(seed=7, drop_fragment_rate=0.1, reorder_fragments=True, rtcm_messages=synthetic,
                                   rtcm_start_s=5.0, rtcm_interval_s=1.3)
@@ -59,8 +71,8 @@ def _fly(tmp_path: Path) -> tuple[dict[str, Any], list[Any]]:
     return ctx, stages
 
 
-def test_fixed_with_corrections_only_through_gps_rtcm_data(tmp_path: Path) -> None:
-    ctx, stages = _fly(tmp_path)
+def test_fixed_with_corrections_only_through_gps_rtcm_data(flown: tuple[Path, dict[str, Any], list[Any]]) -> None:
+    tmp_path, ctx, stages = flown
     recorded = {s.name: s for s in stages}
     for name in ("record rover", "record base"):
         assert recorded[name].ok, recorded[name].summary
@@ -122,3 +134,42 @@ def test_fixed_with_corrections_only_through_gps_rtcm_data(tmp_path: Path) -> No
     # the demo's whole 660 s flight 1.4 % of the real-time fixed epochs were 2-3.1 cm off, vertical noise)
     assert figures["fixed_3d_rms_m"] <= 0.02 and figures["fixed_3d_p95_m"] <= 0.02, figures
     assert figures["fixed_3d_max_m"] <= 0.05, figures
+
+
+def test_camera_cross_check_counts_what_the_simulated_camera_did(
+        flown: tuple[Path, dict[str, Any], list[Any]]) -> None:
+    """The stand-in's CAMERA_FEEDBACK follows the rover receiver's camera: in the rover's events.jsonl every
+    trigger the stand-in reported is one camera check; "matched" exactly when the simulated camera flashed,
+    "shot_without_flash" exactly for the missed flashes, no flash without a shot. The flight closes at the
+    recorder's stop (the mission is cut before landing): the last checks are in the log too."""
+    from hil_sim.mission import autopilot_events, camera_check_vs_truth
+    from onboard.autopilot.camera import CAMERA_CHECK_KIND
+    from onboard.gnsstime import GpsTime
+    from onboard.logger.events import read_events
+    from onboard.timepulse.marks import parse_records
+
+    _tmp, ctx, stages = flown
+    rover = Path({s.name: s for s in stages}["record rover"].outputs["flight"])
+    checks = [r for r in read_events(rover / "events.jsonl").records if r.get("kind") == CAMERA_CHECK_KIND]
+    counts = camera_check_vs_truth(checks, ctx["world"])
+    standin = ctx["standin"]["camera"]
+    # every trigger reported (the last one may still wait out its latency when the stand-in stops)
+    assert standin["triggers"] - 1 <= standin["feedback_sent"] <= standin["triggers"] and standin["triggers"] > 40
+    # every trigger pulse the recorder timed (TIM-TM2 channel 1) has its camera check, the last ones before
+    # the stop included (the autopilot's report of a trigger comes before the receiver's TIM-TM2 of it)
+    _marks, pairings, _other = parse_records(read_events(rover / "events.jsonl").records)
+    pulses = [p.pulse_time.total_ns for p in pairings if p.pulse_time is not None]
+    shots = [GpsTime(c["shot_week"], c["shot_tow_ns"]).total_ns for c in checks if c["shot_week"] is not None]
+    assert len(pulses) > 40 and all(min(abs(s - p) for s in shots) < 10_000_000 for p in pulses)
+    assert counts["disagree_with_truth"] == 0 and counts["no_such_pulse"] == 0, counts
+    assert counts["flashes_without_shot"] == 0, counts
+    assert counts["shots_without_flash"] == counts["simulated_missed_flashes"] >= 2, counts
+    assert counts["matched"] == counts["shots"] - counts["shots_without_flash"]
+    matched = [c for c in checks if c["result"] == "matched"]
+    # the flash follows the trigger by the simulated shutter delay (64 ms ± 0.2 ms) plus the autopilot's
+    # ms-level GPS time error; the attitude at each exposure comes from the stand-in's ATTITUDE
+    assert all(40e6 < c["delay_ns"] < 90e6 for c in matched)
+    assert sum(c["roll_deg"] is not None for c in matched) >= 0.9 * len(matched)
+    stage = autopilot_events(rover, ctx)
+    assert stage.figures["camera_check"] == counts
+    assert f"{counts['shots_without_flash']} without flash (simulated missed flashes" in stage.summary

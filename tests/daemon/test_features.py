@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 
 from onboard.hw.fake import FakeByteStream
+from onboard.logger.events import read_events
 from onboard.logger.journal import iter_journal_bytes, read_manifest
 from onboard.receiver.framing import Frame
 from onboard.recorder.daemon import EXIT_IN_USE, LOCK_NAME, Recorder, RecorderDeps
@@ -71,6 +72,11 @@ class Probe(RecorderFeature):
     def status(self) -> dict[str, Any]:
         return {"frames": self.frames, "bytes": self.byte_count}
 
+    def on_flight_closing(self, reason: str) -> None:
+        self._note(f"closing:{reason}")
+        assert self.flight is not None and self.flight.append_event is not None
+        self.flight.append_event({"type": "probe", "event": "last words", "reason": reason})
+
     def on_flight_closed(self, reason: str) -> None:
         self._note(f"closed:{reason}")
 
@@ -108,9 +114,12 @@ def test_features_get_the_lifecycle_in_order_and_a_broken_one_never_stops_record
     assert run.stop() == 0
     flight = next(settings.data_dir.glob("flight-*"))
     assert b"".join(iter_journal_bytes(flight)) == sent  # every byte recorded, whatever the broken feature did
-    assert probe.calls[0] == "opened" and probe.calls[-1] == "closed:test stop"
-    assert set(probe.calls[1:-1]) == {"bytes", "frame", "decoded"} and probe.frames == 51
-    assert probe.calls[-2] == "decoded"  # the TIM-TM2: its frame, then its decoded item
+    assert probe.calls[0] == "opened" and probe.calls[-2:] == ["closing:test stop", "closed:test stop"]
+    assert set(probe.calls[1:-2]) == {"bytes", "frame", "decoded"} and probe.frames == 51
+    assert probe.calls[-3] == "decoded"  # the TIM-TM2: its frame, then its decoded item
+    # the closing hook's record is in the flight's event log (still open then), before the flight's close
+    records = read_events(flight / "events.jsonl").records
+    assert {"type": "probe", "event": "last words", "reason": "test stop"} in records
     assert probe.byte_count == len(sent) and probe.posted == ["from my thread"]
     assert len(probe.threads) == 1 and "recorder-reader" not in probe.threads  # every hook on the loop
     assert probe.flight is not None and probe.flight.flight_dir == flight
