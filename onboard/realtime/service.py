@@ -18,6 +18,12 @@ keeps its held fix through 5-20 s gaps (hil_sim: no wrong fix, fixed throughout)
 used (single-point solution) and the filter's ambiguities wait, slips watched, for the base to return.
 `rtk.json` shows the age of the newest base epoch (`age_s`) in both cases.
 
+The base's position (its 1005/1006, or `base_pos_ecef_m`) is checked as post-processing checks it
+(`onboard.rtk.postpro.check_base_position`: the median single-point solution of the buffered base epochs,
+`RtkOptions.max_base_spp_offset_m`) before any epoch is differenced against it, again whenever it changes: a
+rejected position is never used (single-point solutions, no fix against it), `rtk.json` says why
+(`base_position_check` "rejected: ..."), and the recorder's event log gets a `base_position_rejected` event.
+
 Wiring into the recorder: `RtkFeature` (a `onboard.recorder.feature.RecorderFeature`) starts the service when
 the flight opens (`start(flight_dir)`), hands it every decoded item (`submit`), writes its snapshot as `rtk.json`
 beside the status snapshot and stops it when the flight closes; the composition root (`onboard.recorder.app`)
@@ -84,6 +90,9 @@ class RtkServiceOptions:
     """Surveyed take-off antenna position (ECEF m, settings key `rtk.takeoff_position`): the engine starts
     static there with its ambiguities computed from it (Daakir 2015 eq. 2) and fixes at the first epoch,
     whatever the baseline. None: a cold start."""
+    preflight_base_timeout_s: float | None = None
+    """Base corrections older than this (s, settings key `rtk.preflight_base_timeout_s`) make the pre-flight page
+    a no-go; published in rtk.json for it (None: the page's default)."""
     lock_rules: Any = None
     """`onboard.receiver.decode.LockTrackerOptions` for the rover's RXM-RAWX phase validity and slips (None:
     RTKLIB's Gen8 thresholds, the same rules `onboard rtk` applies to a journal)."""
@@ -112,12 +121,17 @@ class RtkStatus:
     baseline_m: float | None = None
     max_first_fix_baseline_km: float | None = None
     """The engine's limit for a first fix from a cold start (RtkOptions.max_first_fix_baseline_km; 0: none)."""
+    preflight_base_timeout_s: float | None = None
+    """`RtkServiceOptions.preflight_base_timeout_s`: the pre-flight page's no-go age of the corrections (s)."""
     last_gpst: str | None = None
     ttff_s: float | None = None
     engine_ms_last: float = 0.0
     engine_ms_max: float = 0.0
     errors: int = 0
     restarts: int = 0
+    base_position_check: str | None = None
+    """The base position against the base's own single-point solution: None (no position yet), "pending" (no
+    single-point solution of the base yet: the base is not used), "ok: N m" or "rejected: <why>"."""
 
     def to_json(self) -> dict[str, Any]:
         """JSON-able dict (field `float_` as "float")."""
@@ -207,8 +221,12 @@ class RtkService:
     """The real-time RTK worker (see module doc). Thread-safe `submit`/`snapshot`; `start`/`stop` once."""
 
     def __init__(self, options: RtkServiceOptions, open_radio: Callable[[], ByteStream] | None,
-                 clock: Clock | None = None) -> None:
+                 clock: Clock | None = None, on_event: Callable[[dict[str, Any]], None] | None = None) -> None:
         self.options = options
+        self.on_event = on_event
+        """Receives the service's events (a rejected base position) from the engine thread."""
+        self._checked_base_pos: tuple[float, ...] | None = None
+        self._base_pos_ok = False
         self._open_radio = open_radio
         self.clock = clock or SystemClock()
         self.engine_options = replace(options.engine, max_age_s=options.max_base_age_s)
@@ -217,7 +235,8 @@ class RtkService:
         self._cond = threading.Condition()
         self._base = BaseStream(options.base_buffer_epochs)
         self._reference: GpsTime | None = None
-        self._status = RtkStatus(max_first_fix_baseline_km=self.engine_options.max_first_fix_baseline_km)
+        self._status = RtkStatus(max_first_fix_baseline_km=self.engine_options.max_first_fix_baseline_km,
+                                 preflight_base_timeout_s=options.preflight_base_timeout_s)
         self._threads: list[threading.Thread] = []
         self._journal: Journal | None = None
         self._pos_file: Any = None
@@ -389,6 +408,8 @@ class RtkService:
                 state = rtk_init(self.engine_options)  # mid-flight: the take-off point no longer applies
                 self._status.restarts += 1
                 outage_epochs = 0
+            if base_pos is not None and not self._base_position_usable(base_pos, nav, rover.time):
+                base = None  # unchecked or rejected: never a solution differenced against it
             t0 = self.clock.monotonic_ns()
             try:
                 sol = rtk_pos(state, rover, base, nav, base_pos)
@@ -398,6 +419,40 @@ class RtkService:
                 continue
             ms = (self.clock.monotonic_ns() - t0) / 1e6
             self._publish(sol, base, base_pos, first_time, ms)
+
+    def _base_position_usable(self, base_pos: Arr, nav: Nav, t: GpsTime) -> bool:
+        """Whether `base_pos` passed the post-processing check against the buffered base epochs' single-point
+        solutions (decided once per position; pending while no base epoch solves)."""
+        from onboard.rtk.postpro import base_spp_offset_m, check_base_position
+        from onboard.rtk.types import BasePositionRejected
+
+        key = tuple(float(v) for v in base_pos)
+        if key == self._checked_base_pos:
+            return self._base_pos_ok
+        if self.engine_options.max_base_spp_offset_m <= 0.0:
+            self._checked_base_pos, self._base_pos_ok = key, True
+            self._status.base_position_check = "ok: check disabled (max_base_spp_offset_m = 0)"
+            return True
+        with self._cond:
+            epochs = list(self._base.epochs)
+        found = base_spp_offset_m(epochs, nav, base_pos, self.engine_options)
+        if found is None:
+            self._status.base_position_check = "pending"
+            return False
+        try:
+            check_base_position(epochs, nav, base_pos, self.engine_options)
+        except BasePositionRejected as exc:
+            self._checked_base_pos, self._base_pos_ok = key, False
+            self._status.base_position_check = f"rejected: {exc}"
+            log.error("%s: real-time RTK refuses the base: %s", t, exc)
+            if self.on_event is not None:
+                self.on_event({"type": "rtk", "event": "base_position_rejected", "gpst": str(t),
+                               "base_pos_ecef_m": [round(v, 3) for v in key], "offset_m": round(exc.offset_m, 1),
+                               "bound_m": exc.bound_m, "epochs": exc.epochs, "detail": str(exc)})
+            return False
+        self._checked_base_pos, self._base_pos_ok = key, True
+        self._status.base_position_check = f"ok: {found[0]:.1f} m from the base's single-point position"
+        return True
 
     def _wait_base(self, t: GpsTime) -> tuple[ObsEpoch | None, Arr | None]:
         """The base epoch for rover time `t`: wait up to `base_wait_s` for one at ≥ t − tolerance to arrive."""
@@ -476,6 +531,9 @@ class RtkFeature(RecorderFeature):
     def on_flight_opened(self, flight: FlightContext) -> None:
         if self._started:  # a roll-over: the stopped service cannot start again; a fresh one for the new flight
             self.rtk = RtkService(self.rtk.options, self.rtk._open_radio, self.rtk.clock)
+        append = flight.append_event
+        if append is not None:
+            self.rtk.on_event = lambda record: flight.post(append, record)  # events.jsonl, on the recorder's loop
         self.rtk.start(flight.flight_dir)
         self._started = True
 

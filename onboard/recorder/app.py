@@ -88,6 +88,7 @@ def rtk_feature(settings: Settings, deps: RecorderDeps, base_stream: str,
 
     options = options or RtkServiceOptions(engine=rtk_engine_options(settings),
                                            max_base_age_s=settings.rtk_max_base_age_s,
+                                           preflight_base_timeout_s=settings.rtk_preflight_base_timeout_s,
                                            takeoff_position_ecef_m=takeoff_position_ecef_m(settings))
     return RtkFeature(options, open_base or open_base_stream(base_stream), deps.clock)
 

@@ -56,6 +56,7 @@ class Settings:
     gpio_pin_factory: str = "lgpio"
     rtk_base_stream: str = ""
     rtk_max_base_age_s: float = 30.0
+    rtk_preflight_base_timeout_s: float = 10.0
     rtk_takeoff_position: str = ""
     rtk_engine: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
     """`[rtk.engine]`: RTK engine options by their TOML names (onboard.rtk.options.TOML_KEYS)."""
@@ -103,6 +104,7 @@ KEYS: Mapping[str, str] = MappingProxyType(
         "gpio.pin_factory": "gpio_pin_factory",
         "rtk.base_stream": "rtk_base_stream",
         "rtk.max_base_age_s": "rtk_max_base_age_s",
+        "rtk.preflight_base_timeout_s": "rtk_preflight_base_timeout_s",
         "rtk.takeoff_position": "rtk_takeoff_position",
         "autopilot.link": "autopilot_link",
         "autopilot.system_id": "autopilot_system_id",
@@ -177,6 +179,7 @@ BOUNDS: Mapping[str, Bound] = MappingProxyType(
         "gpio.pps_pin": GPIO_PIN,
         "gpio.flash_pin": GPIO_PIN,
         "rtk.max_base_age_s": Bound(0, 300, " s", True),
+        "rtk.preflight_base_timeout_s": Bound(0, 300, " s", True),
         "autopilot.system_id": Bound(0, 255, why="a MAVLink system id, 0 = the autopilot's own"),
         "autopilot.fast_interval_s": Bound(0, 10, " s", True),
         "autopilot.slow_interval_s": Bound(0, 10, " s", True),

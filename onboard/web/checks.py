@@ -31,6 +31,10 @@ class PreflightOptions:
     disk_margin_bytes: int = 500 * 1024 * 1024
     rtk_max_age_s: float = 30.0
     """Base corrections older than this (s) cannot be fixed (the RTK engine's max_age_s): the radio link is down."""
+    base_timeout_s: float = 10.0
+    """With real-time RTK configured, base corrections absent or older than this (s) are a no-go, naming how long
+    ago they stopped and their source (the recorder's `rtk.preflight_base_timeout_s`, published in rtk.json,
+    takes precedence): a cm direct-georeferencing flight should not take off without its base."""
     rtk_lag_s: float = 5.0
     """Real-time RTK solutions this far (s) behind the receiver's newest epoch: the engine is stalled or overloaded."""
     min_disk_minutes: float = 30.0
@@ -147,6 +151,9 @@ def preflight_checks(
     marks = int(status.get("time_marks") or 0)
     checks.append(Check("camera time marks", OK if marks > 0 else WARN,
                         f"{marks} flash marks" + ("" if marks else ": fire one test shot before take-off")))
+    if rtk is None and base_stream:
+        checks.append(Check("base corrections", FAIL, f"real-time RTK configured ({describe_base_stream(base_stream, autopilot)}) "
+                                                      "but not reporting: no rtk.json"))
     if rtk is not None:
         try:
             checks.append(base_corrections_check(rtk, autopilot, base_stream, options))
@@ -283,18 +290,28 @@ def describe_base_stream(spec: str | None, ap: dict[str, Any] | None) -> str:
 
 def base_corrections_check(rtk: dict[str, Any], ap: dict[str, Any] | None, base_stream: str | None,
                            options: PreflightOptions) -> Check:
-    """"base corrections": their source and the age of the newest base epoch (rtk.json `age_s`)."""
+    """"base corrections": their source and the age of the newest base epoch (rtk.json `age_s`, rover epoch −
+    base epoch, s). rtk.json exists only when real-time RTK is configured (`rtk.base_stream`): then no
+    corrections, or corrections older than the timeout (rtk.json `preflight_base_timeout_s`, else
+    `options.base_timeout_s`), are a no-go."""
     source = describe_base_stream(base_stream, ap)
+    timeout = rtk.get("preflight_base_timeout_s")
+    timeout_s = options.base_timeout_s if timeout is None else float(timeout)
     if rtk.get("unreadable") or not rtk.get("running"):
-        return Check("base corrections", WARN, f"{source}: real-time RTK not running")
+        return Check("base corrections", FAIL, f"{source}: real-time RTK not running")
     if not rtk.get("radio_open"):
-        return Check("base corrections", WARN, f"{source} closed: {rtk.get('radio_error') or 'unknown'}")
+        return Check("base corrections", FAIL, f"{source} closed: {rtk.get('radio_error') or 'unknown'}")
     if not int(rtk.get("base_epochs") or 0):
-        return Check("base corrections", WARN, f"none yet from {source}: is the base station on?")
+        return Check("base corrections", FAIL, f"none yet from {source}: is the base station on?")
+    position = rtk.get("base_position_check")
+    if isinstance(position, str) and position.startswith("rejected"):
+        return Check("base corrections", FAIL, f"base position {position} ({source})")
     age = rtk.get("age_s")
-    if age is None or float(age) > options.rtk_max_age_s:
-        old = "of unknown age" if age is None else f"{float(age):.0f} s old"
-        return Check("base corrections", WARN, f"base corrections stopped: the newest is {old} ({source})")
+    if age is None:
+        return Check("base corrections", FAIL, f"base corrections of unknown age (source {source})")
+    if float(age) > timeout_s:
+        return Check("base corrections", FAIL, f"base corrections stopped {float(age):.0f} s ago (source {source}; "
+                                               f"no-go after {timeout_s:g} s)")
     return Check("base corrections", OK, f"{source}, {float(age):.1f} s old")
 
 

@@ -39,9 +39,11 @@ def world():
     return World(Scenario.default("m8t", duration_s=DURATION_S + 60.0))
 
 
-def _base_frames(world, seconds: int) -> list[bytes]:
-    """What `onboard base` would send each second (1004 + 1006 + 1019), from the world's base receiver."""
-    core = BaseCore(BaseOptions(station_id=1, position_ecef_m=tuple(world.base_ecef_m), radio_budget_bytes_s=2000.0))
+def _base_frames(world, seconds: int, announced_ecef_m: tuple[float, ...] | None = None) -> list[bytes]:
+    """What `onboard base` would send each second (1004 + 1006 + 1019), from the world's base receiver;
+    `announced_ecef_m` the position its 1006 announces (default the true one)."""
+    position = tuple(world.base_ecef_m) if announced_ecef_m is None else announced_ecef_m
+    core = BaseCore(BaseOptions(station_id=1, position_ecef_m=position, radio_budget_bytes_s=2000.0))
     for eph in world.ephemerides():
         core.on_item(eph)
     t0 = world.scenario.start
@@ -67,13 +69,15 @@ def test_base_stream_decodes_rtcm_and_needs_a_rover_time_for_the_week(world) -> 
 
 
 def _run_service(world, tmp_path: Path, gaps, options: RtkServiceOptions | None = None,
-                 seconds: int = DURATION_S) -> tuple[RtkService, list, Path]:
-    frames = _base_frames(world, seconds)
+                 seconds: int = DURATION_S, announced_ecef_m: tuple[float, ...] | None = None,
+                 events: list | None = None) -> tuple[RtkService, list, Path]:
+    frames = _base_frames(world, seconds, announced_ecef_m)
     master, slave = os.openpty()
     tty.setraw(slave)
     radio_path = os.ttyname(slave)
     options = options or RtkServiceOptions(base_wait_s=0.3)
-    svc = RtkService(options, lambda: SerialByteStream(radio_path, 57600, 0.02))
+    svc = RtkService(options, lambda: SerialByteStream(radio_path, 57600, 0.02),
+                     on_event=None if events is None else events.append)
     flight = tmp_path / "flight"
     flight.mkdir()
     svc.start(flight)
@@ -147,6 +151,33 @@ def test_a_surveyed_take_off_point_fixes_the_first_epoch(world, tmp_path) -> Non
            for t, p in zip(track.time[first:], track.pos_ecef_m[first:])]
     assert max(err) < 0.02
     assert svc.snapshot()["ttff_s"] <= 3.0
+
+
+@pytest.mark.parametrize("offset_m", [0.0, 60.0])
+def test_a_wrong_announced_base_position_is_refused_in_real_time(world, tmp_path, offset_m) -> None:
+    """The base announces (1006) a position `offset_m` off its antenna: beyond post-processing's bound (30 m)
+    it is refused as post-processing refuses it (same check): no epoch is differenced against it (all single),
+    rtk.json says so, an event names it. The true position passes and fixes."""
+    t0 = world.scenario.start
+    announced = tuple(float(v) for v in np.asarray(world.base_ecef_m) + np.array([offset_m, 0.0, 0.0]))
+    takeoff = tuple(float(v) for v in world.truth(t0)["antenna_ecef_m"])  # a fix from the first epochs if allowed
+    events: list = []
+    svc, _, flight, _ = _run_service(world, tmp_path, [], RtkServiceOptions(base_wait_s=0.3,
+                                                                            takeoff_position_ecef_m=takeoff),
+                                     20, announced_ecef_m=announced, events=events)
+    track = read_pos(flight / SOLUTION_NAME)
+    snap = svc.snapshot()
+    assert len(track.q) == 20
+    if offset_m == 0.0:
+        assert snap["base_position_check"].startswith("ok: ") and events == []
+        assert np.sum(track.q == Q_FIX) >= 15
+        return
+    assert set(track.q.tolist()) == {Q_SINGLE}, track.q  # never a fixed (or float) solution against it
+    assert snap["base_position_check"].startswith("rejected: base position 6") and snap["fixed"] == 0
+    assert "more than 30 m; check the base position" in snap["base_position_check"]
+    (event,) = events
+    assert event["event"] == "base_position_rejected" and 55.0 < event["offset_m"] < 65.0
+    assert event["bound_m"] == 30.0
 
 
 def test_submit_never_blocks_and_counts_drops(world, tmp_path) -> None:

@@ -96,6 +96,10 @@ def test_page_follows_the_companion_coming_up_and_its_faults(tmp_path: Path) -> 
         wait_verdict(page, "DO NOT FLY", "autopilot link: serial:/dev/ttyAMA1@921600 closed")
         write_status(ap_path, {**autopilot_ok(), "rtcm": {"fragments": 40, "messages": 12, "dropped": 0,
                                                           "bytes": 5000}})
+        # real-time RTK configured (rtk.base_stream = "mavlink"), its snapshot not written yet, then no base yet
+        wait_verdict(page, "DO NOT FLY", "base corrections: real-time RTK configured (MAVLink GPS_RTCM_DATA")
+        write_status(rtk_path, {**_rtk_fixed().to_json(), "base_epochs": 0, "age_s": None, "q": 5})
+        wait_verdict(page, "DO NOT FLY", "base corrections: none yet from MAVLink GPS_RTCM_DATA")
         write_status(rtk_path, _rtk_fixed().to_json())
         wait_verdict(page, "READY TO FLY")
         assert page.inner_text("#fault") == ""
@@ -105,13 +109,14 @@ def test_page_follows_the_companion_coming_up_and_its_faults(tmp_path: Path) -> 
         assert "no automatic upload configured" in page.inner_text("#block-upload")
         page.screenshot(path=str(shots_dir(tmp_path) / "preflight-files-go.png"), full_page=True)
 
-        # the base corrections stop: rtk.json's age grows past the engine's 30 s
-        for age in (5.0, 15.0, 25.0, 36.0):
+        # the base corrections stop: rtk.json's age grows past the pre-flight timeout (rtk.json's own, 12 s here)
+        for age in (3.0, 8.0):
             write_status(status_path, _healthy(time.time_ns()))
-            write_status(rtk_path, {**_rtk_fixed().to_json(), "age_s": age})
-            time.sleep(0.3)
-        fault = wait_verdict(page, "CHECK WARNINGS", "base corrections stopped")
-        assert "the newest is 36 s old (MAVLink GPS_RTCM_DATA (ground station inject))" in fault
+            write_status(rtk_path, {**_rtk_fixed().to_json(), "age_s": age, "preflight_base_timeout_s": 12.0})
+            wait_verdict(page, "READY TO FLY")
+        write_status(rtk_path, {**_rtk_fixed().to_json(), "age_s": 14.0, "preflight_base_timeout_s": 12.0})
+        fault = wait_verdict(page, "DO NOT FLY", "base corrections: base corrections stopped 14 s ago")
+        assert "(source MAVLink GPS_RTCM_DATA (ground station inject); no-go after 12 s)" in fault
         page.screenshot(path=str(shots_dir(tmp_path) / "preflight-files-base-stopped.png"), full_page=True)
 
         # the autopilot link stops: its heartbeat ages past link_timeout_s

@@ -132,7 +132,7 @@ def test_base_source_never_shows_credentials() -> None:
     assert describe_base_stream(None, {"rtcm": {"messages": 3}}) == "MAVLink GPS_RTCM_DATA"
     stopped = {**_rtk_fixed().to_json(), "age_s": 41.0, "q": 2}
     level, detail = _checks(rtk=stopped)["base corrections"]
-    assert level == WARN and "base corrections stopped: the newest is 41 s old" in detail
+    assert level == FAIL and "base corrections stopped 41 s ago (source the base stream; no-go after 10 s)" == detail
 
 
 def test_headline_names_the_first_blocking_fault() -> None:
@@ -152,7 +152,10 @@ def test_api_on_torn_and_foreign_companion_files(tmp_path: Path) -> None:
     write_status(status_path, _healthy(time.time_ns()))
     client = TestClient(create_app(status_path, base_stream="ntrip://u:pw@caster:2101/M"))
     body = client.get("/api/preflight").json()
-    assert body["headline"]["level"] == OK and body["blocks"]["upload"] == [["upload", "no automatic upload configured"]]
+    # rtk.base_stream is set but rtk.json is not written yet: a no-go naming the (credential-free) source
+    assert body["headline"]["fault"] == ("base corrections: real-time RTK configured (NTRIP caster:2101/M) but not "
+                                         "reporting: no rtk.json")
+    assert body["blocks"]["upload"] == [["upload", "no automatic upload configured"]]
     status_path.with_name("autopilot.json").write_text('{"link_up": tr')
     status_path.with_name("upload.json").write_text("[1]")
     write_status(status_path.with_name(RTK_STATUS_NAME), _rtk_fixed().to_json())
@@ -164,3 +167,33 @@ def test_api_on_torn_and_foreign_companion_files(tmp_path: Path) -> None:
     assert levels["upload"] == (FAIL, "upload status unreadable: upload.json is not a JSON object of ours")
     assert dict(body["blocks"]["base corrections"])["source"] == "NTRIP caster:2101/M"
     assert "pw" not in json.dumps(body["blocks"]) and "pw" not in json.dumps(body["checks"])
+
+
+def test_stopped_base_corrections_are_a_no_go_with_rtk_configured() -> None:
+    """Real-time RTK configured (rtk.json present, or `rtk.base_stream` known): no base, a closed source or
+    corrections older than the timeout are a no-go naming them; the recorder's timeout (rtk.json) wins over the
+    page's default; at the timeout itself still go. Without real-time RTK there is no base line at all."""
+    now = time.time_ns()
+    snap = _healthy(now).to_json()
+
+    def base(rtk: dict[str, Any] | None, stream: str | None = "mavlink") -> tuple[str, str] | None:
+        checks = preflight_checks(snap, now, None, rtk, autopilot_ok(), None, stream)
+        line = headline(checks)
+        got = {c.name: (c.level, c.detail) for c in checks}.get("base corrections")
+        if got is not None and got[0] == FAIL:
+            assert line["level"] == FAIL and line["fault"] == f"base corrections: {got[1]}"
+        return got
+
+    fixed = _rtk_fixed().to_json()
+    assert base({**fixed, "age_s": 10.0}) == (OK, "MAVLink GPS_RTCM_DATA (ground station inject), 10.0 s old")
+    assert base({**fixed, "age_s": 10.5}) == (
+        FAIL, "base corrections stopped 10 s ago (source MAVLink GPS_RTCM_DATA (ground station inject); no-go after 10 s)")
+    assert base({**fixed, "age_s": 25.0, "preflight_base_timeout_s": 30.0})[0] == OK  # type: ignore[index]
+    assert base({**fixed, "age_s": 4.0, "preflight_base_timeout_s": 3.0})[0] == FAIL  # type: ignore[index]
+    assert base({**fixed, "base_epochs": 0, "age_s": None}) == (
+        FAIL, "none yet from MAVLink GPS_RTCM_DATA (ground station inject): is the base station on?")
+    assert base({**fixed, "radio_open": False, "radio_error": "gone"}) == (
+        FAIL, "MAVLink GPS_RTCM_DATA (ground station inject) closed: gone")
+    assert base(None) == (FAIL, "real-time RTK configured (MAVLink GPS_RTCM_DATA (ground station inject)) but not "
+                                "reporting: no rtk.json")
+    assert base(None, stream=None) is None and base(None, stream="") is None
