@@ -194,6 +194,6 @@ def test_stopped_base_corrections_are_a_no_go_with_rtk_configured() -> None:
         FAIL, "none yet from MAVLink GPS_RTCM_DATA (ground station inject): is the base station on?")
     assert base({**fixed, "radio_open": False, "radio_error": "gone"}) == (
         FAIL, "MAVLink GPS_RTCM_DATA (ground station inject) closed: gone")
-    assert base(None) == (FAIL, "real-time RTK configured (MAVLink GPS_RTCM_DATA (ground station inject)) but not "
-                                "reporting: no rtk.json")
+    assert base(None) == (FAIL, ("real-time RTK configured (MAVLink GPS_RTCM_DATA (ground station inject)) but not "
+                                 "reporting: no rtk.json"))
     assert base(None, stream=None) is None and base(None, stream="") is None
