@@ -23,6 +23,13 @@ def test_documented_defaults() -> None:
     for key in ("settle_s = 20.0", 'url = ""', 'token_file = ""', "delete_after_upload = false", "chunk_mib = 4.0",
                 "backoff_min_s = 5.0", "backoff_max_s = 300.0", "poll_s = 5.0"):
         assert key in text, key
+    # issue 15's keys, each with its comment: the autopilot connection, "mavlink" beside the other base
+    # sources, the pre-flight page's no-go age of the corrections
+    autopilot = text.split("[autopilot]")[1].split("\n[")[0]
+    assert 'link = ""' in autopilot and '"serial:/dev/ttyAMA0@921600"' in autopilot and "udpin:" in autopilot
+    rtk = text.split("[rtk]")[1].split("\n[")[0]
+    assert all(src in rtk for src in ('"serial:', '"tcp://', '"ntrip://', '"mavlink"', 'base_stream = ""'))
+    assert "preflight_base_timeout_s = 10.0" in rtk and s.rtk_preflight_base_timeout_s == 10.0
 
 
 @pytest.mark.parametrize(("text", "message"), [
