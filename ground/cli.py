@@ -172,7 +172,9 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser(
         "serve", help="run the ground API (FastAPI + uvicorn)",
         description="Flight store and processing server: resumable checksummed uploads, RTK re-processing and "
-                    "adjustment jobs, reports. Every flight route needs 'Authorization: Bearer TOKEN'; OpenAPI "
+                    "adjustment jobs, reports. Every route but /health needs 'Authorization: Bearer TOKEN' of a role it "
+                    "lets through (the bootstrap token of --token-file/$DIRECTGEO_TOKEN is an admin; others: "
+                    "`token create`); OpenAPI "
                     "at /docs and /openapi.json. Example: DIRECTGEO_TOKEN=... python -m ground serve --port 8600 "
                     "--data-dir /srv/directgeo")
     _store_options(s)
