@@ -44,7 +44,7 @@ TOKEN_BYTES = 32
 LAST_USED_RESOLUTION_S = 60.0
 OPENAPI_ROLES_KEY = "x-roles"
 __all__ = ["Principal", "Role", "authenticate", "check_flight_owner", "create_token", "document_roles",
-           "hash_token", "list_tokens", "require_role", "revoke_token"]
+           "hash_token", "list_tokens", "principal_for_id", "require_role", "revoke_token"]
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._@+\-]{0,99}$")
 _ID_RE = re.compile(r"^[0-9a-f]{32}$")
 
@@ -117,6 +117,16 @@ def authenticate(store: Store, settings: ApiSettings, token: str) -> Principal |
             row.last_used_at = now
             s.commit()
         return Principal(token_id=row.id, name=row.name, role=role)
+
+
+def principal_for_id(store: Store, token_id: str) -> Principal | None:
+    """The principal of an active stored token by its id (e.g. a web session that keeps the token id, not the
+    token), None when unknown or revoked: a revoked token ends the sessions opened with it."""
+    with store.session() as s:
+        row = s.get(ApiToken, token_id)
+        if row is None or row.revoked_at is not None or row.role not in set(Role):
+            return None
+        return Principal(token_id=row.id, name=row.name, role=Role(row.role))
 
 
 def check_token_name(name: str) -> str:

@@ -23,6 +23,7 @@ from ground.api.auth import (
     create_token,
     hash_token,
     list_tokens,
+    principal_for_id,
     require_role,
     revoke_token,
 )
@@ -64,8 +65,11 @@ def test_created_token_authenticates_with_its_role_until_revoked(tmp_path: Path)
         [info] = list_tokens(store)
         assert (info.id, info.name, info.role, info.revoked_at) == (tid, "drone-7", Role.DRONE, None)
         assert info.last_used_at is not None  # written by authenticate
+        assert principal_for_id(store, tid) == authenticate(store, settings, clear)
+        assert principal_for_id(store, "0" * 32) is None
         assert revoke_token(store, "drone-7") is True
         assert authenticate(store, settings, clear) is None
+        assert principal_for_id(store, tid) is None
         assert revoke_token(store, tid) is False  # already revoked
         assert revoke_token(store, "nobody") is False
         assert list_tokens(store)[0].revoked_at is not None
