@@ -146,7 +146,7 @@ def _flight_of(s: Any, flight_id: str, principal: Principal) -> Flight:
     if flight is None:
         raise HTTPException(status_code=404, detail=f"no flight {flight_id}")
     check_flight_owner(principal, flight.created_by)
-    return flight  # type: ignore[no-any-return]
+    return flight
 
 
 def _get_flight(store: Store, flight_id: str, principal: Principal) -> Flight:
