@@ -31,6 +31,12 @@ class FlightCreate(BaseModel):
     meta: dict[str, Any] = Field(default_factory=dict, description="free metadata (receiver, onboard manifest)")
 
 
+class FilesAdd(BaseModel):
+    """File entries to add to an existing flight (then uploaded by PUT like the manifest's)."""
+
+    files: list[ManifestFile]
+
+
 class FileOut(BaseModel):
     """Upload state of one file."""
 
@@ -62,6 +68,8 @@ class FlightOut(BaseModel):
     name: str
     status: str
     created_at: dt.datetime
+    created_by: str | None = Field(default=None, description="name of the token that created the flight (a "
+                                   "drone's name for its uploads; None: the bootstrap token)")
     files: list[FileOut]
     jobs: list[JobOut]
 
@@ -73,6 +81,7 @@ class FlightSummary(BaseModel):
     name: str
     status: str
     created_at: dt.datetime
+    created_by: str | None = Field(default=None, description="name of the token that created the flight")
     files: int
     bytes_total: int
     bytes_received: int
