@@ -61,8 +61,8 @@ def test_unauthenticated_requests_are_refused(live: LiveServer) -> None:
         assert "put" in spec["paths"]["/flights/{flight_id}/files/{name}"]
 
 
-@pytest.mark.parametrize("bad", ["../evil.ubx", "..", ".", ".hidden", "a/b.ubx", "a\\b.ubx", "nul\x00.ubx",
-                                 "/etc/passwd", "C:evil", ""])
+@pytest.mark.parametrize("bad", ["../evil.ubx", "..", ".", ".hidden", "a/../../b.ubx", "a//b.ubx", "a/.partial/b",
+                                 "a\\b.ubx", "nul\x00.ubx", "/etc/passwd", "C:evil", ""])
 def test_manifest_with_bad_names_is_refused(live: LiveServer, bad: str) -> None:
     """A manifest naming a file outside the flight directory (or hidden/odd) is refused with 400; no flight made."""
     with live.client() as c:
@@ -84,6 +84,46 @@ def test_path_traversing_upload_names_are_refused(live: LiveServer, tmp_path: Pa
     written = sorted(p.relative_to(data).as_posix() for p in data.rglob("*") if p.is_file())
     assert all(p == "directgeo.sqlite3" or p.startswith(f"flights/{fid}/") for p in written), written
     assert not (data / "evil").exists() and not (data.parent / "evil").exists()
+
+
+def test_sub_folder_files_upload_byte_identical_and_stay_inside(live: LiveServer, tmp_path: Path) -> None:
+    """A flight with the radio/ corrections journal: every file, sub-folder included, reaches the server
+    byte-identical (SHA-256 confirmed), with roles by place; `radio/../` or `radio/.partial/` names write nothing."""
+    folder = _flight_folder(tmp_path / "onboard")
+    radio = folder / "radio"
+    radio.mkdir()
+    corrections = os.urandom(70_000)
+    (radio / "000000.ubx").write_bytes(corrections)
+    m = Manifest(flight="radio", created_wall_ns=1, segments=[SegmentInfo("000000.ubx", 70_000, _sha(corrections))],
+                 closed=True)
+    (radio / "manifest.json").write_text(json.dumps(m.to_json()))
+    (radio / "000000.ubx.tmp").write_bytes(b"temporary")  # never uploaded
+    name, entries = build_upload_manifest(folder)
+    roles = {e.name: e.role for e in entries}
+    assert name == folder.name and "radio/000000.ubx.tmp" not in roles
+    assert roles["radio/000000.ubx"] == "base_obs" and roles["000000.ubx"] == "rover_obs"
+    assert roles["radio/manifest.json"] == "manifest" and roles["000000.idx"] == "index"
+    rep = Uploader(live.url, TOKEN, UploaderOptions(chunk_bytes=30_000), sleep=lambda s: None).upload_flight(folder)
+    assert set(rep.sha256) == set(roles)
+    held = live.settings.flights_dir / rep.flight_id
+    for rel, digest in rep.sha256.items():
+        assert _sha((held / rel).read_bytes()) == digest == _sha((folder / rel).read_bytes()), rel
+    with live.client() as c:
+        assert c.get(f"/flights/{rep.flight_id}/files/radio/000000.ubx/content").content == corrections
+        assert c.get(f"/flights/{rep.flight_id}/files/radio%2F000000.ubx").json()["status"] == "complete"
+        for raw in ("radio/..%2F..%2Fevil", "radio/%2E%2E/evil", "radio/.partial/000000.ubx", "radio//000000.ubx"):
+            r = c.put(f"/flights/{rep.flight_id}/files/{raw}", params={"offset": 0}, content=b"abc",
+                      headers={"X-Chunk-SHA256": _sha(b"abc")})
+            assert r.status_code in (400, 404), (raw, r.status_code, r.text)
+        r = c.post("/flights", json={"name": "clash", "files": [{"name": n, "size": 1, "sha256": "0" * 64}
+                                                                 for n in ("radio", "radio/000000.ubx")]})
+        assert r.status_code == 400 and "also the folder" in r.text
+    data = live.settings.data_dir
+    assert not (data / "evil").exists() and not (data.parent / "evil").exists()
+    assert not (held / "radio" / ".partial" / "000000.ubx").exists()
+    (radio / "000000.ubx").write_bytes(corrections[:-1] + bytes([corrections[-1] ^ 1]))  # the sub-journal's manifest
+    with pytest.raises(UploadError, match="damaged"):                                  # is checked too
+        build_upload_manifest(folder)
 
 
 def test_oversized_files_and_chunks_are_refused(live: LiveServer) -> None:
