@@ -397,3 +397,65 @@ def test_uploader_adapts_to_the_server_chunk_limit(live: LiveServer, tmp_path: P
     assert up.chunk_bytes <= live.settings.max_chunk_bytes
     fdir = live.settings.flights_dir / rep.flight_id
     assert (fdir / "000000.ubx").read_bytes() == (folder / "000000.ubx").read_bytes()
+
+
+def _drone_flight(root: Path) -> Path:
+    """A flight folder as the companion closes it, from a real M8P capture (Galway, static, 0.33 m baseline):
+    the rover's UBX journal (first ~5 min of the log, two segments, a torn tail) at the top, the base's RTCM3
+    stream as received in the radio/ sub-journal (1005 position, MSM7; no navigation: the rover's own
+    ephemerides), events.jsonl and a real-time solution.pos."""
+    import gzip
+
+    from onboard.hw.ports import SystemClock
+    from onboard.logger.journal import Journal, JournalOptions
+    from tests.conftest import shared_file
+
+    d = "gnss/ublox-m8p-galway-2018/"
+    rover = gzip.decompress(shared_file(d + "raw/rover-20181004-1237.ubx.gz").read_bytes())
+    rover = rover[:len(rover) // 4]
+    rtcm = gzip.decompress(shared_file(d + "rtcm3/base-20181004-1236.rtcm3.gz").read_bytes())
+    flight = root / "flight-20181004T123800Z"
+    for folder, data, block in ((flight, rover, 4096), (flight / "radio", rtcm, 1024)):
+        journal = Journal(folder, SystemClock(), JournalOptions(segment_max_bytes=len(data) // 2 + 1))
+        for i in range(0, len(data), block):
+            journal.append(data[i:i + block], time.monotonic_ns(), time.time_ns())
+        journal.close("landed")
+    (flight / "events.jsonl").write_text('{"type": "flight", "event": "closed"}\n')
+    (flight / "solution.pos").write_text("% real-time solution (not read by this test)\n")
+    return flight
+
+
+@pytest.mark.slow
+def test_a_drone_flight_is_rtk_processed_as_uploaded(live: LiveServer, tmp_path: Path) -> None:
+    """The companion's flight uploaded as it is: roles by place (rover journal, radio/ corrections), the RTK job
+    queues by itself and reads the journal folders (299 rover epochs, mostly fixed on this 0.33 m baseline); a
+    second job with static_start says so in SOL.pos; a job naming no journal folder is refused (422)."""
+    from ground.io.trajectory import read_trajectory
+
+    flight = _drone_flight(tmp_path)
+    rep = Uploader(live.url, TOKEN, UploaderOptions(chunk_bytes=200_000), sleep=lambda s: None).upload_flight(flight)
+    with live.client() as c:
+        files = {f["name"]: f["role"] for f in c.get(f"/flights/{rep.flight_id}").json()["files"]}
+        assert files["000000.ubx"] == files["000001.ubx"] == "rover_obs"
+        assert files["radio/000000.ubx"] == files["radio/000001.ubx"] == "base_obs"
+        assert files["solution.pos"] == "realtime_trajectory" and files["events.jsonl"] == "events"
+        auto = _wait_job(c, rep.flight_id)
+        assert auto["kind"] == "rtk" and auto["status"] == "done", auto["message"]
+        assert auto["message"].startswith("299 epochs: fix ")
+        fixed = float(auto["message"].split("(")[1].split(" %")[0])
+        assert fixed > 50.0, auto["message"]
+        r = c.post(f"/flights/{rep.flight_id}/jobs", json={"kind": "rtk", "params": {"base_obs": "nowhere"}})
+        assert r.status_code == 422 and "nowhere" in r.text
+        job = c.post(f"/flights/{rep.flight_id}/jobs", json={"kind": "rtk", "params": {
+            "rover_obs": ".", "base_obs": "radio", "static_start": True}}).json()
+        deadline = time.monotonic() + 90
+        while job["status"] not in ("done", "failed") and time.monotonic() < deadline:
+            time.sleep(0.3)
+            job = c.get(f"/flights/{rep.flight_id}/jobs/{job['id']}").json()
+        assert job["status"] == "done", job["message"]
+    sol = live.settings.data_dir / "outputs" / rep.flight_id / job["id"] / "SOL.pos"
+    text = sol.read_text()
+    assert "pos mode  : kinematic (static start)" in text and "inp file  : radio" in text
+    traj = read_trajectory(str(sol), accept_single=True)
+    # the base position came from the stream's RTCM 1005 (the README's survey-in ECEF), the rover is 0.33 m away
+    assert np.linalg.norm(np.median(traj.pos_ecef_m, axis=0) - [3774088.9931, -601661.8217, 5089321.3853]) < 0.05
