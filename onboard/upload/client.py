@@ -231,6 +231,28 @@ class Uploader:
         report.sha256 = {e.name: e.sha256 for e in entries}
         return report
 
+    def add_files(self, flight_id: str, files: dict[str, Path], roles: dict[str, str] | None = None) -> UploadReport:
+        """Add files to a flight the server already holds (`POST /flights/{id}/files` with their entries, e.g.
+        the office's orientations and GCP for a drone's flight), then send them like a flight's (resumable,
+        SHA-256 per chunk and per file); `files` maps the name on the server to the local file. Raises
+        UploadError (HTTP 404/405 in its text when the server has no such flight or route)."""
+        entries = [FileEntry(name, p.stat().st_size, sha256_file(p), (roles or {}).get(name))
+                   for name, p in sorted(files.items())]
+        report = UploadReport(flight_id=flight_id)
+        r = self._request(report, "POST", f"/flights/{flight_id}/files",
+                          json={"files": [e.to_json() for e in entries]})
+        if r.status_code not in (200, 201):
+            raise UploadError(f"server refused the files for flight {flight_id}: HTTP {r.status_code} {r.text[:300]}")
+        state = {f["name"]: f for f in r.json().get("files", [])}
+        for e in entries:
+            if state.get(e.name, {}).get("status") == "complete":
+                report.files[e.name] = "complete"
+                continue
+            self._upload_file(report, files[e.name], e)
+        self._verify(report, entries)
+        report.sha256 = {e.name: e.sha256 for e in entries}
+        return report
+
     def _verify(self, report: UploadReport, entries: list[FileEntry]) -> None:
         """Ask the server for the flight once more: every file complete with our size and SHA-256."""
         r = self._request(report, "GET", f"/flights/{report.flight_id}")
