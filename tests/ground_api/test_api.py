@@ -459,3 +459,34 @@ def test_a_drone_flight_is_rtk_processed_as_uploaded(live: LiveServer, tmp_path:
     traj = read_trajectory(str(sol), accept_single=True)
     # the base position came from the stream's RTCM 1005 (the README's survey-in ECEF), the rover is 0.33 m away
     assert np.linalg.norm(np.median(traj.pos_ecef_m, axis=0) - [3774088.9931, -601661.8217, 5089321.3853]) < 0.05
+
+
+def test_office_files_added_to_a_drone_flight(live: LiveServer, tmp_path: Path) -> None:
+    """Uploader.add_files: the office's files join the drone's flight (POST /flights/{id}/files, then the same
+    resumable PUT), byte-identical with their roles; a file named like the flight's radio/ folder is refused."""
+    folder = _flight_folder(tmp_path / "onboard")
+    (folder / "radio").mkdir()
+    (folder / "radio" / "000000.ubx").write_bytes(os.urandom(5_000))
+    up = Uploader(live.url, TOKEN, UploaderOptions(chunk_bytes=40_000), sleep=lambda s: None)
+    rep = up.upload_flight(folder)
+    office = tmp_path / "office"
+    office.mkdir()
+    images, gcp = office / "images.txt", office / "gcp.csv"
+    images.write_bytes(os.urandom(90_000))
+    gcp.write_text("name,role,x_rel,y_rel,z_rel,X,Y,Z\n")
+    added = up.add_files(rep.flight_id, {"images.txt": images, "office/gcp.csv": gcp},
+                         {"images.txt": "orientations", "office/gcp.csv": "gcp"})
+    assert added.flight_id == rep.flight_id and added.bytes_sent == 90_000 + gcp.stat().st_size
+    held = live.settings.flights_dir / rep.flight_id
+    assert (held / "images.txt").read_bytes() == images.read_bytes()
+    assert (held / "office" / "gcp.csv").read_bytes() == gcp.read_bytes()
+    with live.client() as c:
+        flight = c.get(f"/flights/{rep.flight_id}").json()
+        roles = {f["name"]: f["role"] for f in flight["files"]}
+        assert roles["images.txt"] == "orientations" and roles["office/gcp.csv"] == "gcp"
+        assert roles["radio/000000.ubx"] == "base_obs" and flight["status"] == "complete"
+    clash = tmp_path / "radio"
+    clash.write_bytes(b"x")
+    with pytest.raises(UploadError, match="HTTP 400.*also the folder"):
+        up.add_files(rep.flight_id, {"radio": clash})
+    up.close()
