@@ -740,6 +740,25 @@ def _wait_rtk_jobs(client: Any, flight_id: str, timeout_s: float = 600.0) -> lis
         time.sleep(0.5)
 
 
+def _job_output(client: Any, server: GroundServer, flight_id: str, job_id: str, name: str, out: Path,
+                ) -> tuple[Path, str]:
+    """A job's output file and where it came from: downloaded through `GET /flights/{id}/jobs/{job}/outputs/
+    {name}` into `out` (SHA-256 checked against the job's output listing) when the server's OpenAPI lists that
+    route, else the server's own copy in its data folder (the demo runs the server)."""
+    import hashlib
+
+    spec = client.get("/openapi.json").json()
+    if "/flights/{flight_id}/jobs/{job_id}/outputs/{name}" not in spec.get("paths", {}):
+        return server.data_dir / "outputs" / flight_id / job_id / name, "the server's data folder (no outputs route)"
+    listed = {f["name"]: f for f in client.get(f"/flights/{flight_id}/jobs/{job_id}/outputs").json()}
+    r = client.get(f"/flights/{flight_id}/jobs/{job_id}/outputs/{name}")
+    if r.status_code != 200 or name not in listed or hashlib.sha256(r.content).hexdigest() != listed[name]["sha256"]:
+        raise RuntimeError(f"job {job_id} output {name}: HTTP {r.status_code}, not the file its listing describes")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / name).write_bytes(r.content)
+    return out / name, f"{server.url}/flights/{flight_id}/jobs/{job_id}/outputs/{name} (SHA-256 checked)"
+
+
 def _add_office_files(server: GroundServer, client: Any, flight_id: str, files: dict[str, Path],
                       events: Path, trajectory: Path) -> tuple[str, str]:
     """Put the office's files where the adjustment can run with the drone's trajectory; returns (flight id,
@@ -805,9 +824,9 @@ def ground_processing(rover: Path, out: Path, ctx: dict[str, Any], server: Groun
             return [StageResult(RTK_COLD, False, f"ground RTK job refused: HTTP {job.status_code} {job.text}")]
         job = _poll_job(client, fid, job.json()["id"])
         rtk_s = time.monotonic() - t
-        sol = server.data_dir / "outputs" / fid / job["id"] / "SOL.pos"
-        if job["status"] != "done" or not sol.exists():
+        if job["status"] != "done":
             return [StageResult(RTK_COLD, False, f"ground RTK job {job['status']}: {job['message']}")]
+        sol, sol_from = _job_output(client, server, fid, job["id"], "SOL.pos", out / "ground-rtk")
         figures, summary = track_figures(sol, world)
         figures["job_s"] = rtk_s
         figures["automatic_job"] = {"status": auto[0]["status"], "params": auto[0]["params"],
@@ -820,7 +839,8 @@ def ground_processing(rover: Path, out: Path, ctx: dict[str, Any], server: Groun
                      + (f"{100 * fix_auto:.1f} % fixed" if fix_auto is not None else auto[0]["message"]))
         stages.append(StageResult(RTK_COLD, figures["wrong_fixes"] == 0,
                                   f"{summary} (static start, job {rtk_s:.0f} s){auto_text}", figures,
-                                  {"trajectory": str(sol), "server_flight": f"{server.url}/flights/{fid}"}))
+                                  {"trajectory": str(sol), "trajectory_from": sol_from,
+                                   "server_flight": f"{server.url}/flights/{fid}"}))
         adjust_fid, how = _add_office_files(server, client, fid, office, rover / "events.jsonl", sol)
         t = time.monotonic()
         job = client.post(f"/flights/{adjust_fid}/jobs", json={"kind": "adjust", "params": {
