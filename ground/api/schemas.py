@@ -15,12 +15,15 @@ from onboard.errors import InputError
 
 
 class ManifestFile(BaseModel):
-    """A file the flight will upload: name (one path component), size in bytes, SHA-256 (hex), optional role."""
+    """A file the flight will upload: name (a relative path of the flight folder), size in bytes, SHA-256 (hex),
+    optional role."""
 
-    name: str = Field(description="file name, a single path component (no /, .., NUL)")
+    name: str = Field(description="file name relative to the flight folder, e.g. events.jsonl or radio/000000.ubx "
+                                  "(components of letters, digits, . _ + -; no .., leading dot, \\, NUL)")
     size: int = Field(ge=0, description="size in bytes")
     sha256: str = Field(description="SHA-256 of the whole file, 64 hex digits")
-    role: str | None = Field(default=None, description="trajectory | events | orientations | gcp | raw | …")
+    role: str | None = Field(default=None, description="trajectory | events | orientations | gcp | rover_obs | "
+                             "base_obs | nav | raw | …")
 
 
 class FlightCreate(BaseModel):
