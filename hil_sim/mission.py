@@ -759,34 +759,18 @@ def _job_output(client: Any, server: GroundServer, flight_id: str, job_id: str, 
     return out / name, f"{server.url}/flights/{flight_id}/jobs/{job_id}/outputs/{name} (SHA-256 checked)"
 
 
-def _add_office_files(server: GroundServer, client: Any, flight_id: str, files: dict[str, Path],
-                      events: Path, trajectory: Path) -> tuple[str, str]:
-    """Put the office's files where the adjustment can run with the drone's trajectory; returns (flight id,
-    how). Through `POST /flights/{id}/files` on the drone's own flight when the server's OpenAPI lists it;
-    otherwise (a server without that route) as a processing set of its own: the office files, the flight's
-    events.jsonl and the ground RTK job's SOL.pos (role trajectory)."""
+def _add_office_files(server: GroundServer, flight_id: str, files: dict[str, Path]) -> None:
+    """Add the office's files to the drone's flight (`POST /flights/{id}/files`, then the resumable PUT), with
+    the office's (engineer) token."""
     from onboard.upload.client import Uploader, UploadError
 
-    spec = client.get("/openapi.json").json()  # public: what this server offers
-    if "post" in spec.get("paths", {}).get("/flights/{flight_id}/files", {}):
-        up = Uploader(server.url, server.engineer_token)  # the office's token
-        try:
-            up.add_files(flight_id, files, OFFICE_ROLES)
-        except UploadError as exc:
-            raise RuntimeError(f"adding the office files to the drone's flight failed: {exc}") from exc
-        finally:
-            up.close()
-        return flight_id, "added to the drone's flight (POST /flights/{id}/files)"
-    office = server.data_dir.parent / "office-processing-set"
-    office.mkdir(exist_ok=True)
-    for name, src in {**files, "events.jsonl": events, "SOL.pos": trajectory}.items():
-        (office / name).write_bytes(Path(src).read_bytes())
-    proc = _run_uploader(server, office, {**OFFICE_ROLES, "SOL.pos": "trajectory"}, server.engineer_token_file)
-    if proc.returncode != 0:
-        raise RuntimeError(f"office processing set upload failed: {proc.stderr.strip()[-400:]}")
-    flight = _server_flight(client, office.name)
-    assert flight is not None
-    return str(flight["id"]), "no POST /flights/{id}/files on this server: a processing set with the flight's SOL.pos"
+    up = Uploader(server.url, server.engineer_token)
+    try:
+        up.add_files(flight_id, files, OFFICE_ROLES)
+    except UploadError as exc:
+        raise RuntimeError(f"adding the office files to the drone's flight failed: {exc}") from exc
+    finally:
+        up.close()
 
 
 def ground_processing(rover: Path, out: Path, ctx: dict[str, Any], server: GroundServer,
@@ -841,42 +825,43 @@ def ground_processing(rover: Path, out: Path, ctx: dict[str, Any], server: Groun
                                   f"{summary} (static start, job {rtk_s:.0f} s){auto_text}", figures,
                                   {"trajectory": str(sol), "trajectory_from": sol_from,
                                    "server_flight": f"{server.url}/flights/{fid}"}))
-        adjust_fid, how = _add_office_files(server, client, fid, office, rover / "events.jsonl", sol)
+        _add_office_files(server, fid, office)
         t = time.monotonic()
-        job = client.post(f"/flights/{adjust_fid}/jobs", json={"kind": "adjust", "params": {
+        job = client.post(f"/flights/{fid}/jobs", json={"kind": "adjust", "params": {
             "gcp": "gcp.csv", "capture_times": "capture_times.csv", "lever_arm": [float(v) for v in lever],
             "lever_arm_sigma": 0.005, "estimate": ["delay"], "crs": "EPSG:4979"}})
         if job.status_code != 202:
             stages.append(StageResult("final adjustment", False, f"adjustment refused: HTTP {job.status_code} "
                                                                  f"{job.text}"))
             return stages
-        job = _poll_job(client, adjust_fid, job.json()["id"])
+        job = _poll_job(client, fid, job.json()["id"])
         adjust_s = time.monotonic() - t
         if job["status"] != "done":
             stages.append(StageResult("final adjustment", False, f"ground adjustment job failed: {job['message']}"))
             return stages
         report_dir = out / "ground-report"
         report_dir.mkdir(exist_ok=True)
-        res = client.get(f"/flights/{adjust_fid}/results").json()
+        res = client.get(f"/flights/{fid}/results").json()
         (report_dir / "results.json").write_text(json.dumps(res, indent=1) + "\n")
-        (report_dir / "report.html").write_text(client.get(f"/flights/{adjust_fid}/report").text)
+        (report_dir / "report.html").write_text(client.get(f"/flights/{fid}/report").text)
     rms = res.get("checkpoint_rms_m", {})
     rms3d = rms.get("3d")
     # the events are the flash marks, taken at the exposure: the delay left to estimate is 0 in the simulator
     figures = {"checkpoint_rms_m": rms, "lever_arm_m": res.get("lever_arm_m"), "delay_s": res.get("delay_s"),
                "true_delay_s": 0.0, "true_lever_arm_m": list(world.scenario.flight.lever_arm_cam_m),
                "sigma0": res.get("sigma0"), "warnings": res.get("warnings"), "job_s": adjust_s,
-               "office_files": how, "same_flight": adjust_fid == fid}
+               "office_files": sorted(office), "flight": fid}
     ok = rms3d is not None and rms3d <= 0.03
     summary = (f"check-point 3D RMS {100 * rms3d:.1f} cm over {len(res.get('checkpoints', []))} points, "
                f"lever arm {[round(v, 3) for v in res.get('lever_arm_m', [])]} m (simulated "
                f"{list(world.scenario.flight.lever_arm_cam_m)}), flash mark → exposure delay "
-               f"{1000 * (res.get('delay_s') or 0):.2f} ms (simulated 0), job {adjust_s:.0f} s; office files {how}"
+               f"{1000 * (res.get('delay_s') or 0):.2f} ms (simulated 0), job {adjust_s:.0f} s, on the drone's flight with "
+               f"the office's {', '.join(sorted(office))} added to it"
                if rms3d is not None else "no check points")
     stages.append(StageResult("final adjustment", ok, summary, figures,
                               {"results": str(report_dir / "results.json"),
                                "report": str(report_dir / "report.html"),
-                               "fetched_from": f"{server.url}/flights/{adjust_fid}/report (a server of this run)"}))
+                               "fetched_from": f"{server.url}/flights/{fid}/report (a server of this run)"}))
     return stages
 
 
