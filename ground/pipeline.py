@@ -276,8 +276,9 @@ def run_adjust(inputs: AdjustInputs, options: AdjustJobOptions, out_dir: Path) -
 
 @dataclass(frozen=True)
 class RtkInputs:
-    """Rover and base observations (RINEX obs, UBX log; the base also an RTCM3 stream or journal folder) and
-    RINEX navigation files."""
+    """Rover and base observations (RINEX obs, UBX log or journal folder, e.g. a drone flight's own folder; the
+    base also an RTCM3 stream or a corrections journal such as the flight's radio/) and RINEX navigation files
+    (none: the ephemerides found in the rover and base data)."""
 
     rover: Path
     base: Path
@@ -289,13 +290,16 @@ class RtkJobOptions:
     """Options of an RTK re-processing run, checked on construction (ValueError in `onboard.validate` words).
 
     `base_pos_ecef_m` the base antenna phase centre (ECEF m; None: the base file's header), `direction`
-    forward/backward/combined, `elmask_deg` the elevation mask (°), `velocity` write velocity columns.
+    forward/backward/combined, `elmask_deg` the elevation mask (°), `velocity` write velocity columns,
+    `static_start` the rover stands still from its first epoch until take-off (the engine's static start:
+    no process noise until its Doppler speed exceeds the take-off speed; `onboard rtk --static-start`).
     """
 
     base_pos_ecef_m: tuple[float, float, float] | None = None
     direction: str = "forward"
     elmask_deg: float = 15.0
     velocity: bool = True
+    static_start: bool = False
 
     def __post_init__(self) -> None:
         if self.base_pos_ecef_m is not None:
@@ -346,7 +350,8 @@ def run_rtk(inputs: RtkInputs, options: RtkJobOptions, output: Path) -> RtkOutco
     except DataRefused as exc:
         raise RefusedByData(str(exc)) from None
     rov_gps, bas_gps, nav, base_pos_arr = run.rover, run.base, run.nav, run.base_pos_ecef_m
-    rtk_options = replace(RtkOptions(), elmask_deg=options.elmask_deg, ar_elmask_deg=max(options.elmask_deg, 15.0))
+    rtk_options = replace(RtkOptions(), elmask_deg=options.elmask_deg, ar_elmask_deg=max(options.elmask_deg, 15.0),
+                          static_start=options.static_start)
     sols, _ = postprocess(rov_gps, bas_gps, nav, base_pos_arr, rtk_options, options.direction)
     good = [s for s in sols if is_position(s)]
     q = np.array([s.q for s in sols], dtype=int)
@@ -356,7 +361,8 @@ def run_rtk(inputs: RtkInputs, options: RtkJobOptions, output: Path) -> RtkOutco
     bx, by, bz = (float(v) for v in base_pos_arr)
     header = ("program   : directgeo ground rtk job (GPS L1)", f"inp file  : {inputs.rover.name}",
               f"inp file  : {inputs.base.name}", *(f"inp file  : {n.name}" for n in inputs.nav),
-              "pos mode  : kinematic", f"solution  : {options.direction}",
+              f"pos mode  : kinematic{' (static start)' if options.static_start else ''}",
+              f"solution  : {options.direction}",
               f"elev mask : {options.elmask_deg:.1f} deg", f"ref pos   : {bx:14.4f} {by:14.4f} {bz:14.4f}", "",
               "(x/y/z-ecef=WGS84,Q=1:fix,2:float,5:single,sdx/sdy/sdz=std(m))", "")
     with atomic_output(output, "w") as fh:

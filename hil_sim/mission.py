@@ -7,8 +7,10 @@ as GPS_RTCM_DATA, as a ground station does. Real product processes: the ground s
 and a generated token in the output folder), the base station (`onboard base`: RTCM3 into the radio), the rover
 companion (`onboard run`: raw journal, pulse/flash pairing, autopilot link with .tlog and lifecycle events,
 real-time RTK with its corrections only from GPS_RTCM_DATA) and the pre-flight page (`onboard web`). After
-landing: the flight's upload to the ground server (`onboard.upload`, compared byte for byte), the ground's RTK
-re-processing (a cold start) and adjustment jobs through the API, their report fetched, and RINEX conversion.
+landing: the flight's upload to the ground server (`onboard upload-daemon`, radio/ included, compared byte for
+byte), then on that very flight the ground's RTK re-processing (the job the server queues by itself, and a
+static-start cold start) of its journal against the corrections it received, the office's files added to it and
+the adjustment job through the API, their report fetched, and RINEX conversion.
 Each stage is checked against the simulator's truth; the summary says what was measured and where everything is.
 """
 
@@ -719,7 +721,9 @@ def upload_flight(rover: Path, server: GroundServer, auto: dict[str, Any] | None
     run) only the comparison is made; without it the flight is sent here with the real uploader."""
     import hashlib
 
-    local = {p.name: p for p in rover.iterdir() if p.is_file() and not p.name.startswith(".")}
+    from onboard.upload.client import flight_files
+
+    local = {name: rover / name for name in flight_files(rover)}  # what the uploader sends: radio/ included
     size = sum(p.stat().st_size for p in local.values())
     if auto is not None:
         wall_s = float(auto["uploaded_s"]) - float(auto["closed_s"])
@@ -745,7 +749,8 @@ def upload_flight(rover: Path, server: GroundServer, auto: dict[str, Any] | None
     ok = not differ and flight["status"] == "complete"
     figures = {"automatic": auto is not None, "closed_after_s": None if auto is None else auto["closed_s"],
                "files": len(local), "bytes": size, "wall_s": wall_s, "throughput_mb_s": size / 1e6 / wall_s,
-               "server_flight_id": flight["id"], "differ": differ}
+               "server_flight_id": flight["id"], "differ": differ,
+               "sub_folder_files": sorted(n for n in local if "/" in n)}
     summary = (f"{len(local)} files, {size / 1e6:.2f} MB in {wall_s:.1f} s after the close ({how}); on the "
                f"server: "
                + ("every file byte-identical" if not differ else f"DIFFERENT: {', '.join(differ)}"))
@@ -760,50 +765,118 @@ def _poll_job(client: Any, flight_id: str, job_id: str, timeout_s: float = 600.0
     return dict(_wait(finished, timeout_s, f"ground job {job_id}", poll_s=0.5))
 
 
-def ground_processing(rover: Path, base: Path, out: Path, ctx: dict[str, Any], server: GroundServer,
+OFFICE_ROLES = {"images.txt": "orientations", "capture_times.csv": "capture_times", "gcp.csv": "gcp"}
+"""The office's files (what the bundle adjustment and the survey give) and their roles on the ground."""
+
+
+def _wait_rtk_jobs(client: Any, flight_id: str, timeout_s: float = 600.0) -> list[dict[str, Any]]:
+    """The RTK jobs of a flight once none is queued or running (the server queues one by itself when the
+    upload's last chunk brings rover and base observations: none then is none at all)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        jobs = [j for j in client.get(f"/flights/{flight_id}").json()["jobs"] if j["kind"] == "rtk"]
+        if all(j["status"] in ("done", "failed") for j in jobs):
+            return jobs
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"timed out after {timeout_s:.0f} s waiting for the RTK jobs of flight {flight_id}")
+        time.sleep(0.5)
+
+
+def _job_output(client: Any, server: GroundServer, flight_id: str, job_id: str, name: str, out: Path,
+                ) -> tuple[Path, str]:
+    """A job's output file and where it came from: downloaded through `GET /flights/{id}/jobs/{job}/outputs/
+    {name}` into `out` (SHA-256 checked against the job's output listing) when the server's OpenAPI lists that
+    route, else the server's own copy in its data folder (the demo runs the server)."""
+    import hashlib
+
+    spec = client.get("/openapi.json").json()
+    if "/flights/{flight_id}/jobs/{job_id}/outputs/{name}" not in spec.get("paths", {}):
+        return server.data_dir / "outputs" / flight_id / job_id / name, "the server's data folder (no outputs route)"
+    listed = {f["name"]: f for f in client.get(f"/flights/{flight_id}/jobs/{job_id}/outputs").json()}
+    r = client.get(f"/flights/{flight_id}/jobs/{job_id}/outputs/{name}")
+    if r.status_code != 200 or name not in listed or hashlib.sha256(r.content).hexdigest() != listed[name]["sha256"]:
+        raise RuntimeError(f"job {job_id} output {name}: HTTP {r.status_code}, not the file its listing describes")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / name).write_bytes(r.content)
+    return out / name, f"{server.url}/flights/{flight_id}/jobs/{job_id}/outputs/{name} (SHA-256 checked)"
+
+
+def _add_office_files(server: GroundServer, flight_id: str, files: dict[str, Path]) -> None:
+    """Add the office's files to the drone's flight (`POST /flights/{id}/files`, then the resumable PUT), with
+    the office's (engineer) token."""
+    from onboard.upload.client import Uploader, UploadError
+
+    up = Uploader(server.url, server.engineer_token)
+    try:
+        up.add_files(flight_id, files, OFFICE_ROLES)
+    except UploadError as exc:
+        raise RuntimeError(f"adding the office files to the drone's flight failed: {exc}") from exc
+    finally:
+        up.close()
+
+
+def ground_processing(rover: Path, out: Path, ctx: dict[str, Any], server: GroundServer,
                       seed: int) -> list[StageResult]:
-    """The office's part through the ground API: the rover journal and events of the flight, the base
-    station's journal and the photogrammetric block uploaded as one processing set (the API has no way to add
-    files to the drone's flight), then the RTK re-processing job (cold start) and the adjustment job on its
-    trajectory; results.json and report.html fetched from the server."""
+    """The office's part through the ground API, on the drone's own flight as its upload daemon sent it: the RTK
+    job the server queued by itself (rover = the flight's UBX journal, base = the corrections it received in
+    radio/, base position from their RTCM 1006, navigation from the rover's ephemerides) and one with
+    `static_start` (the drone stands on the ground first), then the office's files (orientations, capture
+    times, GCP) added to that flight and the adjustment on the static-start trajectory; results.json and
+    report.html fetched from the server."""
     import numpy as np
 
+    from onboard.logger.journal import read_manifest
+
     world = ctx["world"]
-    office = out / f"{rover.name}-processing"
-    office.mkdir(exist_ok=True)
     block = simulate_block(rover, out, ctx, seed)
-    files = {"rover.ubx": _segment(rover), "base.ubx": _segment(base), "events.jsonl": rover / "events.jsonl",
-             "images.txt": block["images"], "capture_times.csv": block["capture_times"], "gcp.csv": block["gcp"]}
-    for name, src in files.items():
-        (office / name).write_bytes(Path(src).read_bytes())
-    roles = {"rover.ubx": "rover_obs", "images.txt": "orientations", "capture_times.csv": "capture_times",
-             "gcp.csv": "gcp"}
-    proc = _run_uploader(server, office, roles, server.engineer_token_file)
-    if proc.returncode != 0:
-        return [StageResult("ground RTK job", False, f"processing set upload failed: {proc.stderr.strip()[-400:]}")]
+    office = {"images.txt": block["images"], "capture_times.csv": block["capture_times"], "gcp.csv": block["gcp"]}
     lever = np.asarray(world.scenario.flight.lever_arm_cam_m) + np.random.default_rng(seed).normal(0, 0.003, 3)
+    manifest = read_manifest(rover)
     stages = []
     with server.client() as client:
-        flight = _server_flight(client, office.name)
-        assert flight is not None
+        flight = _server_flight(client, manifest.flight if manifest else rover.name)
+        if flight is None:
+            return [StageResult(RTK_COLD, False, "the server does not list the drone's flight")]
         fid = flight["id"]
         t = time.monotonic()
-        job = client.post(f"/flights/{fid}/jobs", json={"kind": "rtk", "params": {
-            "base_obs": "base.ubx", "base_pos": [float(v) for v in world.base_ecef_m]}}).json()
-        job = _poll_job(client, fid, job["id"])
+        auto = _wait_rtk_jobs(client, fid)
+        auto_s = time.monotonic() - t
+        if not auto:
+            return [StageResult(RTK_COLD, False, "the server queued no RTK job when the flight's upload completed "
+                                                 "(rover_obs and base_obs roles missing?)")]
+        t = time.monotonic()
+        job = client.post(f"/flights/{fid}/jobs", json={"kind": "rtk", "params": {"static_start": True}})
+        if job.status_code != 202:
+            return [StageResult(RTK_COLD, False, f"ground RTK job refused: HTTP {job.status_code} {job.text}")]
+        job = _poll_job(client, fid, job.json()["id"])
         rtk_s = time.monotonic() - t
-        sol = server.data_dir / "outputs" / fid / job["id"] / "SOL.pos"
-        if job["status"] != "done" or not sol.exists():
+        if job["status"] != "done":
             return [StageResult(RTK_COLD, False, f"ground RTK job {job['status']}: {job['message']}")]
+        sol, sol_from = _job_output(client, server, fid, job["id"], "SOL.pos", out / "ground-rtk")
         figures, summary = track_figures(sol, world)
         figures["job_s"] = rtk_s
-        stages.append(StageResult(RTK_COLD, figures["wrong_fixes"] == 0, f"{summary} (job {rtk_s:.0f} s)",
-                                  figures, {"trajectory": str(sol)}))
+        figures["automatic_job"] = {"status": auto[0]["status"], "params": auto[0]["params"],
+                                    "message": auto[0]["message"], "waited_s": round(auto_s, 1)}
+        auto_sol = server.data_dir / "outputs" / fid / auto[0]["id"] / "SOL.pos"
+        if auto[0]["status"] == "done" and auto_sol.exists():
+            figures["automatic_job"]["figures"] = track_figures(auto_sol, world)[0]
+        fix_auto = figures["automatic_job"].get("figures", {}).get("fix_ratio")
+        auto_text = ("; the job the server queued by itself (no options): "
+                     + (f"{100 * fix_auto:.1f} % fixed" if fix_auto is not None else auto[0]["message"]))
+        stages.append(StageResult(RTK_COLD, figures["wrong_fixes"] == 0,
+                                  f"{summary} (static start, job {rtk_s:.0f} s){auto_text}", figures,
+                                  {"trajectory": str(sol), "trajectory_from": sol_from,
+                                   "server_flight": f"{server.url}/flights/{fid}"}))
+        _add_office_files(server, fid, office)
         t = time.monotonic()
         job = client.post(f"/flights/{fid}/jobs", json={"kind": "adjust", "params": {
             "gcp": "gcp.csv", "capture_times": "capture_times.csv", "lever_arm": [float(v) for v in lever],
-            "lever_arm_sigma": 0.005, "estimate": ["delay"], "crs": "EPSG:4979"}}).json()
-        job = _poll_job(client, fid, job["id"])
+            "lever_arm_sigma": 0.005, "estimate": ["delay"], "crs": "EPSG:4979"}})
+        if job.status_code != 202:
+            stages.append(StageResult("final adjustment", False, f"adjustment refused: HTTP {job.status_code} "
+                                                                 f"{job.text}"))
+            return stages
+        job = _poll_job(client, fid, job.json()["id"])
         adjust_s = time.monotonic() - t
         if job["status"] != "done":
             stages.append(StageResult("final adjustment", False, f"ground adjustment job failed: {job['message']}"))
@@ -818,16 +891,19 @@ def ground_processing(rover: Path, base: Path, out: Path, ctx: dict[str, Any], s
     # the events are the flash marks, taken at the exposure: the delay left to estimate is 0 in the simulator
     figures = {"checkpoint_rms_m": rms, "lever_arm_m": res.get("lever_arm_m"), "delay_s": res.get("delay_s"),
                "true_delay_s": 0.0, "true_lever_arm_m": list(world.scenario.flight.lever_arm_cam_m),
-               "sigma0": res.get("sigma0"), "warnings": res.get("warnings"), "job_s": adjust_s}
+               "sigma0": res.get("sigma0"), "warnings": res.get("warnings"), "job_s": adjust_s,
+               "office_files": sorted(office), "flight": fid}
     ok = rms3d is not None and rms3d <= 0.03
     summary = (f"check-point 3D RMS {100 * rms3d:.1f} cm over {len(res.get('checkpoints', []))} points, "
                f"lever arm {[round(v, 3) for v in res.get('lever_arm_m', [])]} m (simulated "
                f"{list(world.scenario.flight.lever_arm_cam_m)}), flash mark → exposure delay "
-               f"{1000 * (res.get('delay_s') or 0):.2f} ms (simulated 0), job {adjust_s:.0f} s"
+               f"{1000 * (res.get('delay_s') or 0):.2f} ms (simulated 0), job {adjust_s:.0f} s, on the drone's flight with "
+               f"the office's {', '.join(sorted(office))} added to it"
                if rms3d is not None else "no check points")
     stages.append(StageResult("final adjustment", ok, summary, figures,
                               {"results": str(report_dir / "results.json"),
-                               "report": str(report_dir / "report.html"), "fetched_from": f"{server.url}/flights/{fid}/report (a server of this run)"}))
+                               "report": str(report_dir / "report.html"),
+                               "fetched_from": f"{server.url}/flights/{fid}/report (a server of this run)"}))
     return stages
 
 
@@ -885,7 +961,7 @@ def main(args: argparse.Namespace) -> int:
         if rover is not None and base is not None:
             stages.append(corrections_chain(rover, base, ctx))
             stages.append(realtime_rtk(rover, ctx))
-            stages += ground_processing(rover, base, out, ctx, server, args.seed)
+            stages += ground_processing(rover, out, ctx, server, args.seed)
             if args.seeded:
                 stages.append(process_rtk(rover, base, out, ctx, seeded=True))
         if rover is not None:

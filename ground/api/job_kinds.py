@@ -20,13 +20,35 @@ ADJUST_NEEDS = ("events", "orientations")
 RTK_NEEDS = ("rover_obs", "base_obs")
 
 
+JOURNAL_ROLES = RTK_NEEDS
+"""Roles whose files may be the segments of one journal folder (a drone flight: `NNNNNN.ubx` at the top for
+the rover, `radio/NNNNNN.ubx` for the corrections it received): the job reads the folder, segments in order."""
+
+
+def _journal_folder(names: list[str]) -> str | None:
+    """The folder (relative, `.` for the flight's top) when `names` are all journal segments of one folder."""
+    from onboard.logger.journal import is_segment_name
+
+    folders = {n.rpartition("/")[0] or "." for n in names}
+    if names and len(folders) == 1 and all(is_segment_name(n.rpartition("/")[2]) for n in names):
+        return folders.pop()
+    return None
+
+
 def _pick(files: dict[str, str | None], name: str | None, role: str) -> str | None:
-    """The flight file for `role`: the one named in the params, else the only one with that role."""
+    """The flight file for `role`: the one named in the params, else the only one with that role; for the
+    observation roles also a journal folder (named, or holding every file of that role)."""
+    journal = role in JOURNAL_ROLES
     if name is not None:
-        if name not in files:
-            raise InputError(f"{role} file {name!r} is not a completely uploaded file of this flight")
-        return name
+        if name in files:
+            return name
+        if journal and any(_journal_folder([n]) == name for n in files):  # a folder holding journal segments
+            return name
+        raise InputError(f"{role} file {name!r} is not a completely uploaded file (or journal folder) of this flight")
     named = sorted(n for n, r in files.items() if r == role)
+    folder = _journal_folder(named) if journal else None
+    if folder is not None:
+        return folder
     if len(named) > 1:
         raise InputError(f"several files have role {role!r} ({', '.join(named)}): name one in the job params")
     return named[0] if named else None

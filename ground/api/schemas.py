@@ -15,12 +15,15 @@ from onboard.errors import InputError
 
 
 class ManifestFile(BaseModel):
-    """A file the flight will upload: name (one path component), size in bytes, SHA-256 (hex), optional role."""
+    """A file the flight will upload: name (a relative path of the flight folder), size in bytes, SHA-256 (hex),
+    optional role."""
 
-    name: str = Field(description="file name, a single path component (no /, .., NUL)")
+    name: str = Field(description="file name relative to the flight folder, e.g. events.jsonl or radio/000000.ubx "
+                                  "(components of letters, digits, . _ + -; no .., leading dot, \\, NUL)")
     size: int = Field(ge=0, description="size in bytes")
     sha256: str = Field(description="SHA-256 of the whole file, 64 hex digits")
-    role: str | None = Field(default=None, description="trajectory | events | orientations | gcp | raw | …")
+    role: str | None = Field(default=None, description="trajectory | events | orientations | gcp | rover_obs | "
+                             "base_obs | nav | raw | …")
 
 
 class FlightCreate(BaseModel):
@@ -150,14 +153,21 @@ class RtkParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    rover_obs: str | None = None
-    base_obs: str | None = None
-    nav: str | None = None
+    rover_obs: str | None = Field(default=None, description="rover observations: a file of the flight, or a "
+                                  "folder of its journal segments ('.' = the drone's own journal; default: role "
+                                  "rover_obs)")
+    base_obs: str | None = Field(default=None, description="base observations: a file or a journal folder, e.g. "
+                                 "'radio' = the corrections the drone received (default: role base_obs)")
+    nav: str | None = Field(default=None, description="RINEX navigation (role nav; default: the ephemerides in "
+                            "the rover and base data)")
     base_pos: str | tuple[float, float, float] | None = Field(
         default=None, description="base antenna phase centre, ECEF m: 'X,Y,Z' or [X, Y, Z] (default: the base "
         "file's header)")
     direction: Literal["forward", "backward", "combined"] = "forward"
     elmask_deg: float = Field(default=15.0, description="elevation mask (°, 0–90)")
+    static_start: bool = Field(default=False, description="the rover stands still from its first epoch until "
+                               "take-off (a drone recording from power-on on the ground): held static until its "
+                               "Doppler speed says it moves")
 
     @model_validator(mode="after")
     def _check(self) -> RtkParams:
@@ -167,7 +177,8 @@ class RtkParams(BaseModel):
     def job_options(self) -> RtkJobOptions:
         """The pipeline's options of these parameters."""
         pos = None if self.base_pos is None else validate.ecef_position_m(self.base_pos, name="base_pos")
-        return RtkJobOptions(base_pos_ecef_m=pos, direction=self.direction, elmask_deg=self.elmask_deg)
+        return RtkJobOptions(base_pos_ecef_m=pos, direction=self.direction, elmask_deg=self.elmask_deg,
+                             static_start=self.static_start)
 
 
 class ErrorOut(BaseModel):

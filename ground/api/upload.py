@@ -22,7 +22,7 @@ class UploadRejected(ValueError):
 
 
 def check_file_name(name: str) -> str:
-    """A flight file name, or `UploadRejected(400)`: a single path component of safe characters.
+    """A single path component of safe characters (a flight's name, an export's), or `UploadRejected(400)`.
 
     Refused: empty, `/` or `\\`, NUL or control characters, `.`/`..`, a leading dot (hidden, `..x`),
     absolute or drive paths, more than 200 characters.
@@ -32,6 +32,41 @@ def check_file_name(name: str) -> str:
     if name in (".", "..") or not _NAME_RE.match(name):
         raise UploadRejected(400, f"invalid file name {name!r}: letters, digits, . _ + - only, no leading dot")
     return name
+
+
+MAX_PATH_DEPTH = 4
+"""Most components of a flight file's path (`radio/000000.ubx` has 2)."""
+MAX_PATH_CHARS = 255
+
+
+def check_file_path(name: str) -> str:
+    """A flight file's name: a relative path of at most `MAX_PATH_DEPTH` components separated by `/` (a
+    sub-journal such as `radio/000000.ubx`), each one a `check_file_name` component; or `UploadRejected(400)`.
+
+    Refused besides a bad component: an empty component (`a//b`, a leading or trailing `/`), so no absolute path,
+    and `.`/`..` or hidden components, so nothing can climb out of the flight directory or reach `.partial`.
+    """
+    if not name or len(name) > MAX_PATH_CHARS:
+        raise UploadRejected(400, f"invalid file name {name!r}: 1 to {MAX_PATH_CHARS} characters")
+    parts = name.split("/")
+    if len(parts) > MAX_PATH_DEPTH:
+        raise UploadRejected(400, f"invalid file name {name!r}: more than {MAX_PATH_DEPTH} path components")
+    for part in parts:
+        try:
+            check_file_name(part)
+        except UploadRejected:
+            raise UploadRejected(400, f"invalid file name {name!r}: component {part!r} is not letters, digits, "
+                                      ". _ + - (no leading dot, no empty component, no \\ : or NUL)") from None
+    return name
+
+
+def check_name_layout(names: list[str]) -> None:
+    """Names of one flight that can all exist at once: none is also a folder of another (`radio` and
+    `radio/000000.ubx`), else `UploadRejected(400)`."""
+    folders = {"/".join(n.split("/")[:k]) for n in names for k in range(1, n.count("/") + 1)}
+    clash = sorted(folders.intersection(names))
+    if clash:
+        raise UploadRejected(400, f"file {clash[0]!r} is also the folder of other files of this flight")
 
 
 def check_sha256(value: str) -> str:
@@ -61,7 +96,7 @@ def check_manifest_files(files: list[tuple[str, int, str]], limits: Limits) -> N
     seen: set[str] = set()
     total = 0
     for name, size, sha in files:
-        check_file_name(name)
+        check_file_path(name)
         check_sha256(sha)
         if name in seen:
             raise UploadRejected(400, f"file {name!r} listed twice")
@@ -76,6 +111,7 @@ def check_manifest_files(files: list[tuple[str, int, str]], limits: Limits) -> N
         total += size
     if total > limits.max_flight_bytes:
         raise UploadRejected(413, f"flight of {total} bytes > limit {limits.max_flight_bytes}")
+    check_name_layout([name for name, _, _ in files])
 
 
 def check_chunk(offset: int, received: int, chunk_len: int, size: int, limits: Limits) -> None:

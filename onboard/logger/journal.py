@@ -35,6 +35,11 @@ SEGMENT_SUFFIX = ".ubx"
 INDEX_SUFFIX = ".idx"
 MANIFEST_NAME = "manifest.json"
 EVENTS_NAME = "events.jsonl"
+RADIO_DIR = "radio"
+"""The flight's sub-journal (same format) of the base corrections as received, by radio or reassembled from
+MAVLink GPS_RTCM_DATA (written by onboard.realtime)."""
+SOLUTION_NAME = "solution.pos"
+"""The flight's real-time RTK solution (written by onboard.realtime)."""
 MANIFEST_FORMAT = "directgeo-flight/1"
 INDEX_RECORD = struct.Struct("<Qqq")  # segment byte offset, monotonic ns, wall ns
 _SEGMENT_RE = re.compile(r"^(\d{6})\.ubx$")
@@ -149,6 +154,11 @@ def flight_name(wall_ns: int) -> str:
 def segment_name(number: int) -> str:
     """`NNNNNN.ubx` (zero-padded so names sort in recording order)."""
     return f"{number:06d}{SEGMENT_SUFFIX}"
+
+
+def is_segment_name(name: str) -> bool:
+    """Whether a file name (one component) is a journal segment's, `NNNNNN.ubx`."""
+    return _SEGMENT_RE.match(name) is not None
 
 
 def list_segments(flight_dir: Path) -> list[Path]:

@@ -35,11 +35,11 @@ from onboard.cmdline import (
 from onboard.errors import InputError
 from onboard.formats.atomic import atomic_output
 from onboard.formats.rinex_write import ObsHeaderInfo, ObsWriteSummary, write_nav, write_obs
+from onboard.postpro.inputs import input_chunks
 from onboard.receiver.decode import (
     DecodeStats,
-    iter_file_bytes,
 )
-from onboard.receiver.ubx_collect import Collected, StreamPlaces, collect, describe_unframed
+from onboard.receiver.ubx_collect import Collected, collect, describe_unframed
 
 log = logging.getLogger(__name__)
 
@@ -95,31 +95,6 @@ class ConvertResult:
     obs: ObsWriteSummary
     ephemerides: int
     stats: DecodeStats
-
-
-def input_chunks(path: Path, warn: Callable[[str], None] | None = None) -> tuple[Iterator[bytes], StreamPlaces]:
-    """Bytes of an input (a flight journal directory, segments in order, or a UBX log, gzip accepted) and
-    where each byte lives; missing segments and gzip damage go to `warn` (default: logged warnings)."""
-    if path.is_dir():
-        from onboard.logger.journal import iter_journal_bytes, list_segments
-
-        segments = list_segments(path)
-        if not segments:
-            raise InputError(f"{path}: no journal segments (*.ubx) in this directory")
-        places = StreamPlaces(tuple((f"{path / p.name}", p.stat().st_size) for p in segments))
-        return iter(iter_journal_bytes(path, warn=warn)), places
-    if not path.exists():
-        raise InputError(f"{path}: no such file")
-    gz = path.is_file() and _starts_with(path, b"\x1f\x8b")
-    return iter_file_bytes(path, warn=warn), StreamPlaces(((str(path), None if gz else path.stat().st_size),))
-
-
-def _starts_with(path: Path, magic: bytes) -> bool:
-    try:
-        with open(path, "rb") as f:
-            return f.read(len(magic)) == magic
-    except OSError:
-        return False  # the reader says why it cannot read the file
 
 
 def convert_one(path: Path, out_dir: Path, options: ConvertOptions = ConvertOptions(),

@@ -11,9 +11,10 @@ lossy radio stream). Unusable input raises `InputError` naming the file.
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -22,6 +23,9 @@ from onboard.gnsstime import GpsTime
 from onboard.rtk.ephemeris import EphemerisStore
 from onboard.rtk.rtkpos import Nav
 from onboard.rtk.types import Ephemeris, ObsEpoch
+
+if TYPE_CHECKING:
+    from onboard.receiver.ubx_collect import StreamPlaces
 
 log = logging.getLogger(__name__)
 
@@ -42,10 +46,40 @@ def is_rinex(path: Path) -> bool:
     return b"RINEX VERSION" in head[:200]
 
 
+def input_chunks(path: Path, warn: Callable[[str], None] | None = None) -> tuple[Iterator[bytes], StreamPlaces]:
+    """Bytes of an input (a flight journal directory, segments in order, or a UBX log, gzip accepted) and
+    where each byte lives; missing segments and gzip damage go to `warn` (default: logged warnings)."""
+    from onboard.receiver.decode import iter_file_bytes
+    from onboard.receiver.ubx_collect import StreamPlaces
+
+    if path.is_dir():
+        from onboard.logger.journal import iter_journal_bytes, list_segments
+
+        segments = list_segments(path)
+        if not segments:
+            raise InputError(f"{path}: no journal segments (*.ubx) in this directory")
+        places = StreamPlaces(tuple((f"{path / p.name}", p.stat().st_size) for p in segments))
+        return iter(iter_journal_bytes(path, warn=warn)), places
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    gz = path.is_file() and _starts_with(path, b"\x1f\x8b")
+    return iter_file_bytes(path, warn=warn), StreamPlaces(((str(path), None if gz else path.stat().st_size),))
+
+
+def _starts_with(path: Path, magic: bytes) -> bool:
+    try:
+        with open(path, "rb") as f:
+            return f.read(len(magic)) == magic
+    except OSError:
+        return False  # the reader says why it cannot read the file
+
+
 def read_observations(path: str | Path) -> ObsInput:
-    """RINEX observation file (GPS satellites only) or UBX log (journal file) → ObsInput. Raises InputError
-    when unusable."""
+    """RINEX observation file (GPS satellites only), UBX log, or a flight's journal directory (its segments
+    in recording order, e.g. the rover's own flight folder) → ObsInput. Raises InputError when unusable."""
     path = Path(path)
+    if path.is_dir():
+        return _read_ubx(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
     if is_rinex(path):
@@ -55,14 +89,20 @@ def read_observations(path: str | Path) -> ObsInput:
         # (M8P rover + RAWX base 0.065 -> 0.049 s CPU, with the GLW1 CORS base 0.091 -> 0.070 s)
         rnx = read_rinex_obs(path, systems="G")
         return ObsInput(rnx.epochs, [], rnx.header.antenna_position_ecef_m(), "rinex")
-    from onboard.receiver.decode import iter_file_bytes
-    from onboard.receiver.ubx_collect import StreamPlaces, collect, describe_unframed
+    return _read_ubx(path)
 
-    col = collect(iter_file_bytes(path))
-    for message in describe_unframed(col, StreamPlaces(((str(path), None),))):  # what the reader skipped
+
+def _read_ubx(path: Path) -> ObsInput:
+    """A UBX log or journal directory → ObsInput (what the reader skipped is logged with its place)."""
+    from onboard.receiver.ubx_collect import collect, describe_unframed
+
+    chunks, places = input_chunks(path)
+    col = collect(chunks)
+    for message in describe_unframed(col, places):  # what the reader skipped
         log.warning("%s", message)
     if not col.epochs:
-        raise InputError(f"{path}: neither a RINEX observation file nor a UBX log with RXM-RAW/RXM-RAWX epochs")
+        what = "a journal directory without" if path.is_dir() else "neither a RINEX observation file nor a UBX log with"
+        raise InputError(f"{path}: {what} RXM-RAW/RXM-RAWX epochs")
     pos = np.median(np.array(col.fixes_ecef_m), axis=0) if col.fixes_ecef_m else None
     return ObsInput(col.epochs, col.ephemerides, pos, "ubx")
 

@@ -47,7 +47,7 @@ import numpy.typing as npt
 from onboard.errors import LinkLost
 from onboard.gnsstime import GpsTime
 from onboard.hw.ports import ByteStream, Clock, SystemClock
-from onboard.logger.journal import Journal, JournalOptions
+from onboard.logger.journal import RADIO_DIR, SOLUTION_NAME, Journal, JournalOptions
 from onboard.receiver.base_epochs import RtcmCollector
 from onboard.receiver.framing import Frame, Protocol, StreamFramer
 from onboard.receiver.rtcm import BasePosition
@@ -61,8 +61,6 @@ from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, Ephemeris, ObsEp
 log = logging.getLogger(__name__)
 
 Arr = npt.NDArray[np.float64]
-RADIO_DIR = "radio"
-SOLUTION_NAME = "solution.pos"
 GAP_NO_WAIT_S = 2.0
 """Base data this much (s) later than its own interval are in a radio gap: the engine stops waiting for them."""
 

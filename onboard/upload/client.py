@@ -38,6 +38,28 @@ SKIP_SUFFIXES = (".tmp", ".part")
 #: manifest roles by file name (the ground API queues the adjustment when trajectory+events+orientations exist)
 ROLE_BY_NAME = {"events.jsonl": "events", "manifest.json": "manifest"}
 ROLE_BY_SUFFIX = {".ubx": "raw", ".idx": "index", ".pos": "trajectory"}
+ROVER_OBS_ROLE = "rover_obs"
+"""Role of the flight's own journal segments (`NNNNNN.ubx` at the top): the rover of a ground RTK job."""
+BASE_OBS_ROLE = "base_obs"
+"""Role of the corrections journal's segments (`radio/NNNNNN.ubx`: the base's RTCM3 as received, over the
+radio or reassembled from MAVLink GPS_RTCM_DATA): the base of a ground RTK job."""
+REALTIME_TRAJECTORY_ROLE = "realtime_trajectory"
+"""Role of the companion's real-time solution (`solution.pos`): kept apart from `trajectory` so that the
+ground's adjustment uses the flight's post-processed RTK output unless a job names this file."""
+
+
+def flight_file_role(name: str) -> str | None:
+    """The role a file of a recorded flight folder has by its place (`name` relative, `/`-separated): the
+    companion's layout (onboard.logger.journal) is known here, where the upload
+    manifest is written, so the ground needs no knowledge of it."""
+    from onboard.logger.journal import RADIO_DIR, SOLUTION_NAME, is_segment_name
+
+    folder, _, base = name.rpartition("/")
+    if is_segment_name(base) and folder in ("", RADIO_DIR):
+        return ROVER_OBS_ROLE if folder == "" else BASE_OBS_ROLE
+    if name == SOLUTION_NAME:
+        return REALTIME_TRAJECTORY_ROLE
+    return ROLE_BY_NAME.get(base) or ROLE_BY_SUFFIX.get(Path(base).suffix)
 
 
 class UploadError(OnboardError):
@@ -96,35 +118,52 @@ def sha256_file(path: Path) -> str:
     return h.hexdigest()
 
 
-def build_upload_manifest(flight_dir: str | Path, roles: dict[str, str] | None = None) -> tuple[str, list[FileEntry]]:
-    """(flight name, files) for a flight folder.
+def flight_files(flight_dir: Path) -> list[str]:
+    """Names (relative, `/`-separated, sorted) of the files of a flight folder to upload: every regular file,
+    sub-folders included (the `radio/` journal), but no hidden file or folder and no temporary file."""
+    names = []
+    for p in flight_dir.rglob("*"):
+        rel = p.relative_to(flight_dir)
+        if any(part.startswith(".") for part in rel.parts) or p.name.endswith(SKIP_SUFFIXES) or not p.is_file():
+            continue
+        names.append(rel.as_posix())
+    return sorted(names)
 
-    Segments listed in the onboard manifest must still have the size and SHA-256 recorded there (else
-    `UploadError`: the local copy is damaged); other regular files are hashed now. `roles` adds or overrides
-    roles by file name (e.g. {"poses.csv": "orientations"}).
+
+def build_upload_manifest(flight_dir: str | Path, roles: dict[str, str] | None = None) -> tuple[str, list[FileEntry]]:
+    """(flight name, files) for a flight folder, sub-folders included (names relative with `/`).
+
+    Segments listed in the onboard manifest, or in a sub-journal's (`radio/manifest.json`), must still have the
+    size and SHA-256 recorded there (else `LocalCopyDamaged`); other regular files are hashed now. Roles come
+    from the file's place (`flight_file_role`); `roles` adds or overrides roles by relative name (e.g.
+    {"poses.csv": "orientations"}).
     """
     from onboard.logger.journal import MANIFEST_NAME, read_manifest
 
     d = Path(flight_dir)
     if not d.is_dir():
         raise InputError(f"{d} is not a flight folder")
-    manifest = read_manifest(d)
-    if manifest is None and (d / MANIFEST_NAME).exists():
-        raise UploadError(f"{d / MANIFEST_NAME} is unreadable; let the recorder rebuild it before uploading")
-    recorded = {s.name: s for s in manifest.segments} if manifest is not None else {}
-    name = manifest.flight if manifest is not None else d.name
+    names = flight_files(d)
+    recorded: dict[str, Any] = {}
+    name = d.name
+    for manifest_name in [n for n in names if n.rpartition("/")[2] == MANIFEST_NAME]:
+        folder = manifest_name.rpartition("/")[0]
+        manifest = read_manifest(d / folder)
+        if manifest is None:
+            raise UploadError(f"{d / manifest_name} is unreadable; let the recorder rebuild it before uploading")
+        recorded |= {f"{folder}/{s.name}" if folder else s.name: s for s in manifest.segments}
+        if not folder:
+            name = manifest.flight
     entries: list[FileEntry] = []
-    for p in sorted(d.iterdir()):
-        if not p.is_file() or p.name.startswith(".") or p.name.endswith(SKIP_SUFFIXES):
-            continue
+    for rel in names:
+        p = d / rel
         size, digest = p.stat().st_size, sha256_file(p)
-        seg = recorded.get(p.name)
+        seg = recorded.get(rel)
         if seg is not None and (seg.bytes != size or seg.sha256 != digest):
             raise LocalCopyDamaged(f"{p}: {size} bytes sha256 {digest[:12]}… but the manifest recorded {seg.bytes} bytes "
                               f"sha256 {seg.sha256[:12]}…: local copy damaged, not uploaded")
-        role = (roles or {}).get(p.name) or ROLE_BY_NAME.get(p.name) or ROLE_BY_SUFFIX.get(p.suffix)
-        entries.append(FileEntry(p.name, size, digest, role))
-    missing = set(recorded) - {e.name for e in entries}
+        entries.append(FileEntry(rel, size, digest, (roles or {}).get(rel) or flight_file_role(rel)))
+    missing = set(recorded) - set(names)
     if missing:
         raise LocalCopyDamaged(f"segments listed in the manifest are missing: {', '.join(sorted(missing))}")
     if not entries:
@@ -189,6 +228,28 @@ class Uploader:
                 report.files[e.name] = "complete"
                 continue
             self._upload_file(report, d / e.name, e)
+        self._verify(report, entries)
+        report.sha256 = {e.name: e.sha256 for e in entries}
+        return report
+
+    def add_files(self, flight_id: str, files: dict[str, Path], roles: dict[str, str] | None = None) -> UploadReport:
+        """Add files to a flight the server already holds (`POST /flights/{id}/files` with their entries, e.g.
+        the office's orientations and GCP for a drone's flight), then send them like a flight's (resumable,
+        SHA-256 per chunk and per file); `files` maps the name on the server to the local file. Raises
+        UploadError (HTTP 404/405 in its text when the server has no such flight or route)."""
+        entries = [FileEntry(name, p.stat().st_size, sha256_file(p), (roles or {}).get(name))
+                   for name, p in sorted(files.items())]
+        report = UploadReport(flight_id=flight_id)
+        r = self._request(report, "POST", f"/flights/{flight_id}/files",
+                          json={"files": [e.to_json() for e in entries]})
+        if r.status_code not in (200, 201):
+            raise UploadError(f"server refused the files for flight {flight_id}: HTTP {r.status_code} {r.text[:300]}")
+        state = {f["name"]: f for f in r.json().get("files", [])}
+        for e in entries:
+            if state.get(e.name, {}).get("status") == "complete":
+                report.files[e.name] = "complete"
+                continue
+            self._upload_file(report, files[e.name], e)
         self._verify(report, entries)
         report.sha256 = {e.name: e.sha256 for e in entries}
         return report

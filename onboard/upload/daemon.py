@@ -240,34 +240,57 @@ class UploadService:
         self.status.last_error = error
 
     def _delete(self, flight_dir: Path, confirmed: dict[str, str]) -> list[str]:
-        """Delete the files the server confirmed (by name and SHA-256, `confirmed`), then the folder if nothing
-        else is left in it (a sub-folder such as radio/ is never uploaded, so never deleted). The closed manifest
-        goes last and only with the folder: a folder left without it would look like an unclosed flight, which
-        the recorder's next start resumes. Returns the names deleted."""
+        """Delete the files the server confirmed (relative names with `/` and SHA-256, `confirmed`), sub-folders
+        such as radio/ included, deepest folder first; each folder goes once nothing else is left in it. A
+        folder's closed manifest goes last and only with the folder: a flight folder left without it would look
+        like an unclosed flight, which the recorder's next start resumes (and a sub-journal without it, like a
+        torn one). Returns the names deleted."""
         from onboard.logger.journal import MANIFEST_NAME
         from onboard.upload.client import sha256_file
 
-        deleted = []
-        names = sorted(n for n in confirmed if n != MANIFEST_NAME)
-        others = [p for p in flight_dir.iterdir() if p.name not in confirmed]
-        if MANIFEST_NAME in confirmed and not others:
-            names.append(MANIFEST_NAME)
-        for name in names:
-            digest = confirmed[name]
-            path = flight_dir / name
+        deleted: list[str] = []
+        by_folder: dict[str, list[str]] = {}
+        for name in confirmed:
+            by_folder.setdefault(name.rpartition("/")[0], []).append(name)
+        folders = sorted({f for n in confirmed for f in _parents(n)}, key=lambda f: (-f.count("/"), f))
+        for folder in [*folders, ""]:
+            here = flight_dir / folder if folder else flight_dir
+            names = sorted(n for n in by_folder.get(folder, []) if n.rpartition("/")[2] != MANIFEST_NAME)
+            for name in names:
+                if self._delete_file(flight_dir / name, confirmed[name], sha256_file):
+                    deleted.append(name)
+            manifest = f"{folder}/{MANIFEST_NAME}" if folder else MANIFEST_NAME
             try:
-                if sha256_file(path) != digest:  # changed since the upload: keep it
-                    log.warning("%s changed after its upload: kept", path)
-                    continue
-                path.unlink()
-                deleted.append(name)
-            except OSError as exc:
-                log.warning("%s not deleted: %s", path, exc)
-        try:
-            flight_dir.rmdir()  # only if empty
-        except OSError:
-            pass
+                left = [p.name for p in here.iterdir() if p.name != MANIFEST_NAME]
+            except OSError:
+                continue
+            if manifest in confirmed and not left and self._delete_file(flight_dir / manifest, confirmed[manifest],
+                                                                         sha256_file):
+                deleted.append(manifest)
+            try:
+                here.rmdir()  # only if empty
+            except OSError:
+                pass
         return deleted
+
+    @staticmethod
+    def _delete_file(path: Path, digest: str, sha256_file: Callable[[Path], str]) -> bool:
+        """Unlink `path` if it still has SHA-256 `digest` (changed since the upload: kept, logged)."""
+        try:
+            if sha256_file(path) != digest:
+                log.warning("%s changed after its upload: kept", path)
+                return False
+            path.unlink()
+            return True
+        except OSError as exc:
+            log.warning("%s not deleted: %s", path, exc)
+            return False
+
+
+def _parents(name: str) -> list[str]:
+    """The folders of a relative `/` name, nearest first, the flight folder itself excluded: `a/b/c` → [`a/b`, `a`]."""
+    parts = name.split("/")[:-1]
+    return ["/".join(parts[:k]) for k in range(len(parts), 0, -1)]
 
 
 def http_uploader_for(settings: Settings, token: str, stop: threading.Event) -> Callable[..., Uploader]:

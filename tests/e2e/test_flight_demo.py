@@ -45,6 +45,11 @@ def test_the_demo_flies_uploads_and_processes_every_stage(tmp_path: Path) -> Non
     assert pairing["missing"] == 0 and pairing["max_delay_error_ns"] <= 1000
     assert abs(pairing["mean_delay_ms"] - pairing["true_mean_delay_ms"]) < 0.001  # ms: within 1 µs
     adjustment = stages["final adjustment"]
+    # the ground jobs ran on the drone's own uploaded flight, radio/ corrections included, no processing set
+    drone_flight = stages["upload"]["figures"]["server_flight_id"]
+    assert "radio/000000.ubx" in stages["upload"]["figures"]["sub_folder_files"]
+    assert adjustment["figures"]["flight"] == drone_flight
+    assert ground["outputs"]["server_flight"].endswith(f"/flights/{drone_flight}")
     assert adjustment["figures"]["checkpoint_rms_m"]["3d"] <= 0.03
     assert abs(adjustment["figures"]["delay_s"] - adjustment["figures"]["true_delay_s"]) < 0.002
     report = Path(adjustment["outputs"]["report"])

@@ -61,8 +61,8 @@ def test_unauthenticated_requests_are_refused(live: LiveServer) -> None:
         assert "put" in spec["paths"]["/flights/{flight_id}/files/{name}"]
 
 
-@pytest.mark.parametrize("bad", ["../evil.ubx", "..", ".", ".hidden", "a/b.ubx", "a\\b.ubx", "nul\x00.ubx",
-                                 "/etc/passwd", "C:evil", ""])
+@pytest.mark.parametrize("bad", ["../evil.ubx", "..", ".", ".hidden", "a/../../b.ubx", "a//b.ubx", "a/.partial/b",
+                                 "a\\b.ubx", "nul\x00.ubx", "/etc/passwd", "C:evil", ""])
 def test_manifest_with_bad_names_is_refused(live: LiveServer, bad: str) -> None:
     """A manifest naming a file outside the flight directory (or hidden/odd) is refused with 400; no flight made."""
     with live.client() as c:
@@ -84,6 +84,46 @@ def test_path_traversing_upload_names_are_refused(live: LiveServer, tmp_path: Pa
     written = sorted(p.relative_to(data).as_posix() for p in data.rglob("*") if p.is_file())
     assert all(p == "directgeo.sqlite3" or p.startswith(f"flights/{fid}/") for p in written), written
     assert not (data / "evil").exists() and not (data.parent / "evil").exists()
+
+
+def test_sub_folder_files_upload_byte_identical_and_stay_inside(live: LiveServer, tmp_path: Path) -> None:
+    """A flight with the radio/ corrections journal: every file, sub-folder included, reaches the server
+    byte-identical (SHA-256 confirmed), with roles by place; `radio/../` or `radio/.partial/` names write nothing."""
+    folder = _flight_folder(tmp_path / "onboard")
+    radio = folder / "radio"
+    radio.mkdir()
+    corrections = os.urandom(70_000)
+    (radio / "000000.ubx").write_bytes(corrections)
+    m = Manifest(flight="radio", created_wall_ns=1, segments=[SegmentInfo("000000.ubx", 70_000, _sha(corrections))],
+                 closed=True)
+    (radio / "manifest.json").write_text(json.dumps(m.to_json()))
+    (radio / "000000.ubx.tmp").write_bytes(b"temporary")  # never uploaded
+    name, entries = build_upload_manifest(folder)
+    roles = {e.name: e.role for e in entries}
+    assert name == folder.name and "radio/000000.ubx.tmp" not in roles
+    assert roles["radio/000000.ubx"] == "base_obs" and roles["000000.ubx"] == "rover_obs"
+    assert roles["radio/manifest.json"] == "manifest" and roles["000000.idx"] == "index"
+    rep = Uploader(live.url, TOKEN, UploaderOptions(chunk_bytes=30_000), sleep=lambda s: None).upload_flight(folder)
+    assert set(rep.sha256) == set(roles)
+    held = live.settings.flights_dir / rep.flight_id
+    for rel, digest in rep.sha256.items():
+        assert _sha((held / rel).read_bytes()) == digest == _sha((folder / rel).read_bytes()), rel
+    with live.client() as c:
+        assert c.get(f"/flights/{rep.flight_id}/files/radio/000000.ubx/content").content == corrections
+        assert c.get(f"/flights/{rep.flight_id}/files/radio%2F000000.ubx").json()["status"] == "complete"
+        for raw in ("radio/..%2F..%2Fevil", "radio/%2E%2E/evil", "radio/.partial/000000.ubx", "radio//000000.ubx"):
+            r = c.put(f"/flights/{rep.flight_id}/files/{raw}", params={"offset": 0}, content=b"abc",
+                      headers={"X-Chunk-SHA256": _sha(b"abc")})
+            assert r.status_code in (400, 404), (raw, r.status_code, r.text)
+        r = c.post("/flights", json={"name": "clash", "files": [{"name": n, "size": 1, "sha256": "0" * 64}
+                                                                 for n in ("radio", "radio/000000.ubx")]})
+        assert r.status_code == 400 and "also the folder" in r.text
+    data = live.settings.data_dir
+    assert not (data / "evil").exists() and not (data.parent / "evil").exists()
+    assert not (held / "radio" / ".partial" / "000000.ubx").exists()
+    (radio / "000000.ubx").write_bytes(corrections[:-1] + bytes([corrections[-1] ^ 1]))  # the sub-journal's manifest
+    with pytest.raises(UploadError, match="damaged"):                                  # is checked too
+        build_upload_manifest(folder)
 
 
 def test_oversized_files_and_chunks_are_refused(live: LiveServer) -> None:
@@ -357,3 +397,96 @@ def test_uploader_adapts_to_the_server_chunk_limit(live: LiveServer, tmp_path: P
     assert up.chunk_bytes <= live.settings.max_chunk_bytes
     fdir = live.settings.flights_dir / rep.flight_id
     assert (fdir / "000000.ubx").read_bytes() == (folder / "000000.ubx").read_bytes()
+
+
+def _drone_flight(root: Path) -> Path:
+    """A flight folder as the companion closes it, from a real M8P capture (Galway, static, 0.33 m baseline):
+    the rover's UBX journal (first ~5 min of the log, two segments, a torn tail) at the top, the base's RTCM3
+    stream as received in the radio/ sub-journal (1005 position, MSM7; no navigation: the rover's own
+    ephemerides), events.jsonl and a real-time solution.pos."""
+    import gzip
+
+    from onboard.hw.ports import SystemClock
+    from onboard.logger.journal import Journal, JournalOptions
+    from tests.conftest import shared_file
+
+    d = "gnss/ublox-m8p-galway-2018/"
+    rover = gzip.decompress(shared_file(d + "raw/rover-20181004-1237.ubx.gz").read_bytes())
+    rover = rover[:len(rover) // 4]
+    rtcm = gzip.decompress(shared_file(d + "rtcm3/base-20181004-1236.rtcm3.gz").read_bytes())
+    flight = root / "flight-20181004T123800Z"
+    for folder, data, block in ((flight, rover, 4096), (flight / "radio", rtcm, 1024)):
+        journal = Journal(folder, SystemClock(), JournalOptions(segment_max_bytes=len(data) // 2 + 1))
+        for i in range(0, len(data), block):
+            journal.append(data[i:i + block], time.monotonic_ns(), time.time_ns())
+        journal.close("landed")
+    (flight / "events.jsonl").write_text('{"type": "flight", "event": "closed"}\n')
+    (flight / "solution.pos").write_text("% real-time solution (not read by this test)\n")
+    return flight
+
+
+@pytest.mark.slow
+def test_a_drone_flight_is_rtk_processed_as_uploaded(live: LiveServer, tmp_path: Path) -> None:
+    """The companion's flight uploaded as it is: roles by place (rover journal, radio/ corrections), the RTK job
+    queues by itself and reads the journal folders (299 rover epochs, mostly fixed on this 0.33 m baseline); a
+    second job with static_start says so in SOL.pos; a job naming no journal folder is refused (422)."""
+    from ground.io.trajectory import read_trajectory
+
+    flight = _drone_flight(tmp_path)
+    rep = Uploader(live.url, TOKEN, UploaderOptions(chunk_bytes=200_000), sleep=lambda s: None).upload_flight(flight)
+    with live.client() as c:
+        files = {f["name"]: f["role"] for f in c.get(f"/flights/{rep.flight_id}").json()["files"]}
+        assert files["000000.ubx"] == files["000001.ubx"] == "rover_obs"
+        assert files["radio/000000.ubx"] == files["radio/000001.ubx"] == "base_obs"
+        assert files["solution.pos"] == "realtime_trajectory" and files["events.jsonl"] == "events"
+        auto = _wait_job(c, rep.flight_id)
+        assert auto["kind"] == "rtk" and auto["status"] == "done", auto["message"]
+        assert auto["message"].startswith("299 epochs: fix ")
+        fixed = float(auto["message"].split("(")[1].split(" %")[0])
+        assert fixed > 50.0, auto["message"]
+        r = c.post(f"/flights/{rep.flight_id}/jobs", json={"kind": "rtk", "params": {"base_obs": "nowhere"}})
+        assert r.status_code == 422 and "nowhere" in r.text
+        job = c.post(f"/flights/{rep.flight_id}/jobs", json={"kind": "rtk", "params": {
+            "rover_obs": ".", "base_obs": "radio", "static_start": True}}).json()
+        deadline = time.monotonic() + 90
+        while job["status"] not in ("done", "failed") and time.monotonic() < deadline:
+            time.sleep(0.3)
+            job = c.get(f"/flights/{rep.flight_id}/jobs/{job['id']}").json()
+        assert job["status"] == "done", job["message"]
+    sol = live.settings.data_dir / "outputs" / rep.flight_id / job["id"] / "SOL.pos"
+    text = sol.read_text()
+    assert "pos mode  : kinematic (static start)" in text and "inp file  : radio" in text
+    traj = read_trajectory(str(sol), accept_single=True)
+    # the base position came from the stream's RTCM 1005 (the README's survey-in ECEF), the rover is 0.33 m away
+    assert np.linalg.norm(np.median(traj.pos_ecef_m, axis=0) - [3774088.9931, -601661.8217, 5089321.3853]) < 0.05
+
+
+def test_office_files_added_to_a_drone_flight(live: LiveServer, tmp_path: Path) -> None:
+    """Uploader.add_files: the office's files join the drone's flight (POST /flights/{id}/files, then the same
+    resumable PUT), byte-identical with their roles; a file named like the flight's radio/ folder is refused."""
+    folder = _flight_folder(tmp_path / "onboard")
+    (folder / "radio").mkdir()
+    (folder / "radio" / "000000.ubx").write_bytes(os.urandom(5_000))
+    up = Uploader(live.url, TOKEN, UploaderOptions(chunk_bytes=40_000), sleep=lambda s: None)
+    rep = up.upload_flight(folder)
+    office = tmp_path / "office"
+    office.mkdir()
+    images, gcp = office / "images.txt", office / "gcp.csv"
+    images.write_bytes(os.urandom(90_000))
+    gcp.write_text("name,role,x_rel,y_rel,z_rel,X,Y,Z\n")
+    added = up.add_files(rep.flight_id, {"images.txt": images, "office/gcp.csv": gcp},
+                         {"images.txt": "orientations", "office/gcp.csv": "gcp"})
+    assert added.flight_id == rep.flight_id and added.bytes_sent == 90_000 + gcp.stat().st_size
+    held = live.settings.flights_dir / rep.flight_id
+    assert (held / "images.txt").read_bytes() == images.read_bytes()
+    assert (held / "office" / "gcp.csv").read_bytes() == gcp.read_bytes()
+    with live.client() as c:
+        flight = c.get(f"/flights/{rep.flight_id}").json()
+        roles = {f["name"]: f["role"] for f in flight["files"]}
+        assert roles["images.txt"] == "orientations" and roles["office/gcp.csv"] == "gcp"
+        assert roles["radio/000000.ubx"] == "base_obs" and flight["status"] == "complete"
+    clash = tmp_path / "radio"
+    clash.write_bytes(b"x")
+    with pytest.raises(UploadError, match="HTTP 400.*also the folder"):
+        up.add_files(rep.flight_id, {"radio": clash})
+    up.close()

@@ -42,14 +42,21 @@ def live(tmp_path: Path) -> Iterator[LiveServer]:
         srv.stop()
 
 
-def make_flight(data: Path, name: str, size: int, seed: int) -> Path:
-    """A closed flight as the recorder leaves it: two segments, manifest, events.jsonl, queued ready."""
-    d = data / name
+def _journal(d: Path, size: int, seed: int) -> None:
     journal = Journal(d, SystemClock(), JournalOptions(segment_max_bytes=size // 2 + 1))
     rnd = __import__("random").Random(seed)
     for _ in range(size // 4096):
         journal.append(rnd.randbytes(4096), time.monotonic_ns(), time.time_ns())
     journal.close("test")
+
+
+def make_flight(data: Path, name: str, size: int, seed: int, radio_bytes: int = 0) -> Path:
+    """A closed flight as the recorder leaves it: two segments, manifest, events.jsonl, queued ready; with
+    `radio_bytes`, also the corrections sub-journal radio/ (two segments and its own manifest)."""
+    d = data / name
+    _journal(d, size, seed)
+    if radio_bytes:
+        _journal(d / "radio", radio_bytes, seed + 100)
     (d / "events.jsonl").write_text('{"type": "flight", "event": "closed"}\n')
     UploadQueue(data).enqueue(name, True, 0)
     return d
@@ -97,8 +104,9 @@ def server_files(live: LiveServer) -> dict[str, dict[str, str]]:
 
 
 def local_files(d: Path) -> dict[str, str]:
-    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(d.iterdir())
-            if p.is_file() and not p.name.startswith(".")}
+    """relative name (sub-folders with /) → SHA-256 of every file of a flight folder but hidden and .tmp ones."""
+    return {p.relative_to(d).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(d.rglob("*"))
+            if p.is_file() and not p.name.startswith(".") and not p.name.endswith(".tmp")}
 
 
 def write_autopilot(settings: Settings, **snap: Any) -> None:
@@ -190,24 +198,30 @@ def test_backoff_when_the_server_is_unreachable(tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_delete_after_upload_only_confirmed_files(tmp_path: Path, live: LiveServer) -> None:
     data = tmp_path / "data"
-    flight = make_flight(data, "flight-20260501T100000Z", 100_000, 5)
-    (flight / "radio").mkdir()
-    (flight / "radio" / "000000.ubx").write_bytes(b"radio")  # a sub-folder is never uploaded: never deleted
-    names = sorted(local_files(flight))
+    flight = make_flight(data, "flight-20260501T100000Z", 100_000, 5, radio_bytes=30_000)
+    (flight / "radio" / "000002.ubx.tmp").write_bytes(b"radio")  # a temporary file is never uploaded: never deleted
+    files = local_files(flight)
+    names = sorted(files)
+    assert {"radio/000000.ubx", "radio/000001.ubx", "radio/manifest.json"} <= set(names)
     svc = service_for(settings_for(tmp_path, live.url, upload_delete_after_upload=True))
     assert svc.step() == 0.0
-    # the closed manifest stays with what is left, so that the recorder never takes the folder for an unclosed flight
-    assert sorted(p.name for p in flight.iterdir()) == ["manifest.json", "radio"]
-    assert UploadQueue(data).done()[flight.name]["deleted"] == [n for n in names if n != "manifest.json"]
-    assert sorted(server_files(live)[flight.name]) == names
+    assert server_files(live)[flight.name] == files  # radio/ too, byte-identical by SHA-256
+    # each closed manifest stays with what is left in its folder, so that the recorder never takes the folder for
+    # an unclosed flight (nor the radio journal for a torn one)
+    left = sorted(p.relative_to(flight).as_posix() for p in flight.rglob("*") if p.is_file())
+    assert left == ["manifest.json", "radio/000002.ubx.tmp", "radio/manifest.json"]
+    assert sorted(UploadQueue(data).done()[flight.name]["deleted"]) == [
+        n for n in names if n not in ("manifest.json", "radio/manifest.json")]
 
 
 def test_delete_after_upload_removes_the_whole_flight(tmp_path: Path, live: LiveServer) -> None:
     data = tmp_path / "data"
-    flight = make_flight(data, "flight-20260501T100000Z", 100_000, 8)
-    names = sorted(local_files(flight))
+    flight = make_flight(data, "flight-20260501T100000Z", 100_000, 8, radio_bytes=20_000)
+    files = local_files(flight)
+    names = sorted(files)
     svc = service_for(settings_for(tmp_path, live.url, upload_delete_after_upload=True))
     assert svc.step() == 0.0
+    assert server_files(live)[flight.name] == files
     assert not flight.exists()
     assert sorted(UploadQueue(data).done()[flight.name]["deleted"]) == names
     assert svc.step() == 0.2 and svc.status.state == "idle"  # nothing queued, nothing failed

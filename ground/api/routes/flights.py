@@ -5,7 +5,8 @@ Upload protocol (every route needs `Authorization: Bearer <token>` of a role the
 
 1. `POST /flights` {name, files: [{name, size, sha256, role?}]} → 201 with the flight id (200 with the same
    flight when name and files are identical: an uploader restarted from scratch resumes; 409 when the name
-   exists with other files). Names are single path components (no `/`, `\\`, `..`, NUL, leading dot).
+   exists with other files). Names are relative paths of the flight folder (`events.jsonl`, `radio/000000.ubx`:
+   components of letters, digits, `._+-`, no `..`, `\\`, NUL, leading dot or empty component).
 2. `HEAD /flights/{id}/files/{name}` → `Upload-Offset` (bytes held, where to resume) and `Upload-Length`.
 3. `PUT /flights/{id}/files/{name}?offset=N` body = the next bytes, header `X-Chunk-SHA256` = their SHA-256:
    200 with the new state; 409 if N is not `Upload-Offset`; 422 if the chunk's hash differs (not stored);
@@ -55,6 +56,7 @@ from ground.api.upload import (
     UploadRejected,
     check_chunk,
     check_file_name,
+    check_file_path,
     check_manifest_files,
     check_sha256,
 )
@@ -110,11 +112,12 @@ def flight_dir(settings: ApiSettings, flight_id: str) -> Path:
 
 
 def safe_path(settings: ApiSettings, flight_id: str, name: str) -> Path:
-    """Path of a flight file; the name is validated and the result must stay inside the flight directory."""
-    check_file_name(name)
+    """Path of a flight file (`check_file_path`: a sub-folder such as `radio/` allowed); the result must stay
+    inside the flight directory, also through a symbolic link on the server's disk."""
+    check_file_path(name)
     base = flight_dir(settings, flight_id).resolve()
     p = (base / name).resolve()
-    if p.parent != base:
+    if not p.is_relative_to(base) or p.relative_to(base).as_posix() != name:
         raise UploadRejected(400, f"file name {name!r} escapes the flight directory")
     return p
 
@@ -280,7 +283,7 @@ def _lookup_file(s: Any, flight_id: str, name: str, principal: Principal) -> tup
     return flight, f
 
 
-@router.get("/{flight_id}/files/{name}/content", response_class=FileResponse)
+@router.get("/{flight_id}/files/{name:path}/content", response_class=FileResponse)
 def download_file(flight_id: str, name: str, settings: SettingsDep,
                   store: StoreDep, principal: FileReader) -> FileResponse:
     """The bytes of a completely uploaded file."""
@@ -292,7 +295,7 @@ def download_file(flight_id: str, name: str, settings: SettingsDep,
         _, f = _lookup_file(s, flight_id, name, principal)
         if f.status != "complete":
             raise HTTPException(status_code=409, detail=f"{name} is not completely uploaded")
-    return FileResponse(path, media_type="application/octet-stream", filename=name)
+    return FileResponse(path, media_type="application/octet-stream", filename=path.name)
 
 
 @router.head("/{flight_id}/files/{name:path}")
