@@ -101,7 +101,8 @@ class Ephemeris:
     week (a Galileo or BeiDou toe/toc broadcast in GST/BDT is converted: onboard.gnsstime), `week` the GPS
     week of `toe`. `prn` is the u-blox svId (QZSS 1–10 = PRN 193–202). For the other systems: `iode`/`iodc`
     hold Galileo IODnav (both) or BeiDou AODE/AODC; `ura_index` the Galileo SISA index or BeiDou URAI;
-    `health` Galileo's E1-B health/validity bits (HS << 1 | DVS, as RTKLIB's svh for I/NAV E1) or BeiDou SatH1;
+    `health` Galileo's RINEX SV health word (E5b HS << 7 | E5b DVS << 6 | E1-B HS << 1 | E1-B DVS, as RTKLIB's
+    svh) or BeiDou SatH1; `code_on_l2` the Galileo RINEX data-source bits (RTKLIB's eph.code);
     `tgd_s` Galileo BGD(E1,E5a) or BeiDou TGD1 (B1I), `tgd2_s` Galileo BGD(E1,E5b) or BeiDou TGD2.
     Only GPS ones go into the engine's EphemerisStore today (keyed by PRN).
     """
@@ -159,7 +160,8 @@ class GlonassEphemeris:
     velocity and luni-solar acceleration at tb (m, m/s, m/s²; PZ-90.11 is taken as WGS 84, as RTKLIB does:
     they agree to a few centimetres), `tau_n_s` the satellite clock offset τn (s; satellite time = GLONASS
     time − τn + γn·(t − tb)), `gamma_n` the relative frequency offset γn (s/s), `delta_tau_n_s` Δτn (L2 − L1
-    delay, s), `health` Bn (the MSB, unhealthy when set; as RINEX "health"), `age_days` En, `iode` the 7-bit
+    delay, s), `health` 0 when healthy (bit 0: Bn's MSB, what RTKLIB and RINEX call health; bit 1: the
+    GLONASS-M ln flag of string 3, when decoded from strings), `age_days` En, `iode` the 7-bit
     tb index (tb in 15 min units, RTKLIB's iode for GLONASS), `ft` the accuracy index FT (15 when unknown).
     """
 
