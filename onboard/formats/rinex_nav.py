@@ -124,11 +124,12 @@ def _beidou_from_values(prn: int, toc_bdt: GpsTime, v: list[float]) -> Ephemeris
 
 
 def _qzss_from_values(prn: int, toc: GpsTime, v: list[float]) -> Ephemeris:
-    """A QZSS LNAV record (as GPS; RINEX numbers J01 = PRN 193, we keep the u-blox svId 1–10; the fit
-    "interval" is a flag: 0 → 2 h)."""
+    """A QZSS LNAV record (as GPS; RINEX numbers J01 = PRN 193, we keep the u-blox svId 1–10). The fit field is
+    a flag in RINEX 3 (0 → 2 h, 1 → more: 4 h taken) and hours in some RINEX 2.12 writers (2.0)."""
     e = _ephemeris_from_values(prn, toc, v)
     fit = v[28] if len(v) > 28 else 0.0
-    return dataclasses.replace(e, gnss_id=GNSS_QZSS, fit_interval_h=2.0 if fit == 0.0 else 4.0)
+    hours = 2.0 if fit == 0.0 else 4.0 if fit == 1.0 else fit
+    return dataclasses.replace(e, gnss_id=GNSS_QZSS, fit_interval_h=hours)
 
 
 def _glonass_from_values(slot: int, toc_utc: GpsTime, v: list[float], v3: bool) -> GlonassEphemeris:
