@@ -25,6 +25,7 @@ from onboard.gnsstime import (
     gpst_from_calendar,
     leap_seconds_at_utc,
 )
+from onboard.rtk.ephemeris import sisa_index_from_m
 from onboard.rtk.gnss import QZSS_PRN_OFFSET
 from onboard.rtk.types import GNSS_BEIDOU, GNSS_GALILEO, GNSS_QZSS, Ephemeris, GlonassEphemeris
 
@@ -155,21 +156,6 @@ def _glonass_from_values(slot: int, toc_utc: GpsTime, v: list[float], v3: bool) 
         acc_m_s2=(v[5] * 1e3, v[9] * 1e3, v[13] * 1e3), tau_n_s=-v[0], gamma_n=v[1], health=int(v[6]),
         age_days=int(v[14]), iode=round(tb_glo_s / 900.0) & 0x7F,
     )
-
-
-_SISA_STEPS = ((0.0, 0.01, 0, 50), (0.5, 0.02, 50, 75), (1.0, 0.04, 75, 100), (2.0, 0.16, 100, 126))
-
-
-def sisa_index_from_m(sisa_m: float) -> int:
-    """Galileo SISA index (OS SIS ICD 5.1.12) for the signal-in-space accuracy (m) RINEX stores; 255 = no
-    accuracy prediction available (NAPA, a negative or unknown value)."""
-    if sisa_m < 0.0 or math.isnan(sisa_m):
-        return 255
-    for base, step, first, end in _SISA_STEPS:
-        k = first + math.ceil(round((sisa_m - base) / step, 6))
-        if k < end:
-            return max(k, first)
-    return 255
 
 
 def ura_index_from_m(sva_m: float) -> int:

@@ -41,6 +41,32 @@ def ura_sigma_m(ura_index: int) -> float:
     return _URA_M[ura_index] if 0 <= ura_index < len(_URA_M) else 6144.0
 
 
+_SISA_STEPS = ((0.0, 0.01, 0, 50), (0.5, 0.02, 50, 75), (1.0, 0.04, 75, 100), (2.0, 0.16, 100, 126))
+"""Galileo SISA index ranges (OS SIS ICD 5.1.12): (first value m, step m, first index, end index)."""
+SISA_NAPA = 255
+"""Galileo SISA index "no accuracy prediction available"."""
+
+
+def sisa_sigma_m(index: int) -> float:
+    """Galileo signal-in-space accuracy (m) of a SISA index; 6144 m (as an unusable URA) for NAPA/spare."""
+    for base, step, first, end in _SISA_STEPS:
+        if first <= index < end:
+            return base + step * (index - first)
+    return 6144.0
+
+
+def sisa_index_from_m(sisa_m: float) -> int:
+    """Galileo SISA index for an accuracy (m), the smallest that covers it (RINEX stores metres); NAPA (255)
+    for a negative, NaN or too large value."""
+    if sisa_m < 0.0 or math.isnan(sisa_m):
+        return SISA_NAPA
+    for base, step, first, end in _SISA_STEPS:
+        k = first + math.ceil(round((sisa_m - base) / step, 6))
+        if k < end:
+            return max(k, first)
+    return SISA_NAPA
+
+
 def eph_clock_s(eph: Ephemeris, t: GpsTime) -> float:
     """Satellite clock bias (s) at GPS time `t` without relativity or TGD (RTKLIB eph2clk, one iteration)."""
     dt = t.diff_s(eph.toc)
