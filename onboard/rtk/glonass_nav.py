@@ -4,7 +4,9 @@ Pure: no I/O. A string is 85 bits, bit 85 (always 0) sent first, data bits 84..9
 u-blox RXM-SFRBX form (M8 Receiver Description, "GLONASS"): four 32-bit words, the string's 85 bits
 left-aligned in words 1–3 (zero padded), word 4 the receiver's frame identifier (superframe number in bits
 31..16, frame number 1–5 in bits 7..0). The immediate data (ephemeris) are strings 1–4 of one frame: they are
-only combined when their frame identifiers agree, so strings of two different tb never mix.
+only combined when their frame identifiers agree, so strings of two different tb never mix. The date of tb
+comes from string 4's day number NT and string 5's four-year interval N4 once a string 5 was seen (else from
+the receiver's reference time: tb and tk are times of day).
 
 Hamming code (ICD 4.7): check bit βk (k = 1..7) covers the data bits whose Hamming position has bit k−1 set, the
 data bits b9..b85 taking the positions 3, 5, 6, 7, 9, … (powers of two skipped); C_Σ covers all 85 bits. A string
@@ -18,7 +20,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 
-from onboard.gnsstime import GpsTime, gpst_from_glonass_tod
+from onboard.gnsstime import GpsTime, gpst_from_glonass_day, gpst_from_glonass_tod
 from onboard.rtk.navbits import BitField
 from onboard.rtk.types import GlonassEphemeris
 
@@ -91,12 +93,19 @@ def _fields(strings: dict[int, int]) -> dict[str, float | int]:
     }
 
 
+def string5_n4(string85: int) -> int:
+    """N4, the four-year interval number (1 = 1996–1999) of string 5 (bits 49–53 from bit 85)."""
+    return BitField(string85, STRING_BITS).u(49, 5)
+
+
 def ephemeris_from_strings(strings: dict[int, int], channel: int, reference: GpsTime,
-                           leap_s: int) -> GlonassEphemeris:
+                           leap_s: int, n4: int | None = None) -> GlonassEphemeris:
     """GlonassEphemeris from strings 1–4 of one frame (85-bit ints by string number).
 
     `channel` the frequency channel k (RXM-SFRBX freqId − 7), `reference` a GPS time within 12 h of the frame
     (e.g. the receiver time of the last string: tb and tk carry only the time of day), `leap_s` GPST − UTC (s).
+    With `n4` (string 5's four-year interval, from any frame) and string 4's day number NT the date of tb is
+    the broadcast one and the reference only places tk; a NT of 0 (not given) falls back to the reference.
     Raises GlonassNavError when a string is missing or the slot is 0.
     """
     missing = [m for m in (1, 2, 3, 4) if m not in strings]
@@ -107,9 +116,13 @@ def ephemeris_from_strings(strings: dict[int, int], channel: int, reference: Gps
     if not 1 <= slot <= 24:
         raise GlonassNavError(f"slot number {slot} in string 4")
     tb = int(f["tb"])
-    toe = gpst_from_glonass_tod(tb * 900.0, reference, leap_s)
+    nt = int(f["nt"])
+    if n4 and nt:
+        toe = gpst_from_glonass_day(n4, nt, tb * 900.0, leap_s)  # tb counts within the day NT names
+    else:
+        toe = gpst_from_glonass_tod(tb * 900.0, reference, leap_s)
     tk_s = int(f["tk_h"]) * 3600 + int(f["tk_min"]) * 60 + int(f["tk_30s"]) * 30
-    tof = gpst_from_glonass_tod(float(tk_s), reference, leap_s)
+    tof = gpst_from_glonass_tod(float(tk_s), toe, leap_s)  # the frame is sent within the interval around tb
     return GlonassEphemeris(
         slot=slot, channel=channel, toe=toe, tof=tof,
         pos_m=(float(f["x"]), float(f["y"]), float(f["z"])),
@@ -133,6 +146,7 @@ class GlonassStringAssembler:
         self.leap_s = leap_s
         self._frames: dict[int, tuple[int, dict[int, int]]] = {}
         self._last: dict[int, GlonassEphemeris] = {}
+        self._n4: dict[int, int] = {}
         self.hamming_failures = 0
         self.rejected = 0
 
@@ -157,10 +171,12 @@ class GlonassStringAssembler:
             held = (frame_id, {})
             self._frames[sv_id] = held
         held[1][m] = s
+        if m == 5:
+            self._n4[sv_id] = string5_n4(s)  # changes once in four years: any frame's will do
         if m > 4 or not all(k in held[1] for k in (1, 2, 3, 4)):
             return None
         try:
-            eph = ephemeris_from_strings(held[1], freq_id - 7, reference, self.leap_s)
+            eph = ephemeris_from_strings(held[1], freq_id - 7, reference, self.leap_s, self._n4.get(sv_id))
         except GlonassNavError as exc:
             self.rejected += 1
             log.debug("GLONASS slot %d: %s", sv_id, exc)

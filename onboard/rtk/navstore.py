@@ -111,9 +111,10 @@ class BroadcastNavigation:
     def select(self, gnss_id: int, sv_id: int, t: GpsTime) -> AnyEphemeris | None:
         """The ephemeris of the satellite whose toe is nearest `t` within the system's largest age (Galileo:
         I/NAV first), the later one on a tie; None when there is none."""
-        candidates = self._by_sat.get((gnss_id, sv_id), ())
+        candidates: list[AnyEphemeris] = self._by_sat.get((gnss_id, sv_id), [])
         if gnss_id == GNSS_GALILEO:
-            inav = [e for e in candidates if isinstance(e, Ephemeris) and e.code_on_l2 & _INAV_SOURCES]
+            inav: list[AnyEphemeris] = [e for e in candidates
+                                        if isinstance(e, Ephemeris) and e.code_on_l2 & _INAV_SOURCES]
             candidates = inav or candidates
         best, best_dt = None, system(gnss_id).max_eph_age_s
         for eph in candidates:

@@ -295,3 +295,29 @@ def test_beidou_toe_across_the_week_rollover() -> None:
     week = pages[1].u(64, 13)
     e = ephemeris_from_d2(1, pages)
     assert e.toe == GpsTime.from_week_tow_s(week + 1 + 1356, 1800 + 14)
+
+
+@pytest.mark.parametrize(("rel", "n4"), [(f"{M8P}/raw/rover-20181004-1237.ubx.gz", 6), (F9_LOG, 8)])
+def test_glonass_date_from_n4_and_nt_needs_no_reference(rel: str, n4: int) -> None:
+    """String 5's N4 (2016–2019 is interval 6, 2024–2027 is 8) with string 4's NT date tb: the same toe as the
+    receiver-time placement, and still right from a reference days away."""
+    strings: dict[int, dict[int, int]] = {}
+    frames: dict[int, int] = {}
+    for frame in _frames(shared_file(rel)):
+        if (frame.msg_class, frame.msg_id) != (0x02, 0x13):
+            continue
+        m = decode_sfrbx(frame.payload)
+        if m.gnss_id != GNSS_GLONASS or m.sig_id != 0 or not 1 <= m.sv_id <= 24:
+            continue
+        s = glonass_nav.string_bits(m.words)
+        if frames.get(m.sv_id) != m.words[3]:
+            frames[m.sv_id], strings[m.sv_id] = m.words[3], {}
+        strings[m.sv_id][glonass_nav.string_number(s)] = s
+        if all(k in strings[m.sv_id] for k in (1, 2, 3, 4, 5)):
+            break
+    sv, held = next((sv, h) for sv, h in strings.items() if all(k in h for k in (1, 2, 3, 4, 5)))
+    assert glonass_nav.string5_n4(held[5]) == n4
+    by_ref = next(e for e in _decoded(rel) if isinstance(e, GlonassEphemeris) and e.slot == sv)
+    far = by_ref.toe.add_s(3 * 86400 + 5 * 3600)
+    dated = glonass_nav.ephemeris_from_strings(held, by_ref.channel, far, 18, n4)
+    assert dated.toe.diff_s(by_ref.toe) % 1800 == 0 and abs(dated.toe.diff_s(by_ref.toe)) < 3600
