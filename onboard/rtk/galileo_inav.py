@@ -93,6 +93,10 @@ def ephemeris_from_words(words: dict[int, BitField], data_source: int = DATA_SOU
     elif toe.diff_s(t_tx) < -SECONDS_PER_WEEK / 2:
         toe = toe.add_s(SECONDS_PER_WEEK)
     toc = GpsTime.from_week_tow_s(toe.week, float(f["toc_s"]))
+    if toc.diff_s(toe) > SECONDS_PER_WEEK / 2:  # toc and toe on either side of a week start
+        toc = toc.add_s(-SECONDS_PER_WEEK)
+    elif toc.diff_s(toe) < -SECONDS_PER_WEEK / 2:
+        toc = toc.add_s(SECONDS_PER_WEEK)
     iod = iods.pop()
     health = (int(f["e5b_hs"]) << 7) | (int(f["e5b_dvs"]) << 6) | (int(f["e1b_hs"]) << 1) | int(f["e1b_dvs"])
     return Ephemeris(

@@ -14,6 +14,8 @@ from onboard.rtk.navstore import BroadcastNavigation, is_healthy, satellite_stat
 from onboard.rtk.types import GNSS_GALILEO, GNSS_GLONASS, GNSS_GPS, GNSS_QZSS
 from tests.conftest import shared_file
 
+pytestmark = pytest.mark.shared_data
+
 SEPT_NAV = "gnss/geonet-3034-sept-20210922/SEPT2650.21P.gz"
 GLO_NAV = "gnss/broadcast-nav-20121031/brdc3050.12g"
 

@@ -19,6 +19,8 @@ from onboard.rtk.gnss import QZSS_PRN_OFFSET
 from onboard.rtk.types import GNSS_GALILEO, GNSS_QZSS, Ephemeris, GlonassEphemeris
 from tests.conftest import shared_file
 
+pytestmark = pytest.mark.shared_data
+
 GLO_NAV = "gnss/broadcast-nav-20121031/brdc3050.12g"
 QZS_NAV = "gnss/broadcast-nav-20121031/brdc3050.12q"
 SEPT_NAV = "gnss/geonet-3034-sept-20210922/SEPT2650.21P.gz"

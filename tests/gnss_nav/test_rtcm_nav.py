@@ -23,6 +23,8 @@ from onboard.rtk.gnss import is_beidou_geo
 from onboard.rtk.types import GNSS_BEIDOU, GNSS_GALILEO, Ephemeris, GlonassEphemeris
 from tests.conftest import shared_file
 
+pytestmark = pytest.mark.shared_data
+
 # stream → (a GPS time within hours of it: the week and toe of its 1019 GPS ephemerides, leap seconds)
 STREAMS = {
     "rtcm/rtklib_testglo.rtcm3": (GpsTime(1562, 518_400 * 10**9), 15),

@@ -39,6 +39,8 @@ from onboard.rtk.types import (
 )
 from tests.conftest import shared_file
 
+pytestmark = pytest.mark.shared_data
+
 M8P = "gnss/ublox-m8p-galway-2018"
 LOGS = ("base-20181004-1236", "rover-20181004-1237", "base-20181004-1452", "rover-20181004-1532")
 F9_LOG = "ubx/pygnssutils_pygpsdata_testobsnavdata.log"
