@@ -136,3 +136,75 @@ def resolve_week(tow_s: float, reference: GpsTime) -> GpsTime:
     elif dt < -SECONDS_PER_WEEK / 2:
         t = t.add_ns(NS_PER_WEEK)
     return t
+
+
+# ------------------------------------------------------------------------------------------------ time systems
+# Every instant is kept on the GPS time scale (GpsTime); these convert the other systems' broadcast times to it.
+
+GST_WEEK_OFFSET = 1024
+"""GPS week of Galileo System Time week 0 (GST started 1999-08-22 00:00 UTC = GPS week 1024, 13 s ahead of UTC;
+GST runs in step with GPST: GST = GPST, only the week count differs)."""
+BDT_WEEK_OFFSET = 1356
+"""GPS week of BeiDou Time week 0 (BDT started 2006-01-01 00:00:00 UTC, when GPST − UTC was 14 s)."""
+BDT_MINUS_GPST_S = -14
+"""BDT − GPST, s (BDT has no leap seconds and started 14 s behind GPST)."""
+GLONASST_MINUS_UTC_S = 3 * 3600
+"""GLONASS time − UTC(SU), s (Moscow time: GLONASS time follows UTC leap seconds)."""
+
+
+def gpst_from_gst(gst_week: int, gst_tow_ns: int) -> GpsTime:
+    """GPS time of a Galileo System Time instant (GST week number as broadcast, 0 at 1999-08-22; ns of week)."""
+    return GpsTime.from_week_tow_ns(gst_week + GST_WEEK_OFFSET, gst_tow_ns)
+
+
+def gst_week_tow_ns(t: GpsTime) -> tuple[int, int]:
+    """The GST (week, ns of week) of GPS time `t`."""
+    return t.week - GST_WEEK_OFFSET, t.tow_ns
+
+
+def gpst_from_bdt(bdt_week: int, bdt_tow_ns: int) -> GpsTime:
+    """GPS time of a BeiDou Time instant (BDT week, 0 at 2006-01-01; ns of BDT week): GPST = BDT + 14 s."""
+    return GpsTime.from_week_tow_ns(bdt_week + BDT_WEEK_OFFSET, bdt_tow_ns - BDT_MINUS_GPST_S * NS_PER_S)
+
+
+def bdt_week_tow_ns(t: GpsTime) -> tuple[int, int]:
+    """The BDT (week, ns of week) of GPS time `t` (BDT = GPST − 14 s)."""
+    b = t.add_ns(BDT_MINUS_GPST_S * NS_PER_S)
+    return b.week - BDT_WEEK_OFFSET, b.tow_ns
+
+
+def gpst_from_glonass_datetime(glonass_time: _dt.datetime, leap_s: int) -> GpsTime:
+    """GPS time of a GLONASS time calendar instant (UTC(SU) + 3 h; naive or UTC-tagged, read as GLONASS time).
+
+    `leap_s` is GPST − UTC at that instant (s; 18 since 2017): GPST = GLONASS time − 3 h + leap_s. It is a
+    parameter because the broadcast GLONASS message and RINEX carry it separately (or not at all).
+    """
+    g = glonass_time.replace(tzinfo=None) - GPS_EPOCH.replace(tzinfo=None)
+    ns = (g.days * 86_400 + g.seconds) * NS_PER_S + g.microseconds * 1_000
+    return GpsTime.from_total_ns(ns + (leap_s - GLONASST_MINUS_UTC_S) * NS_PER_S)
+
+
+def glonass_datetime(t: GpsTime, leap_s: int) -> _dt.datetime:
+    """The GLONASS time calendar instant (naive datetime, µs resolution) of GPS time `t`; `leap_s` = GPST − UTC."""
+    return t.add_ns((GLONASST_MINUS_UTC_S - leap_s) * NS_PER_S).to_gpst_datetime().replace(tzinfo=None)
+
+
+def gpst_from_glonass_tod(tod_s: float, reference: GpsTime, leap_s: int) -> GpsTime:
+    """GPS time of the GLONASS time of day `tod_s` (s since 00:00 GLONASS time) nearest `reference` (within
+    half a day: the broadcast tb/tk carry no date). `leap_s` = GPST − UTC."""
+    day_ns = 86_400 * NS_PER_S
+    ref_glo = reference.total_ns + (GLONASST_MINUS_UTC_S - leap_s) * NS_PER_S  # GLONASS time, ns since 1980-01-06
+    day_start = ref_glo - ref_glo % day_ns
+    t = day_start + round(tod_s * NS_PER_S)
+    if t - ref_glo > day_ns // 2:
+        t -= day_ns
+    elif t - ref_glo < -day_ns // 2:
+        t += day_ns
+    return GpsTime.from_total_ns(t - (GLONASST_MINUS_UTC_S - leap_s) * NS_PER_S)
+
+
+def gpst_from_glonass_day(n4: int, nt: int, tod_s: float, leap_s: int) -> GpsTime:
+    """GPS time of a GLONASS date given as the broadcast four-year interval `n4` (1 = 1996–1999), day `nt`
+    within it (1 = 1 January of the leap year) and time of day `tod_s` (GLONASS ICD 5.1 A.3.1.3)."""
+    start = _dt.datetime(1996 + 4 * (n4 - 1), 1, 1) + _dt.timedelta(days=nt - 1)
+    return gpst_from_glonass_datetime(start, leap_s).add_ns(round(tod_s * NS_PER_S))

@@ -9,6 +9,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import Enum
 
+# RTCM3 frames and Galileo I/NAV pages share the CRC-24Q: one implementation, in the core (re-exported here)
+from onboard.rtk.navbits import crc24q
+
 UBX_SYNC = b"\xb5\x62"
 RTCM3_PREAMBLE = 0xD3
 MAX_UBX_PAYLOAD = 8192
@@ -59,24 +62,6 @@ def ubx_frame(msg_class: int, msg_id: int, payload: bytes) -> bytes:
     """A complete UBX frame (sync, class, id, little-endian length, payload, checksum)."""
     body = bytes((msg_class, msg_id)) + len(payload).to_bytes(2, "little") + payload
     return UBX_SYNC + body + ubx_checksum(body)
-
-
-_CRC24Q_TABLE: list[int] = []
-for _i in range(256):
-    _c = _i << 16
-    for _ in range(8):
-        _c <<= 1
-        if _c & 0x1000000:
-            _c ^= 0x1864CFB
-    _CRC24Q_TABLE.append(_c & 0xFFFFFF)
-
-
-def crc24q(data: bytes | bytearray) -> int:
-    """CRC-24Q (RTCM3, Qualcomm polynomial 0x1864CFB) of `data`."""
-    crc = 0
-    for byte in data:
-        crc = ((crc << 8) & 0xFFFFFF) ^ _CRC24Q_TABLE[(crc >> 16) ^ byte]
-    return crc
 
 
 class StreamFramer:

@@ -18,3 +18,19 @@ WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
 """WGS 84 first eccentricity squared."""
 F_REL_S_SQRT_M = -4.442807633e-10
 """Relativistic clock-correction constant F = −2√μ/c², s/√m (IS-GPS-200 20.3.3.3.3.1)."""
+MU_GAL_M3_S2 = 3.986004418e14
+"""Earth's gravitational constant of Galileo (GTRF, OS SIS ICD 5.1.1), m³/s²."""
+OMEGA_E_GAL_RAD_S = 7.2921151467e-5
+"""Earth rotation rate used by Galileo, rad/s."""
+MU_BDS_M3_S2 = 3.986004418e14
+"""Earth's gravitational constant of BeiDou (CGCS2000, B1I ICD 5.2.4.11), m³/s²."""
+OMEGA_E_BDS_RAD_S = 7.2921150e-5
+"""Earth rotation rate of CGCS2000 used by BeiDou, rad/s."""
+MU_GLO_M3_S2 = 3.9860044e14
+"""Earth's gravitational constant of PZ-90 (GLONASS ICD 5.1 A.3.1.2), m³/s²."""
+OMEGA_E_GLO_RAD_S = 7.292115e-5
+"""Earth rotation rate of PZ-90, rad/s."""
+J2_GLO = 1.0826257e-3
+"""Second zonal harmonic of the geopotential in the GLONASS equations of motion (PZ-90)."""
+RE_GLO_M = 6_378_136.0
+"""PZ-90 equatorial radius used in the GLONASS equations of motion, m."""

@@ -1,19 +1,33 @@
-"""Satellite position, velocity and clock from GPS LNAV broadcast ephemerides.
+"""Satellite position, velocity and clock from Keplerian broadcast ephemerides (GPS LNAV; one evaluation for
+Galileo, BeiDou and QZSS too, with their constants: eph_position).
 
-Follows IS-GPS-200 20.3.3.4.3 and RTKLIB ephemeris.c eph2pos()/eph2clk()/satposs().
+Follows IS-GPS-200 20.3.3.4.3, the Galileo OS SIS ICD 5.1.1, the BeiDou B1I ICD 5.2.4 and RTKLIB ephemeris.c
+eph2pos()/eph2clk()/satposs() (read to check constants). The batched engine path (satellite_states*) and
+EphemerisStore are GPS only today.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from onboard.gnsstime import NS_PER_S, GpsTime
-from onboard.rtk.consts import CLIGHT_M_S, F_REL_S_SQRT_M, MU_GPS_M3_S2, OMEGA_E_RAD_S
-from onboard.rtk.types import Ephemeris
+from onboard.gnsstime import BDT_MINUS_GPST_S, NS_PER_S, GpsTime
+from onboard.rtk.consts import (
+    CLIGHT_M_S,
+    F_REL_S_SQRT_M,
+    MU_BDS_M3_S2,
+    MU_GAL_M3_S2,
+    MU_GPS_M3_S2,
+    OMEGA_E_BDS_RAD_S,
+    OMEGA_E_GAL_RAD_S,
+    OMEGA_E_RAD_S,
+)
+from onboard.rtk.gnss import is_beidou_geo
+from onboard.rtk.types import GNSS_BEIDOU, GNSS_GALILEO, GNSS_GPS, GNSS_QZSS, Ephemeris
 
 MAX_EPH_AGE_S = 7200.0 + 60.0
 """Largest |t − toe| for which an ephemeris is used (RTKLIB MAXDTOE for GPS, s)."""
@@ -27,6 +41,32 @@ def ura_sigma_m(ura_index: int) -> float:
     return _URA_M[ura_index] if 0 <= ura_index < len(_URA_M) else 6144.0
 
 
+_SISA_STEPS = ((0.0, 0.01, 0, 50), (0.5, 0.02, 50, 75), (1.0, 0.04, 75, 100), (2.0, 0.16, 100, 126))
+"""Galileo SISA index ranges (OS SIS ICD 5.1.12): (first value m, step m, first index, end index)."""
+SISA_NAPA = 255
+"""Galileo SISA index "no accuracy prediction available"."""
+
+
+def sisa_sigma_m(index: int) -> float:
+    """Galileo signal-in-space accuracy (m) of a SISA index; 6144 m (as an unusable URA) for NAPA/spare."""
+    for base, step, first, end in _SISA_STEPS:
+        if first <= index < end:
+            return base + step * (index - first)
+    return 6144.0
+
+
+def sisa_index_from_m(sisa_m: float) -> int:
+    """Galileo SISA index for an accuracy (m), the smallest that covers it (RINEX stores metres); NAPA (255)
+    for a negative, NaN or too large value."""
+    if sisa_m < 0.0 or math.isnan(sisa_m):
+        return SISA_NAPA
+    for base, step, first, end in _SISA_STEPS:
+        k = first + math.ceil(round((sisa_m - base) / step, 6))
+        if k < end:
+            return max(k, first)
+    return SISA_NAPA
+
+
 def eph_clock_s(eph: Ephemeris, t: GpsTime) -> float:
     """Satellite clock bias (s) at GPS time `t` without relativity or TGD (RTKLIB eph2clk, one iteration)."""
     dt = t.diff_s(eph.toc)
@@ -35,14 +75,62 @@ def eph_clock_s(eph: Ephemeris, t: GpsTime) -> float:
     return eph.af0_s + eph.af1_s_s * dt + eph.af2_s_s2 * dt * dt
 
 
+@dataclass(frozen=True)
+class KeplerConstants:
+    """What the Keplerian broadcast orbit needs per system: `mu_m3_s2` the gravitational constant,
+    `omega_e_rad_s` the Earth rotation rate, `f_rel_s_sqrt_m` the relativistic clock constant −2√μ/c²."""
+
+    mu_m3_s2: float
+    omega_e_rad_s: float
+    f_rel_s_sqrt_m: float
+
+
+def _kepler_constants(mu_m3_s2: float, omega_e_rad_s: float) -> KeplerConstants:
+    return KeplerConstants(mu_m3_s2, omega_e_rad_s, -2.0 * math.sqrt(mu_m3_s2) / (CLIGHT_M_S * CLIGHT_M_S))
+
+
+KEPLER_GPS = KeplerConstants(MU_GPS_M3_S2, OMEGA_E_RAD_S, F_REL_S_SQRT_M)
+"""GPS and QZSS (IS-GPS-200, IS-QZSS: WGS 84 values)."""
+KEPLER_GALILEO = _kepler_constants(MU_GAL_M3_S2, OMEGA_E_GAL_RAD_S)
+"""Galileo (OS SIS ICD 5.1.1: GTRF)."""
+KEPLER_BEIDOU = _kepler_constants(MU_BDS_M3_S2, OMEGA_E_BDS_RAD_S)
+"""BeiDou (B1I ICD 5.2.4.11: CGCS2000)."""
+_KEPLER_BY_GNSS = {GNSS_GPS: KEPLER_GPS, GNSS_QZSS: KEPLER_GPS, GNSS_GALILEO: KEPLER_GALILEO,
+                   GNSS_BEIDOU: KEPLER_BEIDOU}
+
+_SIN_M5, _COS_M5 = math.sin(math.radians(-5.0)), math.cos(math.radians(-5.0))
+"""The BeiDou GEO orbital frame is inclined by −5° about x against the CGCS2000 rotating frame."""
+
+
+def kepler_constants(gnss_id: int) -> KeplerConstants:
+    """The Keplerian constants of a system (u-blox gnssId); ValueError for GLONASS/SBAS (not Keplerian)."""
+    try:
+        return _KEPLER_BY_GNSS[gnss_id]
+    except KeyError:
+        raise ValueError(f"gnssId {gnss_id} has no Keplerian broadcast ephemeris") from None
+
+
+def toe_system_tow_s(eph: Ephemeris) -> float:
+    """toe in seconds of week of the ephemeris's own time system (BDT for BeiDou, else GPST = GST tow)."""
+    if eph.gnss_id == GNSS_BEIDOU:
+        return eph.toe.add_ns(BDT_MINUS_GPST_S * NS_PER_S).tow_s
+    return eph.toe_s
+
+
 def eph_position(eph: Ephemeris, t: GpsTime) -> tuple[npt.NDArray[np.float64], float]:
     """Satellite antenna position (ECEF m, at transmission time `t`, frame of `t`) and clock bias (s).
 
-    The clock bias includes the relativistic eccentricity term, not the TGD (apply −TGD for L1 C/A).
+    Any Keplerian system (`eph.gnss_id`: GPS, QZSS, Galileo, BeiDou) with its own μ and Ω̇e; BeiDou GEO
+    satellites (PRN 1–5, 59–63) are rotated from their −5° inclined frame (B1I ICD 5.2.4.12). The frame is
+    the system's (WGS 84, GTRF, CGCS2000: equal at the centimetre level). The clock bias includes the
+    relativistic eccentricity term, not the group delay (apply −TGD for L1 C/A: l1_group_delay_s).
     """
+    k = KEPLER_GPS if eph.gnss_id == GNSS_GPS else kepler_constants(eph.gnss_id)
+    mu, omega_e = k.mu_m3_s2, k.omega_e_rad_s
+    toe_s = eph.toe_s if eph.gnss_id == GNSS_GPS else toe_system_tow_s(eph)
     tk = t.diff_s(eph.toe)
     a = eph.sqrt_a * eph.sqrt_a
-    n = np.sqrt(MU_GPS_M3_S2 / (a * a * a)) + eph.delta_n_rad_s
+    n = np.sqrt(mu / (a * a * a)) + eph.delta_n_rad_s
     mk = eph.m0_rad + n * tk
     ek = mk
     for _ in range(30):
@@ -60,11 +148,28 @@ def eph_position(eph: Ephemeris, t: GpsTime) -> tuple[npt.NDArray[np.float64], f
     r += eph.crs_m * sin2u + eph.crc_m * cos2u
     inc += eph.cis_rad * sin2u + eph.cic_rad * cos2u
     x, y = r * np.cos(u), r * np.sin(u)
-    omega = eph.omega0_rad + (eph.omega_dot_rad_s - OMEGA_E_RAD_S) * tk - OMEGA_E_RAD_S * eph.toe_s
-    cos_o, sin_o, cos_i = np.cos(omega), np.sin(omega), np.cos(inc)
-    pos = np.array([x * cos_o - y * cos_i * sin_o, x * sin_o + y * cos_i * cos_o, y * np.sin(inc)])
-    dts = eph_clock_s(eph, t) + F_REL_S_SQRT_M * eph.e * eph.sqrt_a * sin_e
+    if eph.gnss_id == GNSS_BEIDOU and is_beidou_geo(eph.prn):
+        # GEO: the node in inertial space (no −Ω̇e·tk), then the CGCS2000 rotation by Ω̇e·tk after the −5° tilt
+        omega = eph.omega0_rad + eph.omega_dot_rad_s * tk - omega_e * toe_s
+        cos_o, sin_o, cos_i = np.cos(omega), np.sin(omega), np.cos(inc)
+        xg, yg, zg = x * cos_o - y * cos_i * sin_o, x * sin_o + y * cos_i * cos_o, y * np.sin(inc)
+        sin_r, cos_r = np.sin(omega_e * tk), np.cos(omega_e * tk)
+        pos = np.array([xg * cos_r + yg * sin_r * _COS_M5 + zg * sin_r * _SIN_M5,
+                        -xg * sin_r + yg * cos_r * _COS_M5 + zg * cos_r * _SIN_M5,
+                        -yg * _SIN_M5 + zg * _COS_M5])
+    else:
+        omega = eph.omega0_rad + (eph.omega_dot_rad_s - omega_e) * tk - omega_e * toe_s
+        cos_o, sin_o, cos_i = np.cos(omega), np.sin(omega), np.cos(inc)
+        pos = np.array([x * cos_o - y * cos_i * sin_o, x * sin_o + y * cos_i * cos_o, y * np.sin(inc)])
+    dts = eph_clock_s(eph, t) + k.f_rel_s_sqrt_m * eph.e * eph.sqrt_a * sin_e
     return pos, float(dts)
+
+
+def l1_group_delay_s(eph: Ephemeris) -> float:
+    """The group delay (s) a single-frequency user subtracts from `eph`'s clock for the L1-band signal the M8T
+    tracks: TGD for GPS/QZSS L1 C/A, BGD(E1,E5b) for Galileo E1 (I/NAV clocks are for the E1/E5b pair),
+    TGD1 for BeiDou B1I."""
+    return eph.tgd2_s if eph.gnss_id == GNSS_GALILEO else eph.tgd_s
 
 
 def eph_position_velocity(

@@ -93,12 +93,19 @@ class ObsEpoch:
 
 @dataclass(frozen=True)
 class Ephemeris:
-    """GPS LNAV broadcast ephemeris and clock of one satellite (IS-GPS-200 subframes 1–3).
+    """Keplerian broadcast ephemeris and clock of one satellite: GPS LNAV (IS-GPS-200 subframes 1–3) by
+    default; also Galileo I/NAV or F/NAV, BeiDou D1/D2 and QZSS LNAV, told apart by `gnss_id` (u-blox gnssId).
 
     Angles in radians (semicircles converted at the boundary), rates in rad/s, harmonic corrections in
-    m or rad, clock terms in s, s/s, s/s². `toe`/`toc` carry the full GPS week.
+    m or rad, clock terms in s, s/s, s/s². `toe`/`toc` are instants on the GPS time scale with the full GPS
+    week (a Galileo or BeiDou toe/toc broadcast in GST/BDT is converted: onboard.gnsstime), `week` the GPS
+    week of `toe`. `prn` is the u-blox svId (QZSS 1–10 = PRN 193–202). For the other systems: `iode`/`iodc`
+    hold Galileo IODnav (both) or BeiDou AODE/AODC; `ura_index` the Galileo SISA index or BeiDou URAI;
+    `health` Galileo's RINEX SV health word (E5b HS << 7 | E5b DVS << 6 | E1-B HS << 1 | E1-B DVS, as RTKLIB's
+    svh) or BeiDou SatH1; `code_on_l2` the Galileo RINEX data-source bits (RTKLIB's eph.code);
+    `tgd_s` Galileo BGD(E1,E5a) or BeiDou TGD1 (B1I), `tgd2_s` Galileo BGD(E1,E5b) or BeiDou TGD2.
+    Only GPS ones go into the engine's EphemerisStore today (keyed by PRN).
     """
-
     prn: int
     week: int
     toe: GpsTime
@@ -129,6 +136,8 @@ class Ephemeris:
     fit_interval_h: float = 4.0
     code_on_l2: int = 1
     l2p_flag: int = 0
+    gnss_id: int = GNSS_GPS
+    tgd2_s: float = 0.0
 
     @property
     def toe_s(self) -> float:
@@ -139,6 +148,37 @@ class Ephemeris:
     def toc_s(self) -> float:
         """Time of clock, seconds of week."""
         return self.toc.tow_s
+
+
+@dataclass(frozen=True)
+class GlonassEphemeris:
+    """GLONASS broadcast ephemeris (immediate data of strings 1–4, GLONASS ICD 5.1): a state vector at `toe`.
+
+    `slot` orbital slot 1–24 (u-blox svId, RINEX Rnn), `channel` frequency channel k (−7 … +6),
+    `toe` the instant tb on the GPS time scale (GLONASS time = UTC(SU) + 3 h converted with the leap seconds),
+    `tof` the message frame time tk on the GPS time scale, `pos_m`/`vel_m_s`/`acc_m_s2` the PZ-90 position,
+    velocity and luni-solar acceleration at tb (m, m/s, m/s²; PZ-90.11 is taken as WGS 84, as RTKLIB does:
+    they agree to a few centimetres), `tau_n_s` the satellite clock offset τn (s; satellite time = GLONASS
+    time − τn + γn·(t − tb)), `gamma_n` the relative frequency offset γn (s/s), `delta_tau_n_s` Δτn (L2 − L1
+    delay, s), `health` 0 when healthy (bit 0: Bn's MSB, what RTKLIB and RINEX call health; bit 1: the
+    GLONASS-M ln flag of string 3, when decoded from strings), `age_days` En, `iode` the 7-bit
+    tb index (tb in 15 min units, RTKLIB's iode for GLONASS), `ft` the accuracy index FT (15 when unknown).
+    """
+
+    slot: int
+    channel: int
+    toe: GpsTime
+    tof: GpsTime
+    pos_m: tuple[float, float, float]
+    vel_m_s: tuple[float, float, float]
+    acc_m_s2: tuple[float, float, float]
+    tau_n_s: float
+    gamma_n: float
+    delta_tau_n_s: float = 0.0
+    health: int = 0
+    age_days: int = 0
+    iode: int = 0
+    ft: int = 15
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,70 @@
+"""The multi-constellation broadcast store and satellite-state evaluation (onboard.rtk.navstore)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from onboard.formats.rinex_nav import read_rinex_nav
+from onboard.rtk.ephemeris import eph_position, sisa_index_from_m, sisa_sigma_m
+from onboard.rtk.glonass import glonass_position
+from onboard.rtk.navstore import BroadcastNavigation, is_healthy, satellite_state
+from onboard.rtk.types import GNSS_GALILEO, GNSS_GLONASS, GNSS_GPS, GNSS_QZSS
+from tests.conftest import shared_file
+
+pytestmark = pytest.mark.shared_data
+
+SEPT_NAV = "gnss/geonet-3034-sept-20210922/SEPT2650.21P.gz"
+GLO_NAV = "gnss/broadcast-nav-20121031/brdc3050.12g"
+
+
+def test_sisa_index_and_sigma_round_trip() -> None:
+    for k in (0, 1, 49, 50, 74, 75, 99, 100, 107, 125):
+        assert sisa_index_from_m(sisa_sigma_m(k)) == k
+    assert sisa_sigma_m(107) == pytest.approx(3.12)
+    assert sisa_index_from_m(-1.0) == 255 and sisa_sigma_m(255) == 6144.0
+
+
+def test_store_selects_nearest_inav_galileo_and_evaluates_each_system() -> None:
+    nav = read_rinex_nav(shared_file(SEPT_NAV))
+    store = BroadcastNavigation([*nav.ephemerides, *nav.galileo, *nav.qzss])
+    assert len(store) == 49 + 253 + 19
+    e08 = [e for e in nav.galileo if e.prn == 8]
+    assert {e.code_on_l2 for e in e08} == {258, 517}  # F/NAV and I/NAV records
+    t = e08[0].toe.add_s(700.0)
+    sel = store.select(GNSS_GALILEO, 8, t)
+    assert sel is not None and sel.code_on_l2 == 517  # I/NAV preferred for E1
+    assert abs(sel.toe.diff_s(t)) == min(abs(e.toe.diff_s(t)) for e in e08 if e.code_on_l2 == 517)
+    st = satellite_state(sel, t)
+    pos, clk = eph_position(sel, t)
+    np.testing.assert_array_equal(st.pos_m, pos)
+    assert st.clock_s == pytest.approx(clk - sel.tgd2_s, abs=1e-18)  # E1: BGD(E1,E5b)
+    assert st.healthy and st.var_m2 == pytest.approx(sisa_sigma_m(sel.ura_index) ** 2)
+    assert np.linalg.norm(st.vel_m_s) == pytest.approx(3_000.0, rel=0.25)
+    g = store.select(GNSS_GPS, nav.ephemerides[0].prn, nav.ephemerides[0].toe.add_s(3600))
+    assert g is not None and satellite_state(g, g.toe).clock_s == pytest.approx(
+        eph_position(g, g.toe)[1] - g.tgd_s, abs=1e-18)
+    last_q = max(nav.qzss, key=lambda e: e.toe)
+    assert store.select(GNSS_QZSS, last_q.prn, last_q.toe.add_s(7199)) == last_q
+    assert store.select(GNSS_QZSS, last_q.prn, last_q.toe.add_s(7201)) is None  # QZSS: 2 h at most
+    assert store.select(GNSS_GALILEO, 8, t.add_s(3 * 86400)) is None
+
+
+def test_store_glonass_age_channels_and_health() -> None:
+    glo = read_rinex_nav(shared_file(GLO_NAV)).glonass
+    store = BroadcastNavigation(glo)
+    assert store.add(glo[0]) is False  # a repeat
+    g = glo[0]
+    # the first tb of the day of this slot: 30 min before it nothing, 29 min before it this one
+    first = min((e for e in glo if e.slot == g.slot), key=lambda e: e.toe)
+    assert store.select(GNSS_GLONASS, g.slot, first.toe.add_s(-1801)) is None
+    assert store.select(GNSS_GLONASS, g.slot, first.toe.add_s(-1799)) == first
+    chans = store.glonass_channels()
+    assert len(chans) == 24 and set(chans.values()) <= set(range(-7, 7))
+    st = satellite_state(g, g.toe.add_s(100))
+    pos, _ = glonass_position(g, g.toe.add_s(100))
+    np.testing.assert_array_equal(st.pos_m, pos)
+    assert st.var_m2 == 25.0 and st.clock_s == pytest.approx(-g.tau_n_s + g.gamma_n * 100)
+    assert not is_healthy(dataclasses.replace(g, health=1))
