@@ -6,8 +6,9 @@ file's SHA-256 (a complete file never changes). How each column is derived:
 
 - **state**: `uploading` while a file is incomplete; `processing` while a job is queued or running; otherwise
   the newest job's end (`done` / `failed`); `uploaded` when every file is in and no job ever ran.
-- **drone**: the manifest's `meta.drone` (or `meta.drone_id`), else the receiver named in an uploaded onboard
-  `manifest.json` (role manifest), else unknown.
+- **drone**: the name of the token that created the flight (a drone's own token), else the manifest's
+  `meta.drone` (or `meta.drone_id`), else the receiver named in an uploaded onboard `manifest.json` (role
+  manifest), else unknown.
 - **date**, **duration**: first and last epoch of the trajectory (below), in UTC; without one, the date is the
   `YYYYMMDDTHHMMSSZ` stamp of the flight name (onboard names flights so), else the day the server created it.
 - **fix ratio**: epochs with Q = 1 (fix) among the epochs with a solution in the trajectory: the post-processed
@@ -31,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from ground.store import Flight, FlightFile, Job
+from ground.store import ApiToken, Flight, FlightFile, Job
 from onboard.errors import InputError
 from onboard.gnsstime import GpsTime
 
@@ -183,7 +184,16 @@ class FlightRow:
     created_at: dt.datetime
 
 
-def _drone(flight: Flight, files_dir: Path) -> str | None:
+def token_names(session: Any) -> dict[str, str]:
+    """Token id → name, for naming the drone that created each flight."""
+    from sqlalchemy import select
+
+    return {i: n for i, n in session.execute(select(ApiToken.id, ApiToken.name))}
+
+
+def _drone(flight: Flight, files_dir: Path, creators: dict[str, str]) -> str | None:
+    if flight.created_by and flight.created_by in creators:
+        return creators[flight.created_by]
     meta = (flight.manifest or {}).get("meta") or {}
     for key in ("drone", "drone_id"):
         if isinstance(meta.get(key), str) and meta[key].strip():
@@ -216,8 +226,8 @@ def trajectories(flight: Flight, files_dir: Path, outputs_dir: Path) -> list[tup
     return out
 
 
-def flight_row(flight: Flight, files_dir: Path, outputs_dir: Path) -> FlightRow:
-    """The list line of a flight whose files and jobs are loaded."""
+def flight_row(flight: Flight, files_dir: Path, outputs_dir: Path, creators: dict[str, str]) -> FlightRow:
+    """The list line of a flight whose files and jobs are loaded (`creators`: `token_names`)."""
     files: list[FlightFile] = list(flight.files)
     jobs: list[Job] = list(flight.jobs)
     stats: TrackStats | None = None
@@ -240,7 +250,7 @@ def flight_row(flight: Flight, files_dir: Path, outputs_dir: Path) -> FlightRow:
     else:
         date, date_source = created.date(), "arrival at the server"
     return FlightRow(
-        id=flight.id, name=flight.name, drone=_drone(flight, files_dir), date=date, date_source=date_source,
+        id=flight.id, name=flight.name, drone=_drone(flight, files_dir, creators), date=date, date_source=date_source,
         duration_s=stats.duration_s if stats else None, images=images,
         fix_ratio=stats.fix_ratio if stats else None, fix_source=fix_source,
         state=flight_state([f.status for f in files], [j.status for j in jobs]), files=len(files),

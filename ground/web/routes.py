@@ -64,6 +64,40 @@ templates = Jinja2Templates(directory=HERE / "templates")
 router = APIRouter(include_in_schema=False)
 
 
+def _duration(seconds: float | None) -> str:
+    if seconds is None:
+        return "—"
+    m, s = divmod(round(seconds), 60)
+    return f"{m // 60} h {m % 60:02d} min" if m >= 60 else f"{m} min {s:02d} s"
+
+
+def _size(n: int | None) -> str:
+    if n is None:
+        return "—"
+    if n < 1024:
+        return f"{n} B"
+    value = float(n)
+    for unit in ("KiB", "MiB", "GiB"):
+        value /= 1024
+        if value < 1024 or unit == "GiB":
+            break
+    return f"{value:.1f} {unit}"
+
+
+def _pct(ratio: float | None) -> str:
+    return "—" if ratio is None else f"{100 * ratio:.1f} %"
+
+
+def _utc(t: dt.datetime | None) -> str:
+    if t is None:
+        return ""
+    t = t if t.tzinfo is not None else t.replace(tzinfo=dt.UTC)
+    return t.astimezone(dt.UTC).strftime("%Y-%m-%d %H:%M:%S")
+
+
+templates.env.filters.update(duration=_duration, size=_size, pct=_pct, utc=_utc)
+
+
 def _now() -> dt.datetime:
     return dt.datetime.now(dt.UTC)
 
@@ -217,7 +251,8 @@ def flights_page(request: Request, user: User, state: str | None = None, drone: 
     settings = _settings(request)
     with _store(request).session() as s:
         flights = s.scalars(select(Flight).order_by(Flight.created_at.desc())).all()
-        rows = [flightinfo.flight_row(f, *_dirs(settings, f.id)) for f in flights]
+        creators = flightinfo.token_names(s)
+        rows = [flightinfo.flight_row(f, *_dirs(settings, f.id), creators) for f in flights]
     shown = [r for r in rows if filt.keeps(r)]
     return _page(request, "flights.html", user, rows=shown, total=len(rows), filt=filt, states=flightinfo.STATES,
                  drones=sorted({r.drone for r in rows if r.drone}))
@@ -244,7 +279,9 @@ def _flight_context(flight: Flight, settings: ApiSettings, store: Store) -> dict
         has_report = latest_output(settings, store, flight.id, "report.html").is_file()
     except HTTPException:
         exports, has_report = [], False
-    return {"flight": flight, "row": flightinfo.flight_row(flight, files_dir, outputs_dir),
+    with store.session() as s:
+        creators = flightinfo.token_names(s)
+    return {"flight": flight, "row": flightinfo.flight_row(flight, files_dir, outputs_dir, creators),
             "plots": _plots(flight, settings), "events": events, "exports": exports, "has_report": has_report,
             "jobs": list(reversed(flight.jobs))}
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from sqlalchemy import delete
 
-from ground.store import Store, WebSession
+from ground.store import ApiToken, Store, WebSession
 
 #: the session cookie's name (its value: a random id, 43 URL-safe characters)
 SESSION_COOKIE = "directgeo_session"
@@ -31,7 +31,7 @@ WEB_ROLES = ("engineer", "admin")
 class SignedIn:
     """Who a live session belongs to, and the CSRF token its forms must carry."""
 
-    token_id: str
+    token_id: str | None
     name: str
     role: str
     csrf_token: str
@@ -55,7 +55,7 @@ def sign_in_refusal(role: str) -> str | None:
             "a worker runs jobs). Sign in with an engineer or admin token.")
 
 
-def open_session(store: Store, token_id: str, name: str, role: str, ttl_s: float, now: dt.datetime) -> tuple[str, SignedIn]:
+def open_session(store: Store, token_id: str | None, name: str, role: str, ttl_s: float, now: dt.datetime) -> tuple[str, SignedIn]:
     """Store a new session for a principal already checked; returns (cookie value, the session)."""
     session_id = new_secret()
     row = WebSession(id_sha256=_digest(session_id), csrf_token=new_secret(), token_id=token_id, name=name,
@@ -73,14 +73,19 @@ def _aware(t: dt.datetime) -> dt.datetime:
 
 
 def find_session(store: Store, session_id: str | None, now: dt.datetime) -> SignedIn | None:
-    """The live session of a cookie value; None when absent, unknown or expired (an expired row is deleted)."""
+    """The live session of a cookie value; None when absent, unknown, expired, or its token was revoked or
+    changed role since sign-in (such a row is deleted). A bootstrap-token session (token id None) lives until
+    it expires."""
     if not session_id:
         return None
     with store.session() as s:
         row = s.get(WebSession, _digest(session_id))
         if row is None:
             return None
-        if _aware(row.expires_at) <= now:
+        token = s.get(ApiToken, row.token_id) if row.token_id is not None else None
+        revoked = row.token_id is not None and (token is None or token.revoked_at is not None
+                                                or token.role != row.role)
+        if _aware(row.expires_at) <= now or revoked:
             s.delete(row)
             s.commit()
             return None

@@ -37,7 +37,6 @@ from sqlalchemy import select
 
 from ground.api.auth import Principal, Role, check_flight_owner, require_role
 from ground.api.deps import SettingsDep, StoreDep
-from ground.api.job_kinds import check_job
 from ground.api.jobs import JobRunner
 from ground.api.schemas import (
     FileOut,
@@ -50,6 +49,7 @@ from ground.api.schemas import (
     ManifestFile,
 )
 from ground.api.settings import ApiSettings
+from ground.api.submit import JobRefused, queue_job
 from ground.api.upload import (
     Limits,
     UploadRejected,
@@ -59,7 +59,6 @@ from ground.api.upload import (
     check_sha256,
 )
 from ground.store import Flight, FlightFile, Job, Store, UploadSession
-from onboard.errors import InputError
 
 log = logging.getLogger(__name__)
 
@@ -355,8 +354,10 @@ async def put_chunk(
 
 
 def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str, path: Path, offset: int,
-                  body: bytes, claimed: str, client: str, jobs: JobRunner, locks: FileLocks,
+                  body: bytes, claimed: str, client: str, jobs: JobRunner | None, locks: FileLocks,
                   principal: Principal) -> FileOut:
+    """Store one chunk (the PUT route's work); the flight's automatic jobs are queued on `jobs` when this chunk
+    completes the flight (`jobs` None: the caller queues its own job, e.g. the web adjustment form)."""
     with locks.get(flight_id, name), store.session() as s:
         flight, f = _lookup_file(s, flight_id, name, principal)
         if f.status == "complete":
@@ -409,8 +410,33 @@ def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str
         if f.status != "complete" and f.received == 0:
             raise HTTPException(status_code=422, detail=f"{name}: whole-file SHA-256 differs from the manifest; "
                                                         "the data was discarded, upload again from offset 0")
-    if flight.status == "complete":
+    if flight.status == "complete" and jobs is not None:
         _maybe_auto_adjust(store, flight_id, jobs)
+    return out
+
+
+def receive_file(settings: ApiSettings, store: Store, flight_id: str, name: str, source: Path, locks: FileLocks,
+                 principal: Principal, client: str = "web") -> FileOut:
+    """Send a whole local file into an entry `add_files` registered, through the same chunk path as the PUT
+    route (offsets, per-chunk and whole-file SHA-256, atomic move into place), resuming at the bytes held. No
+    automatic job is queued: the caller queues the job it was asked for."""
+    dest = safe_path(settings, flight_id, name)
+    with store.session() as s:
+        _, f = _lookup_file(s, flight_id, name, principal)
+        offset, status_ = f.received, f.status
+    out: FileOut | None = None
+    if status_ == "complete":
+        with store.session() as s:
+            return _file_out(_lookup_file(s, flight_id, name, principal)[1])
+    with open(source, "rb") as fh:
+        fh.seek(offset)
+        while block := fh.read(settings.max_chunk_bytes):
+            out = _append_chunk(settings, store, flight_id, name, dest, offset, block,
+                                hashlib.sha256(block).hexdigest(), client, None, locks, principal)
+            offset += len(block)
+    if out is None:  # nothing left to send (size 0: verified when registered)
+        with store.session() as s:
+            return _file_out(_lookup_file(s, flight_id, name, principal)[1])
     return out
 
 
@@ -467,20 +493,10 @@ def _maybe_auto_adjust(store: Store, flight_id: str, jobs: JobRunner) -> None:
              responses={404: {}, 409: {}, 413: {}, 422: {}})
 def create_job(flight_id: str, body: JobCreate, request: Request, store: StoreDep, principal: Engineer) -> JobOut:
     """Queue a processing job (runs in the background; poll its status)."""
-    with store.session() as s:
-        flight = _flight_of(s, flight_id, principal)
-        if flight.status != "complete":
-            raise HTTPException(status_code=409, detail="the flight's upload is not complete")
-        try:
-            check_job(body.kind, body.params, {f.name: f.role for f in flight.files if f.status == "complete"})
-        except InputError as exc:
-            raise HTTPException(status_code=422, detail=f"{body.kind} job: {exc}") from exc
-        job = Job(flight_id=flight_id, kind=body.kind, params=body.params)
-        s.add(job)
-        s.commit()
-        out = job_out(job)
-    request.app.state.jobs.submit(out.id)
-    return out
+    try:
+        return job_out(queue_job(store, request.app.state.jobs, flight_id, body.kind, body.params))
+    except JobRefused as exc:
+        raise HTTPException(status_code=exc.status, detail=exc.detail) from exc
 
 
 @router.get("/{flight_id}/jobs/{job_id}", response_model=JobOut)
@@ -493,7 +509,8 @@ def get_job(flight_id: str, job_id: str, store: StoreDep, _: JobReader) -> JobOu
         return job_out(job)
 
 
-def _latest_output(settings: ApiSettings, store: Store, flight_id: str, filename: str) -> Path:
+def latest_output(settings: ApiSettings, store: Store, flight_id: str, filename: str) -> Path:
+    """A file of the latest finished adjustment of the flight (404 in words when there is none or it lacks it)."""
     with store.session() as s:
         flight = s.get(Flight, flight_id)
         if flight is None:
@@ -511,7 +528,7 @@ def _latest_output(settings: ApiSettings, store: Store, flight_id: str, filename
 def get_results(flight_id: str, settings: SettingsDep,
                 store: StoreDep, _: Engineer) -> Response:
     """`results.json` of the latest finished adjustment."""
-    path = _latest_output(settings, store, flight_id, "results.json")
+    path = latest_output(settings, store, flight_id, "results.json")
     return Response(content=path.read_bytes(), media_type="application/json")
 
 
@@ -519,25 +536,35 @@ def get_results(flight_id: str, settings: SettingsDep,
 def get_report(flight_id: str, settings: SettingsDep,
                store: StoreDep, _: Engineer) -> Response:
     """The self-contained HTML report of the latest finished adjustment."""
-    path = _latest_output(settings, store, flight_id, "report.html")
+    path = latest_output(settings, store, flight_id, "report.html")
     return HTMLResponse(content=path.read_text(encoding="utf-8"))
+
+
+def export_names(settings: ApiSettings, store: Store, flight_id: str) -> list[str]:
+    """Names of the export files of the latest finished adjustment (404 when there is none)."""
+    folder = latest_output(settings, store, flight_id, "results.json").parent / "exports"
+    return sorted(p.name for p in folder.iterdir() if p.is_file()) if folder.is_dir() else []
+
+
+def export_path(settings: ApiSettings, store: Store, flight_id: str, name: str) -> Path:
+    """One export file of the latest finished adjustment (400 for a bad name, 404 when absent)."""
+    try:
+        check_file_name(name)
+    except UploadRejected as exc:
+        raise _http(exc) from exc
+    path = latest_output(settings, store, flight_id, "results.json").parent / "exports" / name
+    if not path.is_file():
+        raise HTTPException(status_code=404, detail=f"no export {name!r}")
+    return path
 
 
 @router.get("/{flight_id}/exports", response_model=list[str])
 def list_exports(flight_id: str, settings: SettingsDep, store: StoreDep, _: Engineer) -> list[str]:
     """Geotag/orientation export files of the latest finished adjustment (geo.txt, pix4d.csv, …)."""
-    folder = _latest_output(settings, store, flight_id, "results.json").parent / "exports"
-    return sorted(p.name for p in folder.iterdir() if p.is_file()) if folder.is_dir() else []
+    return export_names(settings, store, flight_id)
 
 
 @router.get("/{flight_id}/exports/{name}", response_class=FileResponse)
 def get_export(flight_id: str, name: str, settings: SettingsDep, store: StoreDep, _: Engineer) -> FileResponse:
     """One export file of the latest finished adjustment."""
-    try:
-        check_file_name(name)
-    except UploadRejected as exc:
-        raise _http(exc) from exc
-    path = _latest_output(settings, store, flight_id, "results.json").parent / "exports" / name
-    if not path.is_file():
-        raise HTTPException(status_code=404, detail=f"no export {name!r}")
-    return FileResponse(path, media_type="text/plain", filename=name)
+    return FileResponse(export_path(settings, store, flight_id, name), media_type="text/plain", filename=name)
