@@ -2,7 +2,7 @@
 adjustment form, report and exports. Every page needs a signed-in session (`ground.web.sessions`); every POST
 form carries the session's CSRF token and is refused (403, in words) without it. The pages call the same core
 functions as the API routes: `ground.api.submit.queue_job` (validate and queue a job), `add_files` and
-`receive_file` (office files into a flight), `latest_output` / `export_path` (results).
+`write_file_bytes` (office files into a flight), `latest_output` / `export_path` (results).
 
 Routes (none in the OpenAPI schema: they are for browsers, not API clients):
 
@@ -35,7 +35,7 @@ from starlette.datastructures import FormData, UploadFile
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from ground.api.auth import Principal, Role, authenticate
-from ground.api.routes.flights import add_files, export_names, export_path, latest_output, receive_file
+from ground.api.routes.flights import add_files, export_names, export_path, latest_output, write_file_bytes
 from ground.api.schemas import ManifestFile
 from ground.api.settings import ApiSettings
 from ground.api.submit import JobRefused, queue_job
@@ -540,8 +540,10 @@ async def adjust_submit(request: Request, user: User, flight_id: str) -> Respons
         if new:
             add_files(settings, store, flight_id, [ManifestFile(name=u.name, size=u.size, sha256=u.sha256, role=u.role)
                                                    for u in new], principal)
-            for u in new:
-                receive_file(settings, store, flight_id, u.name, u.path, request.app.state.file_locks, principal)
+            for u in new:  # no automatic job (jobs None): the form's job is queued below
+                with u.path.open("rb") as fh:
+                    write_file_bytes(settings, store, None, request.app.state.file_locks, flight_id, u.name, fh,
+                                     principal)
     try:
         queue_job(store, request.app.state.jobs, flight_id, "adjust", params)
     except JobRefused as exc:

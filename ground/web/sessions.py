@@ -15,7 +15,8 @@ from dataclasses import dataclass
 
 from sqlalchemy import delete
 
-from ground.store import ApiToken, Store, WebSession
+from ground.api.auth import principal_for_id
+from ground.store import Store, WebSession
 
 #: the session cookie's name (its value: a random id, 43 URL-safe characters)
 SESSION_COOKIE = "directgeo_session"
@@ -82,9 +83,11 @@ def find_session(store: Store, session_id: str | None, now: dt.datetime) -> Sign
         row = s.get(WebSession, _digest(session_id))
         if row is None:
             return None
-        token = s.get(ApiToken, row.token_id) if row.token_id is not None else None
-        revoked = row.token_id is not None and (token is None or token.revoked_at is not None
-                                                or token.role != row.role)
+        if row.token_id is not None:
+            principal = principal_for_id(store, row.token_id)
+            revoked = principal is None or principal.role.value != row.role
+        else:
+            revoked = False
         if _aware(row.expires_at) <= now or revoked:
             s.delete(row)
             s.commit()

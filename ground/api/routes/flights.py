@@ -28,7 +28,7 @@ import os
 import threading
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, BinaryIO
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
@@ -135,7 +135,8 @@ def job_out(j: Job) -> JobOut:
 
 def _flight_out(f: Flight) -> FlightOut:
     return FlightOut(id=f.id, name=f.name, status=f.status, created_at=f.created_at,
-                     files=[_file_out(x) for x in f.files], jobs=[job_out(j) for j in f.jobs])
+                     files=[_file_out(x) for x in sorted(f.files, key=lambda x: x.name)],  # as loaded, also
+                     jobs=[job_out(j) for j in f.jobs])  # right after files were appended in this session
 
 
 def _flight_of(s: Any, flight_id: str, principal: Principal) -> Flight:
@@ -415,28 +416,25 @@ def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str
     return out
 
 
-def receive_file(settings: ApiSettings, store: Store, flight_id: str, name: str, source: Path, locks: FileLocks,
-                 principal: Principal, client: str = "web") -> FileOut:
-    """Send a whole local file into an entry `add_files` registered, through the same chunk path as the PUT
-    route (offsets, per-chunk and whole-file SHA-256, atomic move into place), resuming at the bytes held. No
-    automatic job is queued: the caller queues the job it was asked for."""
-    dest = safe_path(settings, flight_id, name)
+def write_file_bytes(settings: ApiSettings, store: Store, jobs: JobRunner | None, locks: FileLocks, flight_id: str,
+                     name: str, source: BinaryIO, principal: Principal, client: str = "web") -> FileOut:
+    """Store the whole content of a file the flight lists (e.g. added by `add_files` from a web form), read
+    from `source` at the server's offset (an interrupted earlier write resumes), in chunks of the chunk limit,
+    each through the same path as `PUT …/files/{name}` (locks, checks, whole-file SHA-256, automatic jobs;
+    `jobs` None: none, the caller queues the job it was asked for, as the web adjustment form does).
+    Returns the file's state; `HTTPException` as the PUT route (422: the bytes' SHA-256 differs from the listed
+    one, or `source` ends before the listed size; 413: it runs past it)."""
+    path = safe_path(settings, flight_id, name)
     with store.session() as s:
         _, f = _lookup_file(s, flight_id, name, principal)
-        offset, status_ = f.received, f.status
-    out: FileOut | None = None
-    if status_ == "complete":
-        with store.session() as s:
-            return _file_out(_lookup_file(s, flight_id, name, principal)[1])
-    with open(source, "rb") as fh:
-        fh.seek(offset)
-        while block := fh.read(settings.max_chunk_bytes):
-            out = _append_chunk(settings, store, flight_id, name, dest, offset, block,
-                                hashlib.sha256(block).hexdigest(), client, None, locks, principal)
-            offset += len(block)
-    if out is None:  # nothing left to send (size 0: verified when registered)
-        with store.session() as s:
-            return _file_out(_lookup_file(s, flight_id, name, principal)[1])
+        out = _file_out(f)
+    source.seek(out.received)
+    while out.status != "complete":
+        chunk = source.read(settings.max_chunk_bytes)
+        if not chunk:
+            raise HTTPException(status_code=422, detail=f"{name}: {out.received} bytes given, {out.size} listed")
+        out = _append_chunk(settings, store, flight_id, name, path, out.received, chunk,
+                            hashlib.sha256(chunk).hexdigest(), client, jobs, locks, principal)
     return out
 
 
