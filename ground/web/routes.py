@@ -1,7 +1,7 @@
 """The web interface's pages, under `/ui` (the API keeps `/flights…`): sign-in, flights list, flight page,
 adjustment form, report and exports. Every page needs a signed-in session (`ground.web.sessions`); every POST
 form carries the session's CSRF token and is refused (403, in words) without it. The pages call the same core
-functions as the API routes: `ground.api.submit.queue_job` (validate and queue a job), `add_files` and
+functions as the API routes: `validate_and_queue_job` (validate and queue a job, as `POST /flights/{id}/jobs`), `add_files` and
 `write_file_bytes` (office files into a flight), `latest_output` / `export_path` (results).
 
 Routes (none in the OpenAPI schema: they are for browsers, not API clients):
@@ -35,10 +35,16 @@ from starlette.datastructures import FormData, UploadFile
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from ground.api.auth import Principal, Role, authenticate
-from ground.api.routes.flights import add_files, export_names, export_path, latest_output, write_file_bytes
+from ground.api.routes.flights import (
+    add_files,
+    export_names,
+    export_path,
+    latest_output,
+    validate_and_queue_job,
+    write_file_bytes,
+)
 from ground.api.schemas import ManifestFile
 from ground.api.settings import ApiSettings
-from ground.api.submit import JobRefused, queue_job
 from ground.api.upload import UploadRejected, check_file_name
 from ground.store import Flight, Store
 from ground.web import flightinfo
@@ -315,11 +321,12 @@ async def rtk_submit(request: Request, user: User, flight_id: str) -> Response:
     """Queue an RTK re-processing job of the flight's uploaded rover and base observations."""
     await checked_form(request, user)
     try:
-        queue_job(_store(request), request.app.state.jobs, flight_id, "rtk", {})
-    except JobRefused as exc:
-        if exc.status == 404:
-            raise HTTPException(status_code=404, detail=exc.detail) from exc
-        return _flight_page(request, user, flight_id, error=f"nothing queued: {exc.detail}", status_code=exc.status)
+        validate_and_queue_job(_store(request), request.app.state.jobs, flight_id, "rtk", {}, _principal(user))
+    except HTTPException as exc:
+        if exc.status_code == 404:
+            raise
+        return _flight_page(request, user, flight_id, error=f"nothing queued: {exc.detail}",
+                            status_code=exc.status_code)
     return RedirectResponse(f"{PREFIX}/flights/{flight_id}#jobs", status_code=303)
 
 
@@ -545,10 +552,10 @@ async def adjust_submit(request: Request, user: User, flight_id: str) -> Respons
                     write_file_bytes(settings, store, None, request.app.state.file_locks, flight_id, u.name, fh,
                                      principal)
     try:
-        queue_job(store, request.app.state.jobs, flight_id, "adjust", params)
-    except JobRefused as exc:
+        validate_and_queue_job(store, request.app.state.jobs, flight_id, "adjust", params, principal)
+    except HTTPException as exc:
         values.errors.append(f"nothing queued: {exc.detail}")
-        return _adjust_page(request, user, _load(store, flight_id), values, exc.status)
+        return _adjust_page(request, user, _load(store, flight_id), values, exc.status_code)
     return RedirectResponse(f"{PREFIX}/flights/{flight_id}#jobs", status_code=303)
 
 

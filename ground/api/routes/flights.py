@@ -37,6 +37,7 @@ from sqlalchemy import select
 
 from ground.api.auth import Principal, Role, check_flight_owner, require_role
 from ground.api.deps import SettingsDep, StoreDep
+from ground.api.job_kinds import check_job
 from ground.api.jobs import JobRunner
 from ground.api.schemas import (
     FileOut,
@@ -49,7 +50,6 @@ from ground.api.schemas import (
     ManifestFile,
 )
 from ground.api.settings import ApiSettings
-from ground.api.submit import JobRefused, queue_job
 from ground.api.upload import (
     Limits,
     UploadRejected,
@@ -59,6 +59,7 @@ from ground.api.upload import (
     check_sha256,
 )
 from ground.store import Flight, FlightFile, Job, Store, UploadSession
+from onboard.errors import InputError
 
 log = logging.getLogger(__name__)
 
@@ -487,14 +488,32 @@ def _maybe_auto_adjust(store: Store, flight_id: str, jobs: JobRunner) -> None:
         jobs.submit(job_id)
 
 
+def validate_and_queue_job(store: Store, jobs: JobRunner, flight_id: str, kind: str, params: dict[str, Any],
+                           principal: Principal) -> JobOut:
+    """Check a job against the flight (404 no flight, 403 not the caller's, 409 upload not complete, 422 bad
+    parameters or missing files: HTTPException with the reason in words), record it `queued` and hand it to
+    the job queue."""
+    with store.session() as s:
+        flight = _flight_of(s, flight_id, principal)
+        if flight.status != "complete":
+            raise HTTPException(status_code=409, detail="the flight's upload is not complete")
+        try:
+            check_job(kind, params, {f.name: f.role for f in flight.files if f.status == "complete"})
+        except InputError as exc:
+            raise HTTPException(status_code=422, detail=f"{kind} job: {exc}") from exc
+        job = Job(flight_id=flight_id, kind=kind, params=params)
+        s.add(job)
+        s.commit()
+        out = job_out(job)
+    jobs.submit(out.id)
+    return out
+
+
 @router.post("/{flight_id}/jobs", response_model=JobOut, status_code=status.HTTP_202_ACCEPTED,
              responses={404: {}, 409: {}, 413: {}, 422: {}})
 def create_job(flight_id: str, body: JobCreate, request: Request, store: StoreDep, principal: Engineer) -> JobOut:
     """Queue a processing job (runs in the background; poll its status)."""
-    try:
-        return job_out(queue_job(store, request.app.state.jobs, flight_id, body.kind, body.params))
-    except JobRefused as exc:
-        raise HTTPException(status_code=exc.status, detail=exc.detail) from exc
+    return validate_and_queue_job(store, request.app.state.jobs, flight_id, body.kind, body.params, principal)
 
 
 @router.get("/{flight_id}/jobs/{job_id}", response_model=JobOut)
