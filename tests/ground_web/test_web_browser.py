@@ -1,8 +1,8 @@
 """The web interface in a real browser (Playwright driving Debian's chromium) against a live `python -m ground
 serve` with a real SQLite file: a drone token refused at sign-in, an engineer signs in, sees the flight the
-onboard uploader sent (with the drone's token), runs an adjustment through the form (orientation and GCP files
-uploaded), watches the job end through the page's live status, downloads `geo.txt` (byte-identical to the
-API's), sees a failed job's message, and a form sent without its CSRF token is refused in words.
+onboard uploader sent (with the drone's token), runs an adjustment through the form (the orientations as a
+MicMac Ori folder zipped, and a GCP file), watches the job end through the page's live status, downloads
+`geo.txt` (byte-identical to the API's), sees a failed job's message, and a form sent without its CSRF token is refused in words.
 
 Screenshots go to `$GROUND_WEB_SCREENSHOTS` (default the test's tmp folder). The browser is required: a
 missing chromium fails this test (a skipped browser test could not fail)."""
@@ -119,6 +119,11 @@ def test_engineer_adjusts_a_flight_in_chromium(served: Served, tmp_path: Path) -
         finally:
             up.close()
     (good, office), (bad, bad_office) = flights["flight-20240215T101500Z"], flights["flight-20240215T140000Z"]
+    # the good flight's bundle adjustment as MicMac gives it: its Ori folder, zipped
+    from ground.io.orientations import read_opk_csv
+    from tests.ground_io.test_micmac_zip import micmac_zip
+
+    ori_zip = micmac_zip(read_opk_csv(office / "poses.csv").poses, tmp_path / "Ori-Bundle", tmp_path / "Ori-Bundle.zip")
     broken_poses = tmp_path / "cameras.json"
     broken_poses.write_text('{"not": "an OpenSfM reconstruction"}')
 
@@ -165,8 +170,8 @@ def test_engineer_adjusts_a_flight_in_chromium(served: Served, tmp_path: Path) -
         assert "cameras.json" in page.text_content("#errors")
         page.screenshot(path=str(shots / "adjust-refused.png"), full_page=True)
 
-        # the adjustment through the form: poses + GCPs uploaded, lever-arm prior, fixed delay, a UTM export
-        page.set_input_files("#orientations", str(office / "poses.csv"))
+        # the adjustment through the form: MicMac orientations + GCPs uploaded, lever-arm prior, a UTM export
+        page.set_input_files("#orientations", str(ori_zip))
         page.set_input_files("#gcp", str(office / "gcp.csv"))
         page.check("input[name=lever_mode][value=prior]")
         for k, v in (("lever_x", "0.05"), ("lever_y", "-0.12"), ("lever_z", "-0.08"), ("lever_sigma", "0.05")):
@@ -185,7 +190,7 @@ def test_engineer_adjusts_a_flight_in_chromium(served: Served, tmp_path: Path) -
                         headers={"Authorization": f"Bearer {engineer}"}, timeout=30)
         assert api.status_code == 200 and got == api.content
         assert b"IMG_0000.JPG" in got
-        assert page.locator("#file-table tr[data-file]").count() == 4  # poses.csv and gcp.csv added
+        assert page.locator("#file-table tr[data-file]").count() == 4  # Ori-Bundle.zip and gcp.csv added
         page.screenshot(path=str(shots / "flight-done.png"), full_page=True)
 
         # a form sent without its CSRF token is refused in words
@@ -195,7 +200,7 @@ def test_engineer_adjusts_a_flight_in_chromium(served: Served, tmp_path: Path) -
         assert resp.value.status == 403
         assert "security token (CSRF)" in page.text_content("#error")
 
-        # a job that fails: its message on the page
+        # a job that fails (the events name other images): its message on the page, from an OPK CSV
         page.goto(f"{served.url}/ui/flights/{bad}/adjust")
         page.set_input_files("#orientations", str(bad_office / "poses.csv"))
         page.click("#queue-adjust")
