@@ -295,3 +295,54 @@ def test_rtk_button_without_base_data_says_why(client: TestClient, tmp_path: Pat
     csrf = csrf_of(client.get(f"/ui/flights/{fid}").text)
     r = client.post(f"/ui/flights/{fid}/rtk", data={"csrf_token": csrf})
     assert r.status_code == 422 and "nothing queued" in error_of(r.text) and "base_obs" in error_of(r.text)
+
+
+def test_upload_progress_and_both_rtk_solutions(client: TestClient, tmp_path: Path) -> None:
+    """A file half sent shows as such (page and live JSON); a flight with an uploaded real-time trajectory and a
+    finished RTK job's SOL.pos shows both solutions with their own figures."""
+    import hashlib
+
+    blob = bytes(range(256)) * 40
+    headers = {"Authorization": f"Bearer {TOKEN}"}
+    r = client.post("/flights", headers=headers, json={"name": "flight-half", "files": [
+        {"name": "000000.ubx", "size": len(blob), "sha256": hashlib.sha256(blob).hexdigest(), "role": "raw"}]})
+    half_id = r.json()["id"]
+    part = blob[:4000]
+    assert client.put(f"/flights/{half_id}/files/000000.ubx", params={"offset": 0}, content=part,
+                      headers={**headers, "X-Chunk-SHA256": hashlib.sha256(part).hexdigest()}).status_code == 200
+    assert sign_in(client, TOKEN).status_code == 303
+    status = client.get(f"/ui/flights/{half_id}/status").json()
+    assert status["state"] == "uploading"
+    assert status["files"] == [{"name": "000000.ubx", "received": 4000, "size": len(blob), "status": "partial"}]
+    page = client.get(f"/ui/flights/{half_id}").text
+    assert f'<progress max="{len(blob)}" value="4000">' in page and "4000 B" in page
+
+    files = synthetic_files(tmp_path / "f")
+    fid = upload_flight(client, TOKEN, "flight-20260501T101500Z", files)
+    # what a finished RTK job leaves: its row done and SOL.pos in its output folder (here: all epochs fixed)
+    settings: ApiSettings = client.app.state.settings  # type: ignore[attr-defined]
+    with client.app.state.store.session() as s:  # type: ignore[attr-defined]
+        job = Job(flight_id=fid, kind="rtk", status="done", params={}, message="done")
+        s.add(job)
+        s.commit()
+        job_id = job.id
+    out = settings.data_dir / "outputs" / fid / job_id
+    out.mkdir(parents=True)
+    lines = []
+    for line in files["SOL.pos"][0].decode().splitlines():
+        cols = line.split()
+        if not line.startswith("%") and len(cols) > 5:
+            cols[5] = "1"  # Q: fix
+            line = " ".join(cols)
+        lines.append(line)
+    fixed = ("\n".join(lines) + "\n").encode()
+    (out / "SOL.pos").write_bytes(fixed)
+    page = client.get(f"/ui/flights/{fid}").text
+    rtk = page[page.index('id="rtk-table"'):page.index("</table>", page.index('id="rtk-table"'))]
+    assert "real-time (uploaded)" in rtk and "post-processed (RTK job)" in rtk
+    assert "395 (98.8 %)" in rtk and "400 (100.0 %)" in rtk
+    assert page.count('alt="real-time (uploaded) trajectory') == 1
+    assert page.count('alt="post-processed (RTK job) trajectory') == 1
+    row = client.get("/ui/flights").text
+    row = row[row.index(f'data-flight="{fid}"'):]
+    assert ">100.0 %<" in row[:row.index("</tr>")]  # the list's fix ratio is the post-processed one
