@@ -8,11 +8,11 @@ import io
 import json
 import sqlite3
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import httpx
 import pytest
-from fastapi import HTTPException
+from fastapi import APIRouter, Depends, FastAPI, HTTPException
 
 from ground.api.auth import (
     OPENAPI_ROLES_KEY,
@@ -21,6 +21,7 @@ from ground.api.auth import (
     TokenNameTaken,
     authenticate,
     create_token,
+    document_roles,
     hash_token,
     list_tokens,
     principal_for_id,
@@ -187,6 +188,13 @@ def _call(c: httpx.Client, method: str, path: str, op: dict[str, Any]) -> httpx.
     return c.request(method.upper(), path, **kw)
 
 
+class _Ids(dict[str, str]):
+    """Path parameters: the walk's flight and file, any other id a made-up one (answered 404 after the check)."""
+
+    def __missing__(self, key: str) -> str:
+        return "0" * 32
+
+
 def test_every_operation_refuses_exactly_the_roles_outside_its_x_roles(live: LiveServer) -> None:
     """Walk the OpenAPI operations: for every caller (no token, revoked, each role) the answer is 401/403
     exactly when the caller is outside the operation's `x-roles`, and never 401/403 inside them."""
@@ -206,7 +214,7 @@ def test_every_operation_refuses_exactly_the_roles_outside_its_x_roles(live: Liv
             continue
         assert roles, f"{method.upper()} {path} states no role"
         assert "admin" in roles and f"Roles: {', '.join(roles)}." in op["description"]
-        url = path.format(**values)
+        url = path.format_map(_Ids(values))
         for caller in CALLERS:
             with live.client(token=tokens.get(caller)) as c:
                 status = _call(c, method, url, op).status_code
@@ -250,7 +258,10 @@ def test_a_drone_touches_only_the_flights_it_created(live: LiveServer) -> None:
         assert a.get(f"/flights/{fid}").json()["status"] == "complete"
         assert a.get(f"{url}/content").status_code == 403  # a drone never downloads
         assert eng.get(f"{url}/content").content == data
-        assert [f["id"] for f in eng.get("/flights").json()] == [fid]
+        assert [(f["id"], f["created_by"]) for f in eng.get("/flights").json()] == [(fid, "drone-a")]
+        assert flight["created_by"] == eng.get(f"/flights/{fid}").json()["created_by"] == "drone-a"
+    with live.client() as admin:  # the bootstrap token's flights have no creator token
+        assert _drone_flight(admin, "flight-admin", {"x.txt": b"x"})["created_by"] is None
 
 
 def test_office_files_are_added_to_a_flight_and_uploaded(live: LiveServer) -> None:
@@ -341,3 +352,39 @@ def test_token_command_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
         assert usage.value.code == 2
     finally:
         store.close()
+
+
+_DroneOnly = Annotated[Principal, Depends(require_role(Role.DRONE))]
+
+
+def test_document_roles_reads_the_role_checks_of_each_route() -> None:
+    """`x-roles` comes from the `require_role` dependencies wherever they are (parameter, `dependencies=`,
+    router-level; two checks → their intersection); an open route states none; twice is the same as once."""
+    app = FastAPI()
+    router = APIRouter(prefix="/w", dependencies=[Depends(require_role(Role.WORKER, Role.ENGINEER))])
+
+    @router.get("/a")
+    def a() -> None:
+        """Worker or engineer."""
+
+    @router.get("/b", dependencies=[Depends(require_role(Role.WORKER))])
+    def b() -> None:
+        """Both checks: worker only."""
+
+    @app.get("/c")
+    def c(p: _DroneOnly) -> None:
+        """Drone."""
+
+    @app.get("/open")
+    def open_() -> None:
+        """No check."""
+
+    app.include_router(router)
+    document_roles(app)
+    document_roles(app)
+    paths = app.openapi()["paths"]
+    assert paths["/w/a"]["get"][OPENAPI_ROLES_KEY] == ["engineer", "admin", "worker"]
+    assert paths["/w/b"]["get"][OPENAPI_ROLES_KEY] == ["admin", "worker"]
+    assert paths["/c"]["get"][OPENAPI_ROLES_KEY] == ["drone", "admin"]
+    assert paths["/c"]["get"]["description"] == "Drone.\n\nRoles: drone, admin."
+    assert OPENAPI_ROLES_KEY not in paths["/open"]["get"]

@@ -134,8 +134,12 @@ def job_out(j: Job) -> JobOut:
                   created_at=j.created_at, started_at=j.started_at, finished_at=j.finished_at)
 
 
+def _creator(f: Flight) -> str | None:
+    return f.creator.name if f.creator is not None else None
+
+
 def _flight_out(f: Flight) -> FlightOut:
-    return FlightOut(id=f.id, name=f.name, status=f.status, created_at=f.created_at,
+    return FlightOut(id=f.id, name=f.name, status=f.status, created_at=f.created_at, created_by=_creator(f),
                      files=[_file_out(x) for x in sorted(f.files, key=lambda x: x.name)],  # as loaded, also
                      jobs=[job_out(j) for j in f.jobs])  # right after files were appended in this session
 
@@ -146,7 +150,7 @@ def _flight_of(s: Any, flight_id: str, principal: Principal) -> Flight:
     if flight is None:
         raise HTTPException(status_code=404, detail=f"no flight {flight_id}")
     check_flight_owner(principal, flight.created_by)
-    return flight  # type: ignore[no-any-return]
+    return flight
 
 
 def _get_flight(store: Store, flight_id: str, principal: Principal) -> Flight:
@@ -256,7 +260,8 @@ def list_flights(store: StoreDep, _: Engineer) -> list[FlightSummary]:
     """All flights, newest first."""
     with store.session() as s:
         rows = s.scalars(select(Flight).order_by(Flight.created_at.desc())).all()
-        return [FlightSummary(id=f.id, name=f.name, status=f.status, created_at=f.created_at, files=len(f.files),
+        return [FlightSummary(id=f.id, name=f.name, status=f.status, created_at=f.created_at,
+                              created_by=_creator(f), files=len(f.files),
                               bytes_total=sum(x.size for x in f.files), bytes_received=sum(x.received for x in f.files))
                 for f in rows]
 
