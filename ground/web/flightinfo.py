@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from ground.store import ApiToken, Flight, FlightFile, Job
+from ground.store import Flight, FlightFile, Job
 from onboard.errors import InputError
 from onboard.gnsstime import GpsTime
 
@@ -184,16 +184,9 @@ class FlightRow:
     created_at: dt.datetime
 
 
-def token_names(session: Any) -> dict[str, str]:
-    """Token id → name, for naming the drone that created each flight."""
-    from sqlalchemy import select
-
-    return {i: n for i, n in session.execute(select(ApiToken.id, ApiToken.name))}
-
-
-def _drone(flight: Flight, files_dir: Path, creators: dict[str, str]) -> str | None:
-    if flight.created_by and flight.created_by in creators:
-        return creators[flight.created_by]
+def _drone(flight: Flight, files_dir: Path) -> str | None:
+    if flight.creator is not None:  # the token that created the flight (None: the bootstrap token)
+        return flight.creator.name
     meta = (flight.manifest or {}).get("meta") or {}
     for key in ("drone", "drone_id"):
         if isinstance(meta.get(key), str) and meta[key].strip():
@@ -226,8 +219,8 @@ def trajectories(flight: Flight, files_dir: Path, outputs_dir: Path) -> list[tup
     return out
 
 
-def flight_row(flight: Flight, files_dir: Path, outputs_dir: Path, creators: dict[str, str]) -> FlightRow:
-    """The list line of a flight whose files and jobs are loaded (`creators`: `token_names`)."""
+def flight_row(flight: Flight, files_dir: Path, outputs_dir: Path) -> FlightRow:
+    """The list line of a flight whose files, jobs and creator are loaded."""
     files: list[FlightFile] = list(flight.files)
     jobs: list[Job] = list(flight.jobs)
     stats: TrackStats | None = None
@@ -250,7 +243,7 @@ def flight_row(flight: Flight, files_dir: Path, outputs_dir: Path, creators: dic
     else:
         date, date_source = created.date(), "arrival at the server"
     return FlightRow(
-        id=flight.id, name=flight.name, drone=_drone(flight, files_dir, creators), date=date, date_source=date_source,
+        id=flight.id, name=flight.name, drone=_drone(flight, files_dir), date=date, date_source=date_source,
         duration_s=stats.duration_s if stats else None, images=images,
         fix_ratio=stats.fix_ratio if stats else None, fix_source=fix_source,
         state=flight_state([f.status for f in files], [j.status for j in jobs]), files=len(files),

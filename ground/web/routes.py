@@ -257,8 +257,7 @@ def flights_page(request: Request, user: User, state: str | None = None, drone: 
     settings = _settings(request)
     with _store(request).session() as s:
         flights = s.scalars(select(Flight).order_by(Flight.created_at.desc())).all()
-        creators = flightinfo.token_names(s)
-        rows = [flightinfo.flight_row(f, *_dirs(settings, f.id), creators) for f in flights]
+        rows = [flightinfo.flight_row(f, *_dirs(settings, f.id)) for f in flights]
     shown = [r for r in rows if filt.keeps(r)]
     return _page(request, "flights.html", user, rows=shown, total=len(rows), filt=filt, states=flightinfo.STATES,
                  drones=sorted({r.drone for r in rows if r.drone}))
@@ -285,9 +284,7 @@ def _flight_context(flight: Flight, settings: ApiSettings, store: Store) -> dict
         has_report = latest_output(settings, store, flight.id, "report.html").is_file()
     except HTTPException:
         exports, has_report = [], False
-    with store.session() as s:
-        creators = flightinfo.token_names(s)
-    return {"flight": flight, "row": flightinfo.flight_row(flight, files_dir, outputs_dir, creators),
+    return {"flight": flight, "row": flightinfo.flight_row(flight, files_dir, outputs_dir),
             "plots": _plots(flight, settings), "events": events, "exports": exports, "has_report": has_report,
             "jobs": list(reversed(flight.jobs))}
 
