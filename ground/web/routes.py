@@ -25,6 +25,7 @@ from typing import Annotated, Any
 from urllib.parse import quote, urlsplit
 
 from fastapi import APIRouter, Depends, FastAPI, HTTPException, Request
+from fastapi.concurrency import run_in_threadpool
 from fastapi.exception_handlers import http_exception_handler, request_validation_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse, Response
@@ -201,6 +202,7 @@ async def login(request: Request) -> Response:
     refusal = sign_in_refusal(role)
     if refusal is not None:
         return _login_page(request, refusal, 403, next_)
+    close_session(_store(request), request.cookies.get(SESSION_COOKIE))  # a new id at every sign-in
     cookie, _ = open_session(_store(request), principal.token_id, principal.name, role,
                              _settings(request).web_session_s, _now())
     resp = RedirectResponse(_safe_next(next_), status_code=303)
@@ -318,12 +320,13 @@ async def rtk_submit(request: Request, user: User, flight_id: str) -> Response:
     """Queue an RTK re-processing job of the flight's uploaded rover and base observations."""
     await checked_form(request, user)
     try:
-        validate_and_queue_job(_store(request), request.app.state.jobs, flight_id, "rtk", {}, _principal(user))
+        await run_in_threadpool(validate_and_queue_job, _store(request), request.app.state.jobs, flight_id, "rtk",
+                                {}, _principal(user))
     except HTTPException as exc:
         if exc.status_code == 404:
             raise
-        return _flight_page(request, user, flight_id, error=f"nothing queued: {exc.detail}",
-                            status_code=exc.status_code)
+        return await run_in_threadpool(_flight_page, request, user, flight_id, f"nothing queued: {exc.detail}",
+                                       exc.status_code)
     return RedirectResponse(f"{PREFIX}/flights/{flight_id}#jobs", status_code=303)
 
 
@@ -493,6 +496,52 @@ def _adjust_page(request: Request, user: SignedIn, flight: Flight, form: AdjustF
                        for role, _ in UPLOAD_FIELDS})
 
 
+def _check_add_and_queue(request: Request, user: SignedIn, flight: Flight, params: dict[str, Any],
+                         uploads: list[Upload], folder: Path, errors: list[str]) -> int | None:
+    """The adjustment form's checks (uploaded files parsed by the importers, then `check_job` with them), then
+    the files added to the flight (`add_files` + `write_file_bytes`, no automatic job) and the job queued.
+    Returns None when queued, else the HTTP status of the refusal, `errors` saying why in words; nothing is
+    added when a check fails."""
+    from ground.api.job_kinds import check_job
+
+    settings, store = _settings(request), _store(request)
+    complete = {f.name: f for f in flight.files if f.status == "complete"}
+    for u in uploads:
+        params[u.role] = u.name
+        held = complete.get(u.name)
+        if held is not None and held.sha256 != u.sha256:
+            errors.append(f"{u.name}: the flight already holds another file of that name; rename yours")
+    if not errors:
+        _check_uploads(uploads, params, folder, {n: settings.flights_dir / flight.id / n for n in complete}, errors)
+    if not errors:
+        roles = {n: f.role for n, f in complete.items()} | {u.name: u.role for u in uploads}
+        try:
+            check_job("adjust", params, roles)
+        except InputError as exc:
+            errors.append(f"adjust job: {exc}")
+    if errors:
+        return 422
+    principal = _principal(user)
+    new = [u for u in uploads if u.name not in complete]
+    try:
+        if new:
+            add_files(settings, store, flight.id, [ManifestFile(name=u.name, size=u.size, sha256=u.sha256,
+                                                                role=u.role) for u in new], principal)
+        for u in new:  # no automatic job (jobs None): the form's job is queued below
+            with u.path.open("rb") as fh:
+                write_file_bytes(settings, store, None, request.app.state.file_locks, flight.id, u.name, fh,
+                                 principal)
+    except HTTPException as exc:
+        errors.append(f"the files could not be added: {exc.detail}")
+        return exc.status_code
+    try:
+        validate_and_queue_job(store, request.app.state.jobs, flight.id, "adjust", params, principal)
+    except HTTPException as exc:
+        errors.append(f"nothing queued: {exc.detail}")
+        return exc.status_code
+    return None
+
+
 @router.get(f"{PREFIX}/flights/{{flight_id}}/adjust", response_class=HTMLResponse)
 def adjust_form(request: Request, user: User, flight_id: str) -> HTMLResponse:
     """The adjustment form: orientation and GCP files, lever-arm and delay modes, export CRS."""
@@ -517,42 +566,13 @@ async def adjust_submit(request: Request, user: User, flight_id: str) -> Respons
     except ValueError as exc:
         errors.append(str(exc))
         params = {}
-    files_dir = settings.flights_dir / flight_id
-    complete = {f.name: f for f in flight.files if f.status == "complete"}
     with tempfile.TemporaryDirectory(prefix="directgeo-web-") as tmp:
-        folder = Path(tmp)
-        uploads = await _save_uploads(form, folder, settings.max_file_bytes, errors)
-        for u in uploads:
-            params[u.role] = u.name
-            held = complete.get(u.name)
-            if held is not None and held.sha256 != u.sha256:
-                errors.append(f"{u.name}: the flight already holds another file of that name; rename yours")
-        if not errors:
-            _check_uploads(uploads, params, folder, {n: files_dir / n for n in complete}, errors)
-        if not errors:
-            from ground.api.job_kinds import check_job
-
-            roles = {n: f.role for n, f in complete.items()} | {u.name: u.role for u in uploads}
-            try:
-                check_job("adjust", params, roles)
-            except InputError as exc:
-                errors.append(f"adjust job: {exc}")
-        if errors:
-            return _adjust_page(request, user, flight, values, 422)
-        principal = _principal(user)
-        new = [u for u in uploads if u.name not in complete]
-        if new:
-            add_files(settings, store, flight_id, [ManifestFile(name=u.name, size=u.size, sha256=u.sha256, role=u.role)
-                                                   for u in new], principal)
-            for u in new:  # no automatic job (jobs None): the form's job is queued below
-                with u.path.open("rb") as fh:
-                    write_file_bytes(settings, store, None, request.app.state.file_locks, flight_id, u.name, fh,
-                                     principal)
-    try:
-        validate_and_queue_job(store, request.app.state.jobs, flight_id, "adjust", params, principal)
-    except HTTPException as exc:
-        values.errors.append(f"nothing queued: {exc.detail}")
-        return _adjust_page(request, user, _load(store, flight_id), values, exc.status_code)
+        uploads = await _save_uploads(form, Path(tmp), settings.max_file_bytes, errors)
+        # parsing the files and the store's writes are blocking work: off the event loop
+        status_code = await run_in_threadpool(_check_add_and_queue, request, user, flight, params, uploads,
+                                              Path(tmp), errors)
+    if status_code is not None:
+        return await run_in_threadpool(_adjust_page, request, user, _load(store, flight_id), values, status_code)
     return RedirectResponse(f"{PREFIX}/flights/{flight_id}#jobs", status_code=303)
 
 
