@@ -175,7 +175,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "adjustment jobs, reports. Every route but /health needs 'Authorization: Bearer TOKEN' of a role it "
                     "lets through (the bootstrap token of --token-file/$DIRECTGEO_TOKEN is an admin; others: "
                     "`token create`); OpenAPI "
-                    "at /docs and /openapi.json. Example: DIRECTGEO_TOKEN=... python -m ground serve --port 8600 "
+                    "at /docs and /openapi.json; the web interface for engineers at /ui (sign in with an engineer "
+                    "token). Example: DIRECTGEO_TOKEN=... python -m ground serve --port 8600 "
                     "--data-dir /srv/directgeo")
     _store_options(s)
     s.add_argument("--host", default="127.0.0.1", help="address to listen on, e.g. 0.0.0.0 for every interface (default: %(default)s)")

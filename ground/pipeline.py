@@ -15,7 +15,7 @@ import logging
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -25,6 +25,9 @@ from ground.io import crs as crsmod
 from onboard import validate
 from onboard.errors import InputError
 from onboard.formats.atomic import atomic_output, write_atomic
+
+if TYPE_CHECKING:
+    from ground.io.gcp import GroundPoint
 
 log = logging.getLogger(__name__)
 
@@ -190,6 +193,27 @@ def _read_events(inputs: AdjustInputs, options: AdjustJobOptions,
     return events, {"method": "csv image names", "matched": len(events)}
 
 
+def read_control(gcp: Path, gcp_rel: Path | None, gcp_crs: str) -> list[GroundPoint]:
+    """The GCP/check points of a GCP file, its reader chosen by suffix: `.csv` name,x,y,z[,σ,role] with relative
+    coordinates in `gcp_crs`; `.xml` MicMac and other suffixes ODM `gcp_list.txt`, which hold ground coordinates
+    only and need `gcp_rel` (a relative CSV name,x_rel,y_rel,z_rel). `InputError` in the importers' words."""
+    from ground.io.gcp import (
+        merge_ground_and_relative,
+        read_gcp_csv,
+        read_micmac_gcp,
+        read_odm_gcp_list,
+        read_relative_csv,
+    )
+
+    suffix = gcp.suffix.lower()
+    if suffix == ".csv":
+        return read_gcp_csv(gcp, crs=gcp_crs)
+    ground = read_micmac_gcp(gcp, gcp_crs) if suffix == ".xml" else read_odm_gcp_list(gcp)
+    if gcp_rel is None:
+        raise InputError(f"{gcp} has ground coordinates only: give --gcp-rel name,x_rel,y_rel,z_rel")
+    return merge_ground_and_relative(ground, read_relative_csv(gcp_rel))
+
+
 def run_adjust(inputs: AdjustInputs, options: AdjustJobOptions, out_dir: Path) -> AdjustOutcome:
     """Read everything, adjust, write results.json, the exports and report.html into `out_dir` (atomically).
 
@@ -198,14 +222,7 @@ def run_adjust(inputs: AdjustInputs, options: AdjustJobOptions, out_dir: Path) -
     """
     from ground.adjust.solve import adjust, build_problem
     from ground.io.exporters import cameras_to_crs, write_all
-    from ground.io.gcp import (
-        merge_ground_and_relative,
-        read_gcp_csv,
-        read_micmac_gcp,
-        read_odm_gcp_list,
-        read_relative_csv,
-        to_control_points,
-    )
+    from ground.io.gcp import to_control_points
     from ground.io.orientations import read_orientations
     from ground.io.trajectory import read_trajectory
     from ground.report import write_report
@@ -223,16 +240,8 @@ def run_adjust(inputs: AdjustInputs, options: AdjustJobOptions, out_dir: Path) -
     crs_notes = crsmod.check_crs_covers(origin, options.crs)
     control = []
     if inputs.gcp is not None:
-        suffix = inputs.gcp.suffix.lower()
-        if suffix == ".csv":
-            pts = read_gcp_csv(inputs.gcp, crs=options.gcp_crs)
-        else:
-            ground = read_micmac_gcp(inputs.gcp, options.gcp_crs) if suffix == ".xml" else read_odm_gcp_list(
-                inputs.gcp)
-            if inputs.gcp_rel is None:
-                raise InputError(f"{inputs.gcp} has ground coordinates only: give --gcp-rel name,x_rel,y_rel,z_rel")
-            pts = merge_ground_and_relative(ground, read_relative_csv(inputs.gcp_rel))
-        control = to_control_points(pts, origin, max_datum_error_m=tol)
+        control = to_control_points(read_control(inputs.gcp, inputs.gcp_rel, options.gcp_crs), origin,
+                                    max_datum_error_m=tol)
     problem = build_problem(oset.poses, events, traj, control, origin_ecef_m=origin)
     adj_options = AdjustmentOptions(lever_arm=lever, delay=delay, relative_control=options.relative_control)
     result = adjust(problem, adj_options)

@@ -32,14 +32,15 @@ def _v(value: float | None, scale: float = 1.0, fmt: str = ".1f") -> str:
     return format(value * scale, fmt)
 
 
-def _png(fig: Figure) -> str:
+def figure_data_uri(fig: Figure) -> str:
+    """A figure as an inline PNG `data:` URI (the report's and the web pages' one encoding of a figure)."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=96, bbox_inches="tight")
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
 
 
 def _img(fig: Figure, alt: str) -> str:
-    return f'<figure><img alt="{html.escape(alt)}" src="{_png(fig)}"><figcaption>{html.escape(alt)}</figcaption></figure>'
+    return f'<figure><img alt="{html.escape(alt)}" src="{figure_data_uri(fig)}"><figcaption>{html.escape(alt)}</figcaption></figure>'
 
 
 def correlation_figure(names: list[str], matrix: np.ndarray) -> Figure:

@@ -1,4 +1,5 @@
-"""Flight store: SQLAlchemy models (flights, files, upload sessions, jobs, API tokens) and small helpers.
+"""Flight store: SQLAlchemy models (flights, files, upload sessions, jobs, API tokens, web sign-in sessions) and
+small helpers.
 
 SQLite file by default (`sqlite:///<data_dir>/directgeo.sqlite3`), any SQLAlchemy URL (PostgreSQL) through
 `DATABASE_URL`. Raw files live on disk under `<data_dir>/flights/<flight id>/`; the database holds what was
@@ -133,6 +134,23 @@ class ApiToken(Base):
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=_now)
     revoked_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
     last_used_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+
+
+class WebSession(Base):
+    """A signed-in browser of the web interface: the SHA-256 of the session cookie's random id (the id itself is
+    never stored), the CSRF token its forms carry, who signed in (the user token's id, name and role) and when
+    the session ends (UTC)."""
+
+    __tablename__ = "web_sessions"
+
+    id_sha256: Mapped[str] = mapped_column(String(64), primary_key=True)
+    csrf_token: Mapped[str] = mapped_column(String(64))
+    #: the `api_tokens` id; None for the bootstrap admin token of the settings
+    token_id: Mapped[str | None] = mapped_column(String(32), index=True, nullable=True)
+    name: Mapped[str] = mapped_column(String(255), default="")
+    role: Mapped[str] = mapped_column(String(16))
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=_now)
+    expires_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), index=True)
 
 
 def _add_missing_columns(engine: Engine) -> list[str]:

@@ -15,6 +15,7 @@ from ground.api.jobs import JobFunction, JobRunner
 from ground.api.routes import flights, tokens
 from ground.api.settings import ApiSettings
 from ground.store import Store
+from ground.web import routes as web
 
 log = logging.getLogger(__name__)
 
@@ -26,9 +27,15 @@ def default_job_functions() -> dict[str, JobFunction]:
     return {"adjust": adjust_job, "rtk": rtk_job}
 
 
+def _streams_files(scope: Scope) -> bool:
+    """The web adjustment form's multipart POST: its files stream to disk and the route caps them itself."""
+    return bool(scope["method"] == "POST" and scope["path"].startswith(web.PREFIX + "/flights/")
+                and scope["path"].endswith("/adjust"))
+
+
 class BodyLimit:
-    """ASGI middleware: a request body other than an upload chunk (`PUT …/files/…`, capped by its route) larger
-    than `limit` bytes is answered 413 before the application parses it."""
+    """ASGI middleware: a request body other than an upload chunk (`PUT …/files/…`) or the web adjustment form
+    (both capped by their routes) larger than `limit` bytes is answered 413 before the application parses it."""
 
     def __init__(self, app: ASGIApp, limit: int) -> None:
         self.app = app
@@ -36,7 +43,7 @@ class BodyLimit:
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http" or scope["method"] in ("GET", "HEAD") or (
-                scope["method"] == "PUT" and "/files/" in scope["path"]):
+                scope["method"] == "PUT" and "/files/" in scope["path"]) or _streams_files(scope):
             await self.app(scope, receive, send)
             return
         declared = dict(scope["headers"]).get(b"content-length", b"")
@@ -104,6 +111,7 @@ def create_app(settings: ApiSettings, job_functions: dict[str, JobFunction] | No
     app.add_middleware(BodyLimit, limit=settings.max_json_bytes)
     app.include_router(flights.router)
     app.include_router(tokens.router)
+    web.install(app)  # the web interface under /ui (its own routes, outside the OpenAPI schema)
 
     @app.get("/health", tags=["health"])
     def health() -> dict[str, str]:

@@ -29,6 +29,8 @@ class ApiSettings:
     job_timeout_s: float = 4 * 3600.0
     #: largest JSON request body (bytes): manifests of 10 000 files fit in ~2 MB
     max_json_bytes: int = 4 * 1024**2
+    #: a web sign-in session ends this many seconds after sign-in (s)
+    web_session_s: float = 12 * 3600.0
 
     def __post_init__(self) -> None:
         if len(self.token) < MIN_TOKEN_CHARS:
@@ -40,6 +42,7 @@ class ApiSettings:
                 raise ConfigFileError(f"{name} {value!r}: must be a whole number > 0")
         try:
             validate.positive(self.job_timeout_s, name="job_timeout_s", unit=" s")
+            validate.positive(self.web_session_s, name="web_session_s", unit=" s", maximum=30 * 86400.0)
         except ValueError as exc:
             raise ConfigFileError(str(exc)) from None
 

@@ -204,6 +204,42 @@ def read_micmac_folder(folder: str | Path) -> OrientationSet:
     return OrientationSet(poses=poses, format="micmac", frame=f"MicMac {d.name} frame")
 
 
+#: largest uncompressed member of a MicMac .zip (bytes): an orientation XML is a few kB
+MAX_MICMAC_MEMBER_BYTES = 1 << 20
+
+
+def read_micmac_zip(path: str | Path) -> OrientationSet:
+    """Read the `Orientation-*.xml` of a MicMac `Ori-*` folder sent as one .zip (a flight file is one file, not a
+    folder). Members are matched by their base name, wherever they sit in the archive; nothing is extracted to
+    disk, and a member over `MAX_MICMAC_MEMBER_BYTES` or two with the same name are refused."""
+    import tempfile
+    import zipfile
+
+    p = Path(path)
+    try:
+        with zipfile.ZipFile(p) as zf, tempfile.TemporaryDirectory(prefix="micmac-") as tmp:
+            seen: set[str] = set()
+            for info in zf.infolist():
+                name = info.filename.rsplit("/", 1)[-1]
+                if info.is_dir() or not (name.startswith(MICMAC_PREFIX) and name.endswith(".xml")):
+                    continue
+                if name in seen:
+                    raise FormatError(p, f"{name} appears twice in the archive")
+                if info.file_size > MAX_MICMAC_MEMBER_BYTES:
+                    raise FormatError(p, f"{name}: {info.file_size} bytes, too large for an orientation file")
+                seen.add(name)
+                (Path(tmp) / name).write_bytes(zf.read(info))
+            if not seen:
+                raise FormatError(p, "no Orientation-*.xml in this archive (zip the MicMac Ori-* folder)")
+            try:
+                got = read_micmac_folder(tmp)
+            except FormatError as exc:  # name the member, not the temporary copy
+                raise FormatError(p, f"{Path(exc.path).name}: {exc.detail}", line=exc.line) from None
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise FormatError(p, f"not a readable zip archive: {exc}") from exc
+    return OrientationSet(poses=got.poses, format="micmac", frame=f"MicMac frame ({p.name})")
+
+
 def write_micmac_orientation(path: str | Path, pose: CameraPose) -> None:
     """Write a MicMac `Orientation-<image>.xml` holding the pose's Centre and CodageMatr (camera → world)."""
     oc = ET.Element("OrientationConique")
@@ -388,8 +424,8 @@ def write_opk_csv(path: str | Path, poses: list[CameraPose], crs: str | None = N
 def read_orientations(path: str | Path) -> OrientationSet:
     """Read poses from a file or folder, choosing the reader from its shape.
 
-    Folder → MicMac `Ori-*`; `.json` → OpenSfM; `.txt` → COLMAP `images.txt`; `.xml` → Metashape cameras
-    (or a single MicMac orientation); `.csv` → OPK CSV.
+    Folder → MicMac `Ori-*` (`.zip` → the same folder zipped); `.json` → OpenSfM; `.txt` → COLMAP `images.txt`;
+    `.xml` → Metashape cameras (or a single MicMac orientation); `.csv` → OPK CSV.
     """
     p = Path(path)
     if p.is_dir():
@@ -403,9 +439,11 @@ def read_orientations(path: str | Path) -> OrientationSet:
         return read_colmap_images(p)
     if suffix == ".csv":
         return read_opk_csv(p)
+    if suffix == ".zip":
+        return read_micmac_zip(p)
     if suffix == ".xml":
         if p.name.startswith(MICMAC_PREFIX):
             pose = read_micmac_orientation(p)
             return OrientationSet(poses=[pose], format="micmac", frame="MicMac frame")
         return read_metashape_cameras(p)
-    raise FormatError(p, f"unknown orientation format {suffix!r} (expected a folder, .json, .txt, .xml, .csv)")
+    raise FormatError(p, f"unknown orientation format {suffix!r} (expected a folder, .json, .txt, .xml, .csv, .zip)")

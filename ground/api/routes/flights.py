@@ -364,8 +364,10 @@ async def put_chunk(
 
 
 def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str, path: Path, offset: int,
-                  body: bytes, claimed: str, client: str, jobs: JobRunner, locks: FileLocks,
+                  body: bytes, claimed: str, client: str, jobs: JobRunner | None, locks: FileLocks,
                   principal: Principal) -> FileOut:
+    """Store one chunk (the PUT route's work); the flight's automatic jobs are queued on `jobs` when this chunk
+    completes the flight (`jobs` None: the caller queues its own job, e.g. the web adjustment form)."""
     with locks.get(flight_id, name), store.session() as s:
         flight, f = _lookup_file(s, flight_id, name, principal)
         if f.status == "complete":
@@ -418,16 +420,17 @@ def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str
         if f.status != "complete" and f.received == 0:
             raise HTTPException(status_code=422, detail=f"{name}: whole-file SHA-256 differs from the manifest; "
                                                         "the data was discarded, upload again from offset 0")
-    if flight.status == "complete":
+    if flight.status == "complete" and jobs is not None:
         _maybe_auto_adjust(store, flight_id, jobs)
     return out
 
 
-def write_file_bytes(settings: ApiSettings, store: Store, jobs: JobRunner, locks: FileLocks, flight_id: str,
+def write_file_bytes(settings: ApiSettings, store: Store, jobs: JobRunner | None, locks: FileLocks, flight_id: str,
                      name: str, source: BinaryIO, principal: Principal, client: str = "web") -> FileOut:
     """Store the whole content of a file the flight lists (e.g. added by `add_files` from a web form), read
     from `source` at the server's offset (an interrupted earlier write resumes), in chunks of the chunk limit,
-    each through the same path as `PUT …/files/{name}` (locks, checks, whole-file SHA-256, automatic jobs).
+    each through the same path as `PUT …/files/{name}` (locks, checks, whole-file SHA-256, automatic jobs;
+    `jobs` None: none, the caller queues the job it was asked for, as the web adjustment form does).
     Returns the file's state; `HTTPException` as the PUT route (422: the bytes' SHA-256 differs from the listed
     one, or `source` ends before the listed size; 413: it runs past it)."""
     path = safe_path(settings, flight_id, name)
@@ -493,24 +496,32 @@ def _maybe_auto_adjust(store: Store, flight_id: str, jobs: JobRunner) -> None:
         jobs.submit(job_id)
 
 
-@router.post("/{flight_id}/jobs", response_model=JobOut, status_code=status.HTTP_202_ACCEPTED,
-             responses={404: {}, 409: {}, 413: {}, 422: {}})
-def create_job(flight_id: str, body: JobCreate, request: Request, store: StoreDep, principal: Engineer) -> JobOut:
-    """Queue a processing job (runs in the background; poll its status)."""
+def validate_and_queue_job(store: Store, jobs: JobRunner, flight_id: str, kind: str, params: dict[str, Any],
+                           principal: Principal) -> JobOut:
+    """Check a job against the flight (404 no flight, 403 not the caller's, 409 upload not complete, 422 bad
+    parameters or missing files: HTTPException with the reason in words), record it `queued` and hand it to
+    the job queue."""
     with store.session() as s:
         flight = _flight_of(s, flight_id, principal)
         if flight.status != "complete":
             raise HTTPException(status_code=409, detail="the flight's upload is not complete")
         try:
-            check_job(body.kind, body.params, {f.name: f.role for f in flight.files if f.status == "complete"})
+            check_job(kind, params, {f.name: f.role for f in flight.files if f.status == "complete"})
         except InputError as exc:
-            raise HTTPException(status_code=422, detail=f"{body.kind} job: {exc}") from exc
-        job = Job(flight_id=flight_id, kind=body.kind, params=body.params)
+            raise HTTPException(status_code=422, detail=f"{kind} job: {exc}") from exc
+        job = Job(flight_id=flight_id, kind=kind, params=params)
         s.add(job)
         s.commit()
         out = job_out(job)
-    request.app.state.jobs.submit(out.id)
+    jobs.submit(out.id)
     return out
+
+
+@router.post("/{flight_id}/jobs", response_model=JobOut, status_code=status.HTTP_202_ACCEPTED,
+             responses={404: {}, 409: {}, 413: {}, 422: {}})
+def create_job(flight_id: str, body: JobCreate, request: Request, store: StoreDep, principal: Engineer) -> JobOut:
+    """Queue a processing job (runs in the background; poll its status)."""
+    return validate_and_queue_job(store, request.app.state.jobs, flight_id, body.kind, body.params, principal)
 
 
 @router.get("/{flight_id}/jobs/{job_id}", response_model=JobOut)
@@ -523,7 +534,8 @@ def get_job(flight_id: str, job_id: str, store: StoreDep, _: JobReader) -> JobOu
         return job_out(job)
 
 
-def _latest_output(settings: ApiSettings, store: Store, flight_id: str, filename: str) -> Path:
+def latest_output(settings: ApiSettings, store: Store, flight_id: str, filename: str) -> Path:
+    """A file of the latest finished adjustment of the flight (404 in words when there is none or it lacks it)."""
     with store.session() as s:
         flight = s.get(Flight, flight_id)
         if flight is None:
@@ -541,7 +553,7 @@ def _latest_output(settings: ApiSettings, store: Store, flight_id: str, filename
 def get_results(flight_id: str, settings: SettingsDep,
                 store: StoreDep, _: Engineer) -> Response:
     """`results.json` of the latest finished adjustment."""
-    path = _latest_output(settings, store, flight_id, "results.json")
+    path = latest_output(settings, store, flight_id, "results.json")
     return Response(content=path.read_bytes(), media_type="application/json")
 
 
@@ -549,25 +561,35 @@ def get_results(flight_id: str, settings: SettingsDep,
 def get_report(flight_id: str, settings: SettingsDep,
                store: StoreDep, _: Engineer) -> Response:
     """The self-contained HTML report of the latest finished adjustment."""
-    path = _latest_output(settings, store, flight_id, "report.html")
+    path = latest_output(settings, store, flight_id, "report.html")
     return HTMLResponse(content=path.read_text(encoding="utf-8"))
+
+
+def export_names(settings: ApiSettings, store: Store, flight_id: str) -> list[str]:
+    """Names of the export files of the latest finished adjustment (404 when there is none)."""
+    folder = latest_output(settings, store, flight_id, "results.json").parent / "exports"
+    return sorted(p.name for p in folder.iterdir() if p.is_file()) if folder.is_dir() else []
+
+
+def export_path(settings: ApiSettings, store: Store, flight_id: str, name: str) -> Path:
+    """One export file of the latest finished adjustment (400 for a bad name, 404 when absent)."""
+    try:
+        check_file_name(name)
+    except UploadRejected as exc:
+        raise _http(exc) from exc
+    path = latest_output(settings, store, flight_id, "results.json").parent / "exports" / name
+    if not path.is_file():
+        raise HTTPException(status_code=404, detail=f"no export {name!r}")
+    return path
 
 
 @router.get("/{flight_id}/exports", response_model=list[str])
 def list_exports(flight_id: str, settings: SettingsDep, store: StoreDep, _: Engineer) -> list[str]:
     """Geotag/orientation export files of the latest finished adjustment (geo.txt, pix4d.csv, …)."""
-    folder = _latest_output(settings, store, flight_id, "results.json").parent / "exports"
-    return sorted(p.name for p in folder.iterdir() if p.is_file()) if folder.is_dir() else []
+    return export_names(settings, store, flight_id)
 
 
 @router.get("/{flight_id}/exports/{name}", response_class=FileResponse)
 def get_export(flight_id: str, name: str, settings: SettingsDep, store: StoreDep, _: Engineer) -> FileResponse:
     """One export file of the latest finished adjustment."""
-    try:
-        check_file_name(name)
-    except UploadRejected as exc:
-        raise _http(exc) from exc
-    path = _latest_output(settings, store, flight_id, "results.json").parent / "exports" / name
-    if not path.is_file():
-        raise HTTPException(status_code=404, detail=f"no export {name!r}")
-    return FileResponse(path, media_type="text/plain", filename=name)
+    return FileResponse(export_path(settings, store, flight_id, name), media_type="text/plain", filename=name)
