@@ -365,3 +365,75 @@ def test_upload_resumes_after_the_server_was_down_and_after_a_reboot(tmp_path: P
         assert UploadQueue(data).done()[flight.name]["files"] == local_sha256(flight)
     finally:
         ground.stop()
+
+
+def test_a_reboot_of_the_companion_mid_upload(tmp_path: Path) -> None:
+    """A real reboot: the recorder daemon and the uploader both SIGKILLed while a closed 96 MB flight is partly on
+    the server and the next flight is being recorded in the air, then both started again as systemd would (same
+    config, same data folder), the autopilot back on the ground. The upload resumes from the server's offset, the
+    cut flight is recovered (torn tail) and closes on the ground, every closed flight is byte-identical on the
+    server and nothing is sent twice."""
+    ground = Ground(tmp_path)
+    ground.start()
+    data = tmp_path / "data"
+    big = make_big_flight(data, "flight-20260501T100000Z", 96)
+    big_total = sum(p.stat().st_size for p in big.iterdir() if p.is_file())
+    go = tmp_path / "go"
+    receiver, rx_pty = start_receiver(tmp_path)
+    standin, ap_pty, _ = start_standin(tmp_path, "--go-file", str(go), "--arm-at", "1", "--survey", "400")
+    cfg = write_config(tmp_path, ground, f"serial:{ap_pty}@921600", 2.0, upload="chunk_mib = 1.0\n")
+    status_path = tmp_path / "run" / "status.json"
+    daemon = start_daemon(tmp_path, cfg, rx_pty)
+    uploader = start_uploader(tmp_path, cfg)
+    try:
+        wait_until(lambda: autopilot_json(status_path).get("link_up"), 30, "autopilot link up")
+        wait_until(lambda: upload_json(tmp_path).get("bytes_sent", 0) > big_total * 0.2, 60, "a fifth sent")
+        go.touch()  # take-off: the uploader pauses while armed
+        wait_until(lambda: autopilot_json(status_path).get("landed_state") == "in_air", 40, "in the air")
+        time.sleep(1.0)
+        for p in (daemon, uploader):  # the battery goes: no clean stop for either
+            p.kill()
+            p.wait(timeout=30)
+        standin.send_signal(signal.SIGTERM)
+        standin.communicate(timeout=30)
+        held = server_held(ground, big.name)
+        assert 0 < held < big_total
+        (cut,) = [f for f in data.glob("flight-*") if f != big]
+        assert not read_manifest(cut).closed  # type: ignore[union-attr]
+        # power back: the autopilot boots on the ground, disarmed; the companion's two services start again
+        standin, ap_pty, _ = start_standin(tmp_path, "--arm-at", "1000")
+        cfg = write_config(tmp_path, ground, f"serial:{ap_pty}@921600", 2.0, upload="chunk_mib = 1.0\n")
+        daemon = start_daemon(tmp_path, cfg, rx_pty)
+        uploader = start_uploader(tmp_path, cfg)
+        wait_until(lambda: upload_json(tmp_path).get("pid") == uploader.pid, 30, "the new uploader's status")
+        wait_until(lambda: autopilot_json(status_path).get("flights_closed") == 1, 60, "the cut flight closed")
+        wait_until(lambda: upload_json(tmp_path).get("done") == 2, 90, "both closed flights uploaded")
+        second_run = upload_json(tmp_path)
+        sigterm(uploader)
+        sigterm(daemon)
+    finally:
+        for p in (daemon, uploader):
+            reap(p)
+        for p in (standin, receiver):
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+                p.communicate(timeout=30)
+    try:
+        m = read_manifest(cut)
+        assert m is not None and m.closed and m.restarts == 1 and is_rollover(m.close_reason or "")
+        assert any(s.recovered for s in m.segments)  # the torn tail, listed with its true size and hash
+        assert autopilot_events(cut)[:2] == ["armed", "takeoff"] and autopilot_events(cut)[-1] == "flight_over"
+        cut_total = sum(p.stat().st_size for p in cut.iterdir() if p.is_file() and not p.name.startswith("."))
+        # resumed from the server's offset: the second run sent what the server lacked of the big flight and the
+        # whole cut flight, not a byte more
+        assert second_run["bytes_sent"] == big_total - held + cut_total
+        on_server = ground.flights()
+        assert big.name in on_server and cut.name in on_server
+        newest = max(data.glob("flight-*"))
+        assert set(on_server) == {big.name, cut.name} and newest not in (big, cut)  # the open flight stays local
+        for f in (big, cut):
+            assert ground.stored_sha256(f.name) == local_sha256(f), f.name
+            assert all(x["status"] == "complete" for x in on_server[f.name]["files"])
+            assert UploadQueue(data).done()[f.name]["files"] == local_sha256(f)
+    finally:
+        ground.stop()
