@@ -103,31 +103,31 @@ def _merge(a: ObsEpoch, b: ObsEpoch) -> ObsEpoch:
 class EpochAssembler:
     """Observation messages → `BaseEpoch`s, one per epoch time (pure, incremental; feed in stream order).
 
-    A message joins the open epoch when of its time (within EPOCH_MERGE_TOLERANCE_NS), else opens a new one;
-    satellites already present are not added twice. An epoch closes as complete when a message with the
-    multiple-message bit clear joins it, and as incomplete when a message of a later epoch arrives first (its
-    last message was lost) or at `flush()`. A message of an epoch older than the open or last closed one is
-    dropped and counted in `late` (real bases send an epoch's messages together, in time order). Closed epochs come out
-    of `add`/`flush` in time order.
+    A message joins the open epoch when of its time (within EPOCH_MERGE_TOLERANCE_NS), else closes it and opens
+    a new one; satellites already present are not added twice. An epoch closes as complete when a message with
+    the multiple-message bit clear joins it, as incomplete when a message of another epoch arrives first (its
+    last message was lost) or at `flush()`. A message is late, dropped and counted in `late`, only when its own
+    system already closed an epoch at or after its time: one system's odd time tags (a stream writing GPS time
+    into BeiDou's DF427, 14 s off) never cost the other systems their epochs. Closed epochs therefore come in
+    stream order, which is time order for a sane stream (`RtcmCollector` files them by time).
     """
 
     def __init__(self) -> None:
         self._open: tuple[ObsEpoch, list[int]] | None = None  # the epoch under construction, its messages
-        self._last_closed: GpsTime | None = None
+        self._last_closed: dict[int, GpsTime] = {}  # per system
         self.late = 0
 
     def add(self, obs: ObsEpoch, info: ObsMessageInfo) -> list[BaseEpoch]:
-        """Add one message's epoch; returns the epochs it closed (oldest first)."""
+        """Add one message's epoch; returns the epochs it closed (in closing order)."""
         t = obs.time
-        behind = self._open[0].time if self._open is not None else self._last_closed
-        if behind is not None and t.diff_ns(behind) <= -EPOCH_MERGE_TOLERANCE_NS or (
-                self._last_closed is not None and t.diff_ns(self._last_closed) < EPOCH_MERGE_TOLERANCE_NS):
+        last = self._last_closed.get(info.gnss_id)
+        if last is not None and t.diff_ns(last) < EPOCH_MERGE_TOLERANCE_NS:
             self.late += 1
             log.warning("RTCM %d of epoch %s arrived after that epoch was closed: dropped", info.number, t)
             return []
         closed: list[BaseEpoch] = []
-        if self._open is not None and t.diff_ns(self._open[0].time) >= EPOCH_MERGE_TOLERANCE_NS:
-            closed.append(self._close(complete=False))  # a later epoch began: the open one lost its last message
+        if self._open is not None and abs(t.diff_ns(self._open[0].time)) >= EPOCH_MERGE_TOLERANCE_NS:
+            closed.append(self._close(complete=False))  # another epoch began: the open one lost its last message
         if self._open is not None:
             ep, numbers = self._open
             self._open = (_merge(ep, obs), [*numbers, info.number])
@@ -145,7 +145,8 @@ class EpochAssembler:
         assert self._open is not None
         obs, numbers = self._open
         self._open = None
-        self._last_closed = obs.time
+        for g in obs.systems():
+            self._last_closed[g] = obs.time
         return BaseEpoch(obs, tuple(numbers), complete)
 
 
@@ -231,7 +232,18 @@ class RtcmCollector:
     def _closed(self, epochs: list[BaseEpoch]) -> None:
         out = self.out
         out.late_messages = self.assembler.late
-        out.gnss_epochs += epochs
+        kept = out.gnss_epochs
+        for ep in epochs:
+            # by time: after the last one in any sane stream; an epoch of the same time is merged into
+            k = len(kept)
+            while k > 0 and kept[k - 1].time.diff_ns(ep.time) >= EPOCH_MERGE_TOLERANCE_NS:
+                k -= 1
+            if k > 0 and abs(kept[k - 1].time.diff_ns(ep.time)) < EPOCH_MERGE_TOLERANCE_NS:
+                old = kept[k - 1]
+                kept[k - 1] = BaseEpoch(_merge(old.obs, ep.obs), old.messages + ep.messages,
+                                        old.complete or ep.complete)
+            else:
+                kept.insert(k, ep)
         if self.max_epochs is not None and len(out.gnss_epochs) > self.max_epochs:
             del out.gnss_epochs[: len(out.gnss_epochs) - self.max_epochs]
 
