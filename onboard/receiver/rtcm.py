@@ -541,3 +541,173 @@ def encode_ephemeris(eph: Ephemeris) -> bytes:
         "DF102": eph.health, "DF103": eph.l2p_flag, "DF137": 1 if eph.fit_interval_h > 4.0 else 0,
     })
     return rtcm3_frame(w.to_bytes())
+
+
+# --- MSM encoding ----------------------------------------------------------------------------------------
+
+MSM_SIGNAL_IDS: dict[int, dict[str, int]] = {
+    GNSS_GPS: {"1C": 2}, GNSS_GLONASS: {"1C": 2}, GNSS_GALILEO: {"1C": 2, "1B": 4, "1X": 5}, GNSS_QZSS: {"1C": 2},
+    GNSS_BEIDOU: {"2I": 2},
+}
+"""MSM signal ids (DF395 mask bit, 1 = most significant) of the L1-band signals, RTCM 10403.3 tables 3.5-91…108."""
+_MSM_BASE = {g: n for n, g in MSM_SYSTEMS.items()}
+_DF407_LOCK_MS = [lock_ms_from_df407(i) for i in range(705)]
+
+
+def _indicator_at_most(table: Sequence[float], lock_ms: float) -> int:
+    """The largest indicator whose minimum lock time does not exceed `lock_ms` (tables increase)."""
+    import bisect
+
+    return max(0, bisect.bisect_right(table, lock_ms) - 1)
+
+
+def _df402_from_lock_ms(lock_ms: float) -> int:
+    return _indicator_at_most([0.0] + [lock_ms_from_df402(i) for i in range(1, 16)], lock_ms)
+
+
+class MsmEncoder:
+    """`ObsEpoch` → RTCM3 MSM4, MSM5 or MSM7 frame of one system (the L1-band signal of each satellite).
+
+    Stateful only where RTCM needs it: a carrier phase further than the fine-phase field's span (±2^-8 ms,
+    ±1171 m) from the rough range is moved by whole cycles, the same shift kept for that satellite until its
+    lock time falls (a slip). GLONASS needs each entry's `glo_fcn` (sent as DF419 in MSM5/7; a satellite
+    without it is sent with its pseudorange only). Entries of other systems are ignored.
+    """
+
+    def __init__(self, station_id: int) -> None:
+        self.station_id = station_id
+        self._shift_cyc: dict[tuple[int, int], float] = {}
+        self._lock_ms: dict[tuple[int, int], float] = {}
+
+    def encode(self, epoch: ObsEpoch, gnss_id: int, kind: int = 4, more_follow: bool = False) -> bytes | None:
+        """The MSM`kind` (4, 5 or 7) frame of `epoch`'s `gnss_id` satellites with a valid pseudorange (None when
+        it has none); `more_follow` sets the multiple-message bit (further messages of this epoch follow)."""
+        if kind not in (4, 5, 7):
+            raise ValueError("MSM kind must be 4, 5 or 7")
+        sig_ids = MSM_SIGNAL_IDS[gnss_id]
+        rows = []
+        for i in range(len(epoch)):
+            sv = int(epoch.sv_id[i])
+            sig = str(epoch.signal[i]) if epoch.signal.shape[0] == len(epoch) and epoch.signal[i] else ""
+            sig = sig or next(iter(sig_ids))
+            if int(epoch.gnss_id[i]) != gnss_id or sig not in sig_ids or not math.isfinite(epoch.pr_m[i]):
+                continue
+            if not 1 <= sv <= 64:
+                continue
+            rows.append((sv, i, sig))
+        if not rows:
+            return None
+        rows.sort()
+        sats = sorted({sv for sv, _, _ in rows})
+        sigs = sorted({sig_ids[s] for _, _, s in rows})
+        if len(sats) * len(sigs) > 64:
+            raise ValueError(f"{len(sats)} satellites × {len(sigs)} signals exceed the 64-cell MSM mask")
+        w = BitWriter()
+        w.put(_MSM_BASE[gnss_id] + kind, 12)
+        w.put(self.station_id, 12)
+        self._put_epoch_time(w, epoch.time, gnss_id)
+        for value, bits in ((int(more_follow), 1), (0, 3), (0, 7), (0, 2), (0, 2), (0, 1), (0, 3)):
+            w.put(value, bits)  # DF393, IODS, reserved, clock steering, external clock, smoothing, interval
+        w.put(sum(1 << (64 - sv) for sv in sats), 64)
+        w.put(sum(1 << (32 - s) for s in sigs), 32)
+        cells = {(sv, sig_ids[sig]): (i, sig) for sv, i, sig in rows}
+        for sv in sats:
+            for s in sigs:
+                w.put(int((sv, s) in cells), 1)
+        ms_m = CLIGHT_M_S / 1000.0
+        rough: dict[int, float] = {}
+        fcn_of: dict[int, int | None] = {}
+        for sv in sats:
+            i = next(i for (v, _), (i, _) in cells.items() if v == sv)
+            rough[sv] = round(float(epoch.pr_m[i]) / ms_m * 1024.0) / 1024.0
+            k = int(epoch.glo_fcn[i]) if gnss_id == GNSS_GLONASS and epoch.glo_fcn.shape[0] == len(epoch) else None
+            fcn_of[sv] = k if k is not None and GLO_FCN_MIN <= k <= GLO_FCN_MAX else None
+        rates = {sv: self._rate_m_s(epoch, cells, sv, fcn_of[sv]) for sv in sats}
+        for sv in sats:
+            w.put(int(rough[sv]), 8)
+        if kind in (5, 7):
+            for sv in sats:
+                w.put(fcn_of[sv] + 7 if fcn_of[sv] is not None else (15 if gnss_id == GNSS_GLONASS else 0), 4)
+        for sv in sats:
+            w.put(round((rough[sv] - int(rough[sv])) * 1024.0), 10)
+        if kind in (5, 7):
+            for sv in sats:
+                r = rates[sv]
+                w.put(-8192 if r is None else round(r), 14, signed=True)
+        order = [(sv, s) for sv in sats for s in sigs if (sv, s) in cells]
+        fine = [self._fine(epoch, cells[c][0], c[0], rough[c[0]], fcn_of[c[0]], gnss_id) for c in order]
+        pr_bits, pr_res, cp_bits, cp_res = (15, 2**-24, 22, 2**-29) if kind != 7 else (20, 2**-29, 24, 2**-31)
+        for fpr, _, _ in fine:
+            w.put(-(1 << (pr_bits - 1)) if fpr is None else round(fpr / pr_res), pr_bits, signed=True)
+        for _, fcp, _ in fine:
+            w.put(-(1 << (cp_bits - 1)) if fcp is None else round(fcp / cp_res), cp_bits, signed=True)
+        for _, _, lock in fine:
+            w.put(_df402_from_lock_ms(lock) if kind != 7 else _indicator_at_most(_DF407_LOCK_MS, lock),
+                  4 if kind != 7 else 10)
+        for c in order:
+            w.put(int(bool(int(epoch.lli[cells[c][0]]) & LLI_HALF_CYCLE)), 1)
+        for c in order:
+            cn0 = float(epoch.cn0_dbhz[cells[c][0]])
+            cn0 = 0.0 if not math.isfinite(cn0) else cn0
+            if kind != 7:
+                w.put(int(np.clip(round(cn0), 0, 63)), 6)
+            else:
+                w.put(int(np.clip(round(cn0 * 16), 0, 1023)), 10)
+        if kind in (5, 7):
+            for c in order:
+                r = rates[c[0]]
+                full = self._rate_m_s(epoch, {c: cells[c]}, c[0], fcn_of[c[0]], rounded=False)
+                w.put(-16384 if r is None or full is None else round((full - round(r)) / 0.0001), 15, signed=True)
+        return rtcm3_frame(w.to_bytes())
+
+    @staticmethod
+    def _put_epoch_time(w: BitWriter, t: GpsTime, gnss_id: int) -> None:
+        if gnss_id == GNSS_GLONASS:
+            import datetime as _dt
+
+            moscow = t.to_utc() + _dt.timedelta(hours=3)
+            tod_ms = round((moscow.hour * 3600 + moscow.minute * 60 + moscow.second) * 1000
+                           + moscow.microsecond / 1000)
+            w.put((moscow.weekday() + 1) % 7, 3)  # DF416: 0 Sunday
+            w.put(tod_ms, 27)
+            return
+        tow_ms = round(t.tow_ns / 1e6)
+        if gnss_id == GNSS_BEIDOU:
+            tow_ms = (tow_ms - 14_000) % 604_800_000
+        w.put(tow_ms, 30)
+
+    @staticmethod
+    def _rate_m_s(epoch: ObsEpoch, cells: dict, sv: int, fcn: int | None, rounded: bool = True) -> float | None:
+        """Phase-range rate (m/s, −Doppler·λ) of the satellite's first cell; None without Doppler or carrier."""
+        i = next(i for (v, _), (i, _) in cells.items() if v == sv)
+        lam = l1_wavelength_m(int(epoch.gnss_id[i]), fcn)
+        dop = float(epoch.dop_hz[i])
+        if lam is None or not math.isfinite(dop):
+            return None
+        return -dop * lam
+
+    def _fine(self, epoch: ObsEpoch, i: int, sv: int, rough_ms: float, fcn: int | None,
+              gnss_id: int) -> tuple[float | None, float | None, float]:
+        """Fine pseudorange and phase range (ms, relative to the rough range) and lock time (ms) of entry i."""
+        ms_m = CLIGHT_M_S / 1000.0
+        fpr = float(epoch.pr_m[i]) / ms_m - rough_ms
+        if abs(fpr) >= 2**-10:
+            fpr = None  # type: ignore[assignment]
+        lock = float(epoch.lock_ms[i]) if math.isfinite(epoch.lock_ms[i]) else 0.0
+        key = (gnss_id, sv)
+        if lock < self._lock_ms.get(key, 0.0) or int(epoch.lli[i]) & LLI_SLIP:
+            self._shift_cyc.pop(key, None)  # a new lock: a new whole-cycle shift may be chosen
+        self._lock_ms[key] = lock
+        lam = l1_wavelength_m(gnss_id, fcn)
+        cp = float(epoch.cp_cyc[i])
+        if lam is None or not math.isfinite(cp):
+            return fpr, None, lock
+        shift = self._shift_cyc.get(key, 0.0)
+        fcp = (cp + shift) * lam / ms_m - rough_ms
+        if abs(fcp) >= 2**-9:  # within the decoders' accepted span (±2^-9 ms), else whole cycles moved
+            if key in self._shift_cyc or lock > 0.0:
+                lock = 0.0  # a tracked phase moved: the receiving end must see a new lock (a slip)
+            shift = float(round((rough_ms * ms_m - cp * lam) / lam))
+            self._shift_cyc[key] = shift
+            fcp = (cp + shift) * lam / ms_m - rough_ms
+        return fpr, fcp, lock
