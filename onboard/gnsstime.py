@@ -208,3 +208,23 @@ def gpst_from_glonass_day(n4: int, nt: int, tod_s: float, leap_s: int) -> GpsTim
     within it (1 = 1 January of the leap year) and time of day `tod_s` (GLONASS ICD 5.1 A.3.1.3)."""
     start = _dt.datetime(1996 + 4 * (n4 - 1), 1, 1) + _dt.timedelta(days=nt - 1)
     return gpst_from_glonass_datetime(start, leap_s).add_ns(round(tod_s * NS_PER_S))
+
+
+def gps_from_glonass_tod(tod_ns: int, reference: GpsTime) -> GpsTime:
+    """GPS time of a GLONASS time of day (ns since Moscow midnight, as RTCM MSM DF034) nearest `reference`
+    (within 12 h), with the GPS − UTC leap seconds in force at `reference`."""
+    leap_s = leap_seconds_at_utc(reference.to_utc())
+    day_ns = 86_400 * NS_PER_S
+    ref_glo = reference.total_ns + (GLONASST_MINUS_UTC_S - leap_s) * NS_PER_S
+    t = ref_glo - ref_glo % day_ns + tod_ns % day_ns
+    if t - ref_glo > day_ns // 2:
+        t -= day_ns
+    elif t - ref_glo < -day_ns // 2:
+        t += day_ns
+    return GpsTime.from_total_ns(t - (GLONASST_MINUS_UTC_S - leap_s) * NS_PER_S)
+
+
+def gps_from_bdt_tow_ns(tow_ns: int, reference: GpsTime) -> GpsTime:
+    """GPS time of a BeiDou time of week (ns, as RTCM MSM DF427), in the week nearest to `reference`."""
+    gps_tow_ns = (tow_ns - BDT_MINUS_GPST_S * NS_PER_S) % NS_PER_WEEK
+    return resolve_week(gps_tow_ns / NS_PER_S, reference)

@@ -11,17 +11,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from onboard.rtk.consts import CLIGHT_M_S, FREQ_L1_HZ
+from onboard.rtk.consts import (
+    DFREQ_G1_HZ,
+    FREQ_B1I_HZ,
+    FREQ_G1_HZ,
+    FREQ_L1_HZ,
+    GLO_FCN_MAX,
+    GLO_FCN_MIN,
+)
 from onboard.rtk.types import GNSS_BEIDOU, GNSS_GALILEO, GNSS_GLONASS, GNSS_GPS, GNSS_QZSS, GNSS_SBAS
 
-FREQ_B1I_HZ = 1_561_098_000.0
-"""BeiDou B1I carrier frequency, Hz."""
-FREQ_G1_BASE_HZ = 1_602_000_000.0
-"""GLONASS L1 FDMA centre frequency of channel k = 0, Hz."""
-FREQ_G1_STEP_HZ = 562_500.0
-"""GLONASS L1 FDMA channel spacing, Hz (f = 1602 MHz + k · 0.5625 MHz, k = −7 … +6)."""
-GLONASS_CHANNEL_MIN, GLONASS_CHANNEL_MAX = -7, 6
-"""Range of the GLONASS frequency channel number k."""
+GLONASS_CHANNEL_MIN, GLONASS_CHANNEL_MAX = GLO_FCN_MIN, GLO_FCN_MAX
+"""Range of the GLONASS frequency channel number k (the carrier constants live in onboard.rtk.consts)."""
 
 TIME_GPST, TIME_GST, TIME_BDT, TIME_GLONASST = "GPST", "GST", "BDT", "GLONASST"
 """Time systems (conversions in onboard.gnsstime): GST = GPST; BDT = GPST − 14 s; GLONASS time = UTC(SU) + 3 h."""
@@ -108,14 +109,6 @@ def glonass_l1_freq_hz(channel: int) -> float:
     """GLONASS L1 OF carrier frequency (Hz) of frequency channel `channel` (k = −7 … +6)."""
     if not GLONASS_CHANNEL_MIN <= channel <= GLONASS_CHANNEL_MAX:
         raise SatIdError(f"GLONASS frequency channel {channel} outside {GLONASS_CHANNEL_MIN}…{GLONASS_CHANNEL_MAX}")
-    return FREQ_G1_BASE_HZ + channel * FREQ_G1_STEP_HZ
+    return FREQ_G1_HZ + channel * DFREQ_G1_HZ
 
 
-def l1_wavelength_m(gnss_id: int, glonass_channel: int | None = None) -> float:
-    """Carrier wavelength (m) of the L1-band signal the M8T tracks for the system (GLONASS needs its channel)."""
-    s = system(gnss_id)
-    if s.l1_freq_hz is None:
-        if glonass_channel is None:
-            raise SatIdError("a GLONASS wavelength needs the satellite's frequency channel")
-        return CLIGHT_M_S / glonass_l1_freq_hz(glonass_channel)
-    return CLIGHT_M_S / s.l1_freq_hz

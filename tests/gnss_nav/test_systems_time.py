@@ -17,12 +17,12 @@ from onboard.gnsstime import (
     gpst_from_gst,
     gst_week_tow_ns,
 )
+from onboard.rtk.consts import l1_wavelength_m
 from onboard.rtk.gnss import (
     SYSTEMS,
     SatIdError,
     glonass_l1_freq_hz,
     is_beidou_geo,
-    l1_wavelength_m,
     parse_sat_id,
     sat_id,
 )
@@ -63,8 +63,8 @@ def test_glonass_frequencies_and_wavelengths() -> None:
     assert l1_wavelength_m(GNSS_GLONASS, 1) == pytest.approx(299_792_458.0 / 1_602_562_500.0)
     assert l1_wavelength_m(GNSS_GALILEO) == l1_wavelength_m(GNSS_GPS) == l1_wavelength_m(GNSS_QZSS)
     assert l1_wavelength_m(GNSS_BEIDOU) == pytest.approx(0.192039486)
-    with pytest.raises(SatIdError):
-        l1_wavelength_m(GNSS_GLONASS)
+    assert l1_wavelength_m(GNSS_GLONASS) is None  # no channel: its phase cannot be turned into cycles
+    assert l1_wavelength_m(GNSS_GLONASS, 7) is None
 
 
 def test_beidou_geo_prns() -> None:
