@@ -136,3 +136,33 @@ def resolve_week(tow_s: float, reference: GpsTime) -> GpsTime:
     elif dt < -SECONDS_PER_WEEK / 2:
         t = t.add_ns(NS_PER_WEEK)
     return t
+
+
+GLONASS_UTC_OFFSET_S = 3 * 3600
+"""GLONASS system time = UTC(SU) + 3 h (Moscow time; UTC(SU) taken as UTC)."""
+BDT_GPST_OFFSET_S = 14
+"""GPS time − BeiDou time (BDT started 2006-01-01 00:00:00 UTC, when GPS − UTC was 14 s)."""
+
+
+def gps_from_glonass_tod(tod_ns: int, reference: GpsTime) -> GpsTime:
+    """GPS time of a GLONASS time of day (ns since Moscow midnight, as RTCM MSM DF034) on the day nearest to
+    `reference` (any GPS time within 12 h of it). GLONASS follows UTC, leap seconds included: the result adds
+    the GPS − UTC offset in force at that UTC instant."""
+    ref_utc = reference.to_utc()
+    utc_tod_ns = (tod_ns - GLONASS_UTC_OFFSET_S * NS_PER_S) % (86_400 * NS_PER_S)
+    midnight = ref_utc.replace(hour=0, minute=0, second=0, microsecond=0)
+    t_utc_ns = utc_tod_ns
+    ref_tod_ns = (ref_utc - midnight) // _dt.timedelta(microseconds=1) * 1_000
+    if t_utc_ns - ref_tod_ns > 43_200 * NS_PER_S:
+        t_utc_ns -= 86_400 * NS_PER_S
+    elif t_utc_ns - ref_tod_ns < -43_200 * NS_PER_S:
+        t_utc_ns += 86_400 * NS_PER_S
+    day = midnight + _dt.timedelta(microseconds=t_utc_ns // 1_000)
+    whole = GpsTime.from_utc(day)
+    return whole.add_ns(t_utc_ns % 1_000)
+
+
+def gps_from_bdt_tow_ns(tow_ns: int, reference: GpsTime) -> GpsTime:
+    """GPS time of a BeiDou time of week (ns, as RTCM MSM DF427), in the week nearest to `reference`."""
+    gps_tow_ns = (tow_ns + BDT_GPST_OFFSET_S * NS_PER_S) % NS_PER_WEEK
+    return resolve_week(gps_tow_ns / NS_PER_S, reference)

@@ -1,7 +1,10 @@
 """RINEX 2.11 / 3.0x observation files → header + `ObsEpoch` stream (single-frequency L1 C/A).
 
 Keeps, per satellite, the L1 C/A pseudorange, carrier phase, Doppler and C/N0 (v3 codes C1C/L1C/D1C/S1C;
-v2 C1/L1/D1/S1, with P1 as pseudorange fallback), the phase LLI bits, and nothing else. Values keep RINEX's
+v2 C1/L1/D1/S1, with P1 as pseudorange fallback), the phase LLI bits, and nothing else. Every system of a
+mixed file (GPS, GLONASS, Galileo, QZSS, BeiDou B1I, SBAS): each entry's `signal` is the attribute of the code
+read (e.g. "1C", Galileo "1X", BeiDou "2I"), a GLONASS entry's `glo_fcn` the channel of its slot in the
+`GLONASS SLOT / FRQ #` header lines (FCN_NONE when the header has none). Values keep RINEX's
 sign conventions (the ones `ObsEpoch` documents). gzip-compressed files are accepted.
 Special event records (flags 2–5, e.g. TIM-TM2 marks written by convbin) and cycle-slip records (flag 6)
 are skipped; power-failure epochs (flag 1) are read with every phase flagged as slipped.
@@ -22,6 +25,7 @@ from onboard.formats.textfile import read_text_lines
 from onboard.gnsstime import GpsTime, gpst_from_calendar
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.types import (
+    FCN_NONE,
     GNSS_BEIDOU,
     GNSS_GALILEO,
     GNSS_GLONASS,
@@ -60,7 +64,8 @@ class RinexObsHeader:
 
     `approx_pos_ecef_m` APPROX POSITION XYZ (marker, m; None if absent or zero), `antenna_delta_hen_m`
     ANTENNA: DELTA H/E/N (m, antenna reference point above the marker), `interval_s` (None if absent).
-    `obs_types` maps system letter → list of observation codes as written.
+    `obs_types` maps system letter → list of observation codes as written; `glo_fcn` GLONASS slot → frequency
+    channel k from `GLONASS SLOT / FRQ #` (RINEX 3.02+).
     """
 
     version: float
@@ -71,6 +76,7 @@ class RinexObsHeader:
     receiver_type: str = ""
     interval_s: float | None = None
     obs_types: dict[str, list[str]] = field(default_factory=dict)
+    glo_fcn: dict[int, int] = field(default_factory=dict)
 
     def antenna_position_ecef_m(self) -> np.ndarray | None:
         """APPROX POSITION plus the ANTENNA DELTA H/E/N rotated into ECEF (None without a position)."""
@@ -127,6 +133,11 @@ def _parse_header(path: Path, lines: list[str]) -> tuple[RinexObsHeader, int]:
                 if line[:6].strip():
                     v2_count = int(line[:6])
                 v2_types += line[6:60].split()
+            elif label == "GLONASS SLOT / FRQ #":
+                for k in range(4, 60, 7):  # up to 8 "Rnn kk" pairs after the count (I3, 1X)
+                    item = line[k : k + 7]
+                    if item.strip():
+                        hdr.glo_fcn[int(item[1:3])] = int(item[3:7])
             elif label == "SYS / # / OBS TYPES":
                 if line[0] != " ":
                     cur_sys = line[0]
@@ -148,6 +159,15 @@ def _column_indices(types: list[str], version: float) -> dict[str, int]:
     return out
 
 
+def _signal_code(types: list[str], cols: dict[str, int]) -> str:
+    """The signal (band + attribute, e.g. "1C") of the code read as pseudorange (else as phase); "" if none."""
+    k = cols["pr"] if cols["pr"] >= 0 else cols["cp"]
+    if k < 0:
+        return ""
+    code = types[k]
+    return code[1:3] if len(code) >= 3 else {"C1": "1C", "L1": "1C", "P1": "1P"}.get(code, "")
+
+
 def _field_spans(cols: dict[str, int], offset: int) -> tuple[slice, slice, slice, slice, slice]:
     """Where a satellite's kept values are in its text, whose fixed 16-column fields (F14.3 + LLI + SSI) start at
     `offset`: the pr, cp, dop and cn0 values and the phase's LLI digit; an empty slice for an absent quantity
@@ -163,12 +183,14 @@ def _field_spans(cols: dict[str, int], offset: int) -> tuple[slice, slice, slice
 class _EpochBuilder:
     """Accumulates one epoch's rows and turns them into an ObsEpoch."""
 
-    def __init__(self) -> None:
-        self.rows: list[tuple[int, int, float, float, float, float, int]] = []
-        """Per satellite: gnss id, PRN, pr (m), cp (cycles), Doppler (Hz), C/N0 (dB-Hz), LLI (one append each)."""
+    def __init__(self, glo_fcn: dict[int, int]) -> None:
+        self.rows: list[tuple[int, int, float, float, float, float, int, int, str]] = []
+        """Per satellite: gnss id, PRN, pr (m), cp (cycles), Doppler (Hz), C/N0 (dB-Hz), LLI, GLONASS channel,
+        signal (one append each)."""
+        self.glo_fcn = glo_fcn
 
     def add_fields(self, sys_letter: str, prn: int, text: str, spans: tuple[slice, slice, slice, slice, slice],
-                   force_slip: bool) -> None:
+                   force_slip: bool, signal: str) -> None:
         """Add one satellite from its fixed 16-column fields, at `spans` (_field_spans) of `text`.
 
         Only the kept quantities are parsed (a blank or missing field is NaN, its LLI 0), straight from the
@@ -183,26 +205,30 @@ class _EpochBuilder:
             return
         lli_c = text[s_lli].strip()
         lli = int(lli_c) if lli_c.isdigit() else 0
+        fcn = self.glo_fcn.get(prn, FCN_NONE) if sys_letter == "R" else FCN_NONE
         self.rows.append((SYSTEM_GNSS_ID.get(sys_letter, -1), prn, pr if pr != 0.0 else math.nan,
                           cp if cp != 0.0 else math.nan, float(text[s_dop].strip() or "nan"),
-                          float(text[s_cn0].strip() or "nan"), (lli | LLI_SLIP) if force_slip else lli))
+                          float(text[s_cn0].strip() or "nan"), (lli | LLI_SLIP) if force_slip else lli, fcn,
+                          signal))
 
     def build(self, time: GpsTime) -> ObsEpoch:
         n = len(self.rows)
-        gnss, sv, pr, cp, dop, cn0, lli = zip(*self.rows) if n else ((),) * 7
+        gnss, sv, pr, cp, dop, cn0, lli, fcn, signal = zip(*self.rows) if n else ((),) * 9
         values = np.array((pr, cp, dop, cn0), float)  # one array, one row per quantity
         unknown = np.full((3, n), np.nan)  # RINEX has no lock time or precisions
         return ObsEpoch(
             time=time, gnss_id=np.array(gnss, np.int8), sv_id=np.array(sv, np.int16), pr_m=values[0],
             cp_cyc=values[1], dop_hz=values[2], cn0_dbhz=values[3], lock_ms=unknown[0], lli=np.array(lli, np.uint8),
             half_cyc_sub=np.zeros(n, np.uint8), pr_std_m=unknown[1], cp_std_cyc=unknown[2],
+            glo_fcn=np.array(fcn, np.int8), signal=np.array(signal, "<U2"),
         )
 
 
 def _iter_v3(path: Path, lines: list[str], start: int, hdr: RinexObsHeader,
              systems: str | None = None) -> Iterator[ObsEpoch]:
-    spans = {s: _field_spans(_column_indices(t, hdr.version), 3) for s, t in hdr.obs_types.items()
-            if systems is None or s in systems}
+    cols = {s: _column_indices(t, hdr.version) for s, t in hdr.obs_types.items() if systems is None or s in systems}
+    spans = {s: _field_spans(c, 3) for s, c in cols.items()}
+    signals = {s: _signal_code(hdr.obs_types[s], c) for s, c in cols.items()}
     i = start
     while i < len(lines):
         line = lines[i]
@@ -223,7 +249,7 @@ def _iter_v3(path: Path, lines: list[str], start: int, hdr: RinexObsHeader,
         if len(body) < nsat:
             log.warning("%s: truncated last epoch dropped", path)
             return
-        b = _EpochBuilder()
+        b = _EpochBuilder(hdr.glo_fcn)
         for row in body:
             sys_letter = row[0:1]
             if sys_letter not in spans:
@@ -233,7 +259,7 @@ def _iter_v3(path: Path, lines: list[str], start: int, hdr: RinexObsHeader,
             except ValueError as exc:
                 raise InputError(f"{path}: malformed satellite id {row[:3]!r}") from exc
             try:
-                b.add_fields(sys_letter, prn, row, spans[sys_letter], flag == 1)
+                b.add_fields(sys_letter, prn, row, spans[sys_letter], flag == 1, signals[sys_letter])
             except ValueError as exc:
                 raise InputError(f"{path}: malformed observation for {row[:3]}: {exc}") from exc
         yield b.build(gpst_from_calendar(year, mo, dd, hh, mi, round(sec * 1e9)))
@@ -243,7 +269,9 @@ def _iter_v2(path: Path, lines: list[str], start: int, hdr: RinexObsHeader,
              systems: str | None = None) -> Iterator[ObsEpoch]:
     types = hdr.obs_types.get("G", [])
     ntypes = len(types)
-    spans = _field_spans(_column_indices(types, hdr.version), 0)
+    cols = _column_indices(types, hdr.version)
+    spans = _field_spans(cols, 0)
+    signal = _signal_code(types, cols)
     lines_per_sat = (ntypes + 4) // 5
     i = start
     while i < len(lines):
@@ -276,7 +304,7 @@ def _iter_v2(path: Path, lines: list[str], start: int, hdr: RinexObsHeader,
         if len(body) < nsat * lines_per_sat:
             log.warning("%s: truncated last epoch dropped", path)
             return
-        b = _EpochBuilder()
+        b = _EpochBuilder(hdr.glo_fcn)
         for k, sat in enumerate(sats):
             sys_letter = sat[0] if sat[0] != " " else "G"
             if systems is not None and sys_letter not in systems:
@@ -287,7 +315,7 @@ def _iter_v2(path: Path, lines: list[str], start: int, hdr: RinexObsHeader,
                 raise InputError(f"{path}: malformed satellite id {sat!r}") from exc
             text = "".join(ln.ljust(80)[:80] for ln in body[k * lines_per_sat : (k + 1) * lines_per_sat])
             try:
-                b.add_fields(sys_letter, prn, text, spans, flag == 1)
+                b.add_fields(sys_letter, prn, text, spans, flag == 1, signal)
             except ValueError as exc:
                 raise InputError(f"{path}: malformed observation for {sat}: {exc}") from exc
         yield b.build(gpst_from_calendar(year, mo, dd, hh, mi, round(sec * 1e9)))

@@ -3,6 +3,15 @@
 Pure: frames in, typed values out; no I/O, no clock. RTCM epochs carry no GPS week: it is resolved from a
 reference time (the rover's first epoch, then the stream's own epochs). Messages of one epoch (several legacy or
 MSM messages sharing a time tag) are merged into one epoch.
+
+Two views of the same stream: `RtcmCollected.epochs`, the GPS epochs (GPS satellites only) that today's GPS
+engine pairs with the rover, exactly as before multi-GNSS decoding; and `RtcmCollected.gnss_epochs`, every
+system's observations reassembled per epoch time (`EpochAssembler`). A real base sends one MSM message per
+system per epoch, all but the last with the multiple-message bit (DF393) set; a radio loses some of them. Each
+message is put into the epoch of its time (GLONASS time of day and BeiDou time converted to GPS time first),
+whatever arrived before or is missing: a lost GPS message leaves that epoch GLONASS-only, never lost, and it
+says so (`BaseEpoch.complete` False, `BaseEpoch.systems`), so a pairing can take each system from the latest
+base epoch that has it (`latest_base_epoch`) instead of a rover epoch meeting half a base.
 """
 
 from __future__ import annotations
@@ -16,7 +25,13 @@ import numpy as np
 
 from onboard.gnsstime import GpsTime
 from onboard.receiver.framing import Frame, Protocol, StreamFramer
-from onboard.receiver.rtcm import BasePosition, RtcmDecoder
+from onboard.receiver.rtcm import (
+    BasePosition,
+    GlonassChannel,
+    GlonassCodePhaseBias,
+    ObsMessageInfo,
+    RtcmDecoder,
+)
 from onboard.rtk.types import Ephemeris, ObsEpoch
 
 log = logging.getLogger(__name__)
@@ -27,16 +42,48 @@ RTCM_POSITION = frozenset({1005, 1006})
 """Base position messages (antenna reference point): decodable without a time reference."""
 
 
+@dataclass(frozen=True)
+class BaseEpoch:
+    """One base epoch reassembled from the observation messages of its time (every system).
+
+    `obs` the observations (GPS time; systems in message order, satellites sorted within each), `messages` the
+    message numbers that made it, in arrival order, `complete` True when its last message (multiple-message bit
+    clear) arrived: False means a message after the last one received is missing (a lost GPS or GLONASS part)
+    or the stream ended; which systems are present is `systems`.
+    """
+
+    obs: ObsEpoch
+    messages: tuple[int, ...]
+    complete: bool
+
+    @property
+    def time(self) -> GpsTime:
+        """The epoch (GPS time)."""
+        return self.obs.time
+
+    @property
+    def systems(self) -> frozenset[int]:
+        """u-blox gnssIds present."""
+        return self.obs.systems()
+
+
 @dataclass
 class RtcmCollected:
-    """What an RTCM3 stream held: GPS epochs (time order), ephemerides, the last base position, counts."""
+    """What an RTCM3 stream held: GPS epochs (time order), every system's epochs reassembled per epoch time
+    (`gnss_epochs`, time order), ephemerides, the last base position, the last GLONASS code-phase biases (1230),
+    the GLONASS frequency channels learned (slot → k, from MSM5/7 and 1020), counts (`late_messages`:
+    observation messages of an epoch already passed, dropped)."""
 
     epochs: list[ObsEpoch] = field(default_factory=list)
+    gnss_epochs: list[BaseEpoch] = field(default_factory=list)
     ephemerides: list[Ephemeris] = field(default_factory=list)
     base_position: BasePosition | None = None
+    glonass_biases: GlonassCodePhaseBias | None = None
+    glo_fcn: dict[int, int] = field(default_factory=dict)
     frames: int = 0
     messages: dict[int, int] = field(default_factory=dict)
     undecodable: int = 0
+    late_messages: int = 0
 
 
 def _merge(a: ObsEpoch, b: ObsEpoch) -> ObsEpoch:
@@ -53,6 +100,72 @@ def _merge(a: ObsEpoch, b: ObsEpoch) -> ObsEpoch:
     return replace(a, **cols)
 
 
+class EpochAssembler:
+    """Observation messages → `BaseEpoch`s, one per epoch time (pure, incremental; feed in stream order).
+
+    A message joins the open epoch when of its time (within EPOCH_MERGE_TOLERANCE_NS), else closes it and opens
+    a new one; satellites already present are not added twice. An epoch closes as complete when a message with
+    the multiple-message bit clear joins it, as incomplete when a message of another epoch arrives first (its
+    last message was lost) or at `flush()`. A message is late, dropped and counted in `late`, only when its own
+    system already closed an epoch at or after its time: one system's odd time tags (a stream writing GPS time
+    into BeiDou's DF427, 14 s off) never cost the other systems their epochs. Closed epochs therefore come in
+    stream order, which is time order for a sane stream (`RtcmCollector` files them by time).
+    """
+
+    def __init__(self) -> None:
+        self._open: tuple[ObsEpoch, list[int]] | None = None  # the epoch under construction, its messages
+        self._last_closed: dict[int, GpsTime] = {}  # per system
+        self.late = 0
+
+    def add(self, obs: ObsEpoch, info: ObsMessageInfo) -> list[BaseEpoch]:
+        """Add one message's epoch; returns the epochs it closed (in closing order)."""
+        t = obs.time
+        last = self._last_closed.get(info.gnss_id)
+        if last is not None and t.diff_ns(last) < EPOCH_MERGE_TOLERANCE_NS:
+            self.late += 1
+            log.warning("RTCM %d of epoch %s arrived after that epoch was closed: dropped", info.number, t)
+            return []
+        closed: list[BaseEpoch] = []
+        if self._open is not None and abs(t.diff_ns(self._open[0].time)) >= EPOCH_MERGE_TOLERANCE_NS:
+            closed.append(self._close(complete=False))  # another epoch began: the open one lost its last message
+        if self._open is not None:
+            ep, numbers = self._open
+            self._open = (_merge(ep, obs), [*numbers, info.number])
+        else:
+            self._open = (obs, [info.number])
+        if not info.more_follow:
+            closed.append(self._close(complete=True))
+        return closed
+
+    def flush(self) -> list[BaseEpoch]:
+        """Close the open epoch, if any (end of the stream): as incomplete."""
+        return [self._close(complete=False)] if self._open is not None else []
+
+    def _close(self, complete: bool) -> BaseEpoch:
+        assert self._open is not None
+        obs, numbers = self._open
+        self._open = None
+        for g in obs.systems():
+            self._last_closed[g] = obs.time
+        return BaseEpoch(obs, tuple(numbers), complete)
+
+
+def latest_base_epoch(epochs: list[BaseEpoch], t: GpsTime, gnss_id: int, max_age_s: float,
+                      tolerance_s: float = 0.0) -> BaseEpoch | None:
+    """The latest base epoch not after `t` + `tolerance_s` that has observations of system `gnss_id`, and is at
+    most `max_age_s` older than `t`; None if there is none. Per system: a rover epoch after a lost GPS message
+    takes its GPS base from the epoch before and its GLONASS from the newest."""
+    limit = t.add_s(tolerance_s)
+    for ep in reversed(epochs):
+        if ep.time > limit:
+            continue
+        if t.diff_s(ep.time) > max_age_s:
+            return None
+        if gnss_id in ep.systems:
+            return ep
+    return None
+
+
 class RtcmCollector:
     """Incremental RTCM3 stream → `RtcmCollected` (feed frames in stream order). Pure: no I/O.
 
@@ -62,13 +175,20 @@ class RtcmCollector:
     resolved from `reference`, which then follows the stream's own epochs (a long log never drifts past half a
     week). `reference` None (real time before the rover's first epoch): only 1005/1006 (which carry no time)
     are decoded until `set_reference`. `max_epochs` keeps only the newest epochs (real time; None: all).
+    GPS epochs (`out.epochs`) appear as their message arrives; the reassembled epochs of every system
+    (`out.gnss_epochs`, `EpochAssembler`) when they close: at their last message, else when the next epoch's
+    first message arrives, else at `flush()` (`collect_rtcm` calls it at the end of the stream).
+    `glo_fcn` (slot → channel k) gives the GLONASS frequency channels beforehand, for MSM4 streams without 1020.
     """
 
-    def __init__(self, reference: GpsTime | None, max_epochs: int | None = None) -> None:
+    def __init__(self, reference: GpsTime | None, max_epochs: int | None = None,
+                 glo_fcn: dict[int, int] | None = None) -> None:
         self.reference = reference
         self.max_epochs = max_epochs
-        self.decoder = RtcmDecoder()
+        self.decoder = RtcmDecoder(glo_fcn)
+        self.assembler = EpochAssembler()
         self.out = RtcmCollected()
+        self.out.glo_fcn = self.decoder.glo_fcn
         self.epoch_count = 0
         """Epochs appended since the start (the kept list may be shorter, see `max_epochs`)."""
 
@@ -77,7 +197,7 @@ class RtcmCollector:
         if self.reference is None:
             self.reference = reference
 
-    def add(self, frame: Frame) -> ObsEpoch | BasePosition | Ephemeris | None:
+    def add(self, frame: Frame) -> ObsEpoch | BasePosition | Ephemeris | GlonassCodePhaseBias | GlonassChannel | None:
         """Decode one frame (non-RTCM frames are ignored); returns what it decoded to."""
         if frame.protocol is not Protocol.RTCM3:
             return None
@@ -93,15 +213,42 @@ class RtcmCollector:
         item = self.decoder.decode(frame, reference)
         out.undecodable += self.decoder.errors - before
         if isinstance(item, ObsEpoch):
-            self.add_epoch(item)
+            self.add_epoch(item.gps_only())
+            info = self.decoder.last_obs_info
+            if len(item) and info is not None:
+                self._closed(self.assembler.add(item, info))
         elif isinstance(item, Ephemeris):
             out.ephemerides.append(item)
         elif isinstance(item, BasePosition):
             out.base_position = item
+        elif isinstance(item, GlonassCodePhaseBias):
+            out.glonass_biases = item
         return item
 
+    def flush(self) -> None:
+        """End of the stream: close the epochs still waiting for a message (incomplete)."""
+        self._closed(self.assembler.flush())
+
+    def _closed(self, epochs: list[BaseEpoch]) -> None:
+        out = self.out
+        out.late_messages = self.assembler.late
+        kept = out.gnss_epochs
+        for ep in epochs:
+            # by time: after the last one in any sane stream; an epoch of the same time is merged into
+            k = len(kept)
+            while k > 0 and kept[k - 1].time.diff_ns(ep.time) >= EPOCH_MERGE_TOLERANCE_NS:
+                k -= 1
+            if k > 0 and abs(kept[k - 1].time.diff_ns(ep.time)) < EPOCH_MERGE_TOLERANCE_NS:
+                old = kept[k - 1]
+                kept[k - 1] = BaseEpoch(_merge(old.obs, ep.obs), old.messages + ep.messages,
+                                        old.complete or ep.complete)
+            else:
+                kept.insert(k, ep)
+        if self.max_epochs is not None and len(out.gnss_epochs) > self.max_epochs:
+            del out.gnss_epochs[: len(out.gnss_epochs) - self.max_epochs]
+
     def add_epoch(self, epoch: ObsEpoch) -> bool:
-        """Add one base epoch by the rules above (also for epochs of a raw UBX relay); True if it is a new one."""
+        """Add one GPS base epoch by the rules above (also for epochs of a raw UBX relay); True if it is a new one."""
         if len(epoch) == 0:
             return False
         self.reference = epoch.time
@@ -120,15 +267,17 @@ class RtcmCollector:
         return True
 
 
-def collect_rtcm(chunks: Iterable[bytes], reference: GpsTime) -> RtcmCollected:
-    """Decode every RTCM3 frame in a byte stream (other protocols interleaved are skipped)."""
+def collect_rtcm(chunks: Iterable[bytes], reference: GpsTime, glo_fcn: dict[int, int] | None = None) -> RtcmCollected:
+    """Decode every RTCM3 frame in a byte stream (other protocols interleaved are skipped); `glo_fcn` as
+    `RtcmCollector`."""
     framer = StreamFramer()
-    col = RtcmCollector(reference)
+    col = RtcmCollector(reference, glo_fcn=glo_fcn)
     for chunk in chunks:
         for frame in framer.feed(chunk):
             col.add(frame)
     for frame in framer.flush():
         col.add(frame)
+    col.flush()
     return col.out
 
 

@@ -6,7 +6,8 @@ does not decode and for payloads that do not decode, and counts the latter in `D
 
 Representation
 --------------
-- RXM-RAW / RXM-RAWX -> `ObsEpoch` (L1 signals only; one entry per satellite, the first L1 signal reported).
+- RXM-RAW / RXM-RAWX -> `ObsEpoch` (L1 signals only; one entry per satellite, the first L1 signal reported;
+  RXM-RAWX: every system, with `glo_fcn` from freqId − 7 and `signal` from (gnssId, sigId), L1_SIGNAL_CODES).
   The high-rate raw messages are unpacked here with declarative numpy record layouts (u-blox 6 Receiver
   Description §RXM-RAW, u-blox 8 §RXM-RAWX), not through pyubx2: the per-field Python objects pyubx2 builds
   cost 9–25x more per epoch than framer + this decoder (bench/bench_recorder.py), which matters at 5 Hz on a
@@ -47,6 +48,7 @@ from onboard.gnsstime import GpsTime, leap_seconds_at_utc
 from onboard.receiver.framing import Frame, Protocol, StreamFramer
 from onboard.rtk.geodesy import llh_to_ecef
 from onboard.rtk.types import (
+    FCN_NONE,
     GNSS_BEIDOU,
     GNSS_GALILEO,
     GNSS_GLONASS,
@@ -225,6 +227,18 @@ _L1_LOOKUP = np.zeros((256, 256), bool)
 for _g, _sigs in L1_SIG_IDS.items():
     _L1_LOOKUP[_g, sorted(_sigs)] = True
 
+L1_SIGNAL_CODES: dict[tuple[int, int], str] = {
+    (GNSS_GPS, 0): "1C", (GNSS_SBAS, 0): "1C", (GNSS_GALILEO, 0): "1C", (GNSS_GALILEO, 1): "1B",
+    (GNSS_BEIDOU, 0): "2I", (GNSS_BEIDOU, 1): "2I", (GNSS_QZSS, 0): "1C", (GNSS_QZSS, 1): "1Z",
+    (GNSS_GLONASS, 0): "1C",
+}
+"""(gnssId, sigId) of the L1 signals we keep → RINEX 3 band + attribute (u-blox 8/9 Interface Description,
+"Signal identifiers": GPS L1C/A, SBAS L1C/A, Galileo E1C/E1B, BeiDou B1I D1/D2, QZSS L1C/A and L1S, GLONASS L1OF)."""
+
+_SIGNAL_LOOKUP = np.full((256, 256), "", "<U2")
+for (_g, _s), _code in L1_SIGNAL_CODES.items():
+    _SIGNAL_LOOKUP[_g, _s] = _code
+
 CP_STD_CYC_PER_CODE = 0.004
 """RXM-RAWX cpStdev: n · 0.004 cycles."""
 PR_STD_M_BASE = 0.01
@@ -333,6 +347,9 @@ def decode_rxm_rawx(payload: bytes, glo_fcn: dict[int, int] | None = None) -> Ob
     # Half-cycle resolved: trkStat bit 2, except SBAS where RTKLIB trusts it only after 8 s of lock.
     half_ok = np.where(m["gnssId"] == GNSS_SBAS, lock > 8000, (trk & TRK_HALF_CYC) != 0)
     lli = np.where(half_ok, 0, LLI_HALF_CYCLE) | np.where(lock == 0, LLI_SLIP, 0)
+    # freqId is the GLONASS channel k + 7 (0–13); meaningless for the other systems
+    fcn = m["freqId"].astype(np.int16) - 7
+    glo_fcn = np.where((m["gnssId"] == GNSS_GLONASS) & (fcn >= -7) & (fcn <= 6), fcn, FCN_NONE).astype(np.int8)
     return ObsEpoch(
         time=GpsTime.from_week_tow_ns(week, round(rcv_tow_s * 1e9)),
         gnss_id=m["gnssId"].astype(np.int8), sv_id=m["svId"].astype(np.int16), pr_m=pr, cp_cyc=cp,
@@ -341,6 +358,7 @@ def decode_rxm_rawx(payload: bytes, glo_fcn: dict[int, int] | None = None) -> Ob
         pr_std_m=PR_STD_M_BASE * np.exp2((m["prStdev"] & 0x0F).astype(np.float64)),
         cp_std_cyc=CP_STD_CYC_PER_CODE * (m["cpStdev"] & 0x0F).astype(np.float64),
         clock_reset=bool(rec_stat & 0x02), leap_s=int(leap_s) if rec_stat & 0x01 else None,
+        glo_fcn=glo_fcn, signal=_SIGNAL_LOOKUP[m["gnssId"], m["sigId"]],
     )
 
 
@@ -419,7 +437,7 @@ class LockTracker:
             time=epoch.time, gnss_id=epoch.gnss_id, sv_id=epoch.sv_id, pr_m=epoch.pr_m, cp_cyc=cp,
             dop_hz=epoch.dop_hz, cn0_dbhz=epoch.cn0_dbhz, lock_ms=epoch.lock_ms, lli=lli_out,
             half_cyc_sub=epoch.half_cyc_sub, pr_std_m=epoch.pr_std_m, cp_std_cyc=epoch.cp_std_cyc,
-            clock_reset=epoch.clock_reset, leap_s=epoch.leap_s,
+            clock_reset=epoch.clock_reset, leap_s=epoch.leap_s, glo_fcn=epoch.glo_fcn, signal=epoch.signal,
         )
 
 

@@ -1,4 +1,6 @@
-"""Physical and GPS constants (IS-GPS-200, WGS 84)."""
+"""Physical and GPS constants (IS-GPS-200, WGS 84), and the L1-band carriers of the other systems."""
+
+from onboard.rtk.types import GNSS_BEIDOU, GNSS_GALILEO, GNSS_GLONASS, GNSS_GPS, GNSS_QZSS, GNSS_SBAS
 
 CLIGHT_M_S = 299_792_458.0
 """Speed of light in vacuum, m/s."""
@@ -18,3 +20,25 @@ WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
 """WGS 84 first eccentricity squared."""
 F_REL_S_SQRT_M = -4.442807633e-10
 """Relativistic clock-correction constant F = −2√μ/c², s/√m (IS-GPS-200 20.3.3.3.3.1)."""
+FREQ_G1_HZ = 1_602_000_000.0
+"""GLONASS G1 FDMA centre frequency (channel k = 0), Hz; channel k transmits FREQ_G1_HZ + k·DFREQ_G1_HZ."""
+DFREQ_G1_HZ = 562_500.0
+"""GLONASS G1 channel spacing, Hz."""
+FREQ_B1I_HZ = 1_561_098_000.0
+"""BeiDou B1I carrier frequency, Hz."""
+GLO_FCN_MIN = -7
+GLO_FCN_MAX = 6
+"""GLONASS frequency channel numbers in use (ICD L1/L2 2008: −7…+6)."""
+
+
+def l1_wavelength_m(gnss_id: int, glo_fcn: int | None = None) -> float | None:
+    """Carrier wavelength (m) of a system's L1-band signal that we track (u-blox gnssId): GPS/SBAS/QZSS L1 and
+    Galileo E1 1575.42 MHz, BeiDou B1I 1561.098 MHz, GLONASS G1 1602 + 0.5625·k MHz. None for GLONASS without a
+    valid channel k (its phase cannot be turned into cycles) or an unknown system."""
+    if gnss_id in (GNSS_GPS, GNSS_SBAS, GNSS_GALILEO, GNSS_QZSS):
+        return LAMBDA_L1_M
+    if gnss_id == GNSS_BEIDOU:
+        return CLIGHT_M_S / FREQ_B1I_HZ
+    if gnss_id == GNSS_GLONASS and glo_fcn is not None and GLO_FCN_MIN <= glo_fcn <= GLO_FCN_MAX:
+        return CLIGHT_M_S / (FREQ_G1_HZ + glo_fcn * DFREQ_G1_HZ)
+    return None

@@ -20,6 +20,13 @@ GNSS_BEIDOU = 3
 GNSS_QZSS = 5
 GNSS_GLONASS = 6
 
+SYSTEM_LETTER = {GNSS_GPS: "G", GNSS_SBAS: "S", GNSS_GALILEO: "E", GNSS_BEIDOU: "C", GNSS_QZSS: "J",
+                 GNSS_GLONASS: "R"}
+"""u-blox gnssId → RINEX 3 system letter."""
+
+FCN_NONE = -128
+"""`ObsEpoch.glo_fcn` where there is no GLONASS frequency channel: another system, or a channel not known."""
+
 LLI_SLIP = 0x01
 """RINEX LLI bit 0: lost lock between the previous and this observation (possible cycle slip)."""
 LLI_HALF_CYCLE = 0x02
@@ -33,12 +40,21 @@ class ObsEpoch:
     `time` is the receiver time tag (receiver clock, not yet corrected: u-blox tags sit at …999 ms or
     …992 ms). Arrays are all shape (n,), one entry per tracked signal:
     `gnss_id` u-blox gnssId, `sv_id` satellite number within it (GPS PRN 1–32, SBAS 120–158),
-    `pr_m` pseudorange (m), `cp_cyc` carrier phase (cycles, NaN when invalid), `dop_hz` Doppler (Hz),
+    `pr_m` pseudorange (m), `cp_cyc` carrier phase (cycles of the signal's own carrier: a GLONASS FDMA phase
+    is in cycles of 1602 + 0.5625·k MHz; NaN when invalid), `dop_hz` Doppler (Hz),
     `cn0_dbhz` carrier-to-noise density (dB-Hz), `lock_ms` lock time (ms, NaN when the receiver has none,
     e.g. RXM-RAW), `lli` RINEX loss-of-lock bits (LLI_SLIP | LLI_HALF_CYCLE), `half_cyc_sub` 1 where the
     receiver already subtracted a half cycle (RXM-RAWX trkStat bit 3), `pr_std_m`, `cp_std_cyc` receiver
     precision estimates (NaN where unknown). `clock_reset` is True when the receiver reported a clock reset
     (RXM-RAWX recStat bit 1); `leap_s` the GPS−UTC leap seconds it reported (None if unknown).
+
+    Multi-GNSS (optional: empty arrays on GPS-only paths, which never read them): `glo_fcn` GLONASS frequency
+    channel number k (−7…+6; carrier 1602 + 0.5625·k MHz) per entry, FCN_NONE for other systems and unknown
+    channels; `signal` RINEX 3 band + attribute of the tracked signal ("1C" GPS/GLONASS/QZSS L1 C/A or
+    Galileo E1C, "1B" E1B, "1X" E1B+C, "2I" BeiDou B1I, "1Z" QZSS L1S …), "" where unknown. A u-blox M8
+    (RXM-RAWX version 0) reports no signal id: its L1 signals are "1C", Galileo "1C" (E1C) and BeiDou "2I".
+    Times of every system are GPS time (receiver time tag); sv_id is the number within the system (QZSS 1–10,
+    not PRN 193–202; SBAS keeps its PRN 120–158).
     """
 
     time: GpsTime
@@ -55,6 +71,8 @@ class ObsEpoch:
     cp_std_cyc: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     clock_reset: bool = False
     leap_s: int | None = None
+    glo_fcn: npt.NDArray[np.int8] = field(default_factory=lambda: np.zeros(0, np.int8))
+    signal: npt.NDArray[np.str_] = field(default_factory=lambda: np.zeros(0, "<U2"))
 
     def __len__(self) -> int:
         return int(self.sv_id.shape[0])
@@ -87,8 +105,16 @@ class ObsEpoch:
             cp_cyc=pick(self.cp_cyc), dop_hz=pick(self.dop_hz), cn0_dbhz=pick(self.cn0_dbhz),
             lock_ms=pick(self.lock_ms), lli=pick(self.lli), half_cyc_sub=pick(self.half_cyc_sub),
             pr_std_m=pick(self.pr_std_m), cp_std_cyc=pick(self.cp_std_cyc),
-            clock_reset=self.clock_reset, leap_s=self.leap_s,
+            clock_reset=self.clock_reset, leap_s=self.leap_s, glo_fcn=pick(self.glo_fcn), signal=pick(self.signal),
         )
+
+    def system(self, gnss_id: int) -> ObsEpoch:
+        """The same epoch restricted to one system's entries (u-blox gnssId)."""
+        return self.select(self.gnss_id == gnss_id)
+
+    def systems(self) -> frozenset[int]:
+        """The u-blox gnssIds present in this epoch."""
+        return frozenset(np.unique(self.gnss_id).tolist())
 
 
 @dataclass(frozen=True)
