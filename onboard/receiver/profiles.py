@@ -142,7 +142,7 @@ class ReceiverOptions:
             raise ValueError(f"aid_eph_poll_s must be ≥ 0 (0 = never), got {self.aid_eph_poll_s}")
         camera_pulse_spec(self.camera_period_s, self.pulse_len_ms, self.pulse_rising)  # validates both
         if not isinstance(self.gnss, str):
-            raise ValueError(f"gnss must be text such as 'GPS,GLONASS,Galileo,QZSS', got {self.gnss!r}")
+            raise TypeError(f"gnss must be text such as 'GPS,GLONASS,Galileo,QZSS', got {self.gnss!r}")
         unknown = [g for g in self.gnss_systems if g not in M8_GNSS_CHANNELS]
         if unknown:
             raise ValueError(f"gnss: unknown system(s) {unknown}; known: {', '.join(M8_GNSS_CHANNELS)}")
