@@ -13,6 +13,13 @@ Modelling choices (each switchable where the documents leave the real behaviour 
   there); its MON-VER is swVersion "7.03 (45969)", hwVersion "00040007" without extension strings.
 - Navigation solution: NAV-SOL (both) and NAV-PVT (M8T only) = the World's antenna truth + `nav_noise_m`
   white noise, no fix before valid time; TIM-TP (next whole-second pulse) once time is valid.
+- CFG-GNSS (M8T only; NAK on the LEA-6T, which has no such message): the factory blocks are those of the real
+  NEO-M8T dump (GPS, SBAS, Galileo, BeiDou, QZSS on; GLONASS, IMES off; 32 channels; the flags' reserved high
+  byte as dumped). A SET is applied block by block (by gnssId, keeping that byte) and NAKed unless the result
+  keeps the M8 rules: msgVer 0, numTrkChUse 1–32 (0xFF = all), every block maxTrkCh ≥ resTrkCh and ≤
+  numTrkChUse, an enabled major GNSS (GPS, Galileo, BeiDou, GLONASS) with maxTrkCh ≥ 4 and a signal, 1–3 major
+  GNSS enabled, the enabled systems' reserved channels within numTrkChUse. RXM-RAWX then carries only the
+  enabled systems. CFG-RST is never answered (as the real receiver); it is counted, no restart is modelled.
 - AID-EPH polls are answered on both models (deprecated on M8, kept for the daemon's backup path).
 - Every CFG input is answered at once (well within the 1 s of the spec); the ACK of a CFG-PRT baud change
   goes out at the new rate (`baud_rate` changes before the ACK is written).
@@ -94,6 +101,17 @@ M8T_TP5_DEFAULTS: tuple[dict[str, int], dict[str, int]] = (
 LEA6T_TP_DEFAULT: dict[str, int] = {"interval": 1_000_000, "length": 100_000, "status": 1, "timeRef": 0,
                                     "flags": 0, "reserved1": 0, "antennaCableDelay": 50, "rfGroupDelay": 0,
                                     "userDelay": 0}
+
+# the CFG-GNSS answer of the real NEO-M8T dump: (gnssId, resTrkCh, maxTrkCh, flags)
+M8T_GNSS_DEFAULTS: tuple[tuple[int, int, int, int], ...] = (
+    (0, 8, 16, 0x01010001), (1, 1, 3, 0x01010001), (2, 8, 8, 0x01010001), (3, 8, 8, 0x01010001),
+    (4, 0, 8, 0x03010000), (5, 0, 3, 0x05010001), (6, 8, 14, 0x01010000))
+M8T_TRACKING_CHANNELS = 32
+MAJOR_GNSS = frozenset({0, 2, 3, 6})  # GPS, Galileo, BeiDou, GLONASS
+MAX_MAJOR_GNSS = 3
+GNSS_ENABLE = 0x01
+GNSS_SIG_MASK = 0x00FF0000
+GNSS_RESERVED_HIGH = 0xFF000000
 
 TP5_ACTIVE = 0x01
 TP5_LOCKED_OTHER_SET = 0x04
@@ -184,6 +202,7 @@ class ReceiverStats:
     acked: int = 0
     naked: int = 0
     polls_answered: int = 0
+    gnss_restarts: int = 0
     epochs_out: int = 0
     epochs_dropped_budget: int = 0
     epochs_dropped_fault: int = 0
@@ -273,6 +292,9 @@ class Config:
     rate: dict[str, int]
     tp5: dict[int, dict[str, int]]
     tp: dict[str, int]
+    gnss: dict[int, dict[str, int]] = field(default_factory=dict)
+    """CFG-GNSS blocks by gnssId (M8T; empty on the LEA-6T)."""
+    num_trk_ch_use: int = M8T_TRACKING_CHANNELS
 
     @classmethod
     def factory(cls, model: ModelSpec) -> Config:
@@ -280,13 +302,22 @@ class Config:
         version = 1 if model.name == "m8t" else 0
         tp5 = {i: {**d, "version": version, "flags": d["flags"] & model.tp5_flags_mask}
                for i, d in enumerate(M8T_TP5_DEFAULTS)}
+        gnss = ({g: {"gnssId": g, "resTrkCh": r, "maxTrkCh": m, "reserved1": 0, "flags": f}
+                 for g, r, m, f in M8T_GNSS_DEFAULTS} if model.name == "m8t" else {})
         return cls(_factory_ports(), _factory_msg_rates(), {"measRate": 1000, "navRate": 1, "timeRef": 1},
-                   tp5, dict(LEA6T_TP_DEFAULT))
+                   tp5, dict(LEA6T_TP_DEFAULT), gnss)
 
     def copy(self) -> Config:
         return Config({k: dict(v) for k, v in self.ports.items()},
                       {k: list(v) for k, v in self.msg_rates.items()}, dict(self.rate),
-                      {k: dict(v) for k, v in self.tp5.items()}, dict(self.tp))
+                      {k: dict(v) for k, v in self.tp5.items()}, dict(self.tp),
+                      {k: dict(v) for k, v in self.gnss.items()}, self.num_trk_ch_use)
+
+    def gnss_enabled(self) -> frozenset[int] | None:
+        """gnssIds enabled by CFG-GNSS (None: the model has no CFG-GNSS and tracks what it tracks)."""
+        if not self.gnss:
+            return None
+        return frozenset(g for g, b in self.gnss.items() if b["flags"] & GNSS_ENABLE)
 
 
 def _period_divides_second(value: int, is_freq: bool) -> bool:
@@ -339,6 +370,7 @@ class ReceiverCore:
         self._handlers: dict[tuple[int, int], Callable[[bytes], list[bytes]]] = {
             (0x06, 0x00): self._cfg_prt, (0x06, 0x01): self._cfg_msg, (0x06, 0x08): self._cfg_rate,
             (0x06, 0x31): self._cfg_tp5, (0x06, 0x07): self._cfg_tp, (0x06, 0x09): self._cfg_cfg,
+            (0x06, 0x3E): self._cfg_gnss, (0x06, 0x04): self._cfg_rst,
             MON_VER: self._mon_ver, AID_EPH: self._aid_eph,
         }
 
@@ -509,6 +541,46 @@ class ReceiverCore:
         self.config.tp = new
         return [self._ack(key)]
 
+    def _cfg_gnss(self, payload: bytes) -> list[bytes]:
+        key = (0x06, 0x3E)
+        if self.model.name != "m8t":
+            return [self._nak(key)]
+        if len(payload) == 0:
+            head = {"msgVer": 0, "numTrkChHw": M8T_TRACKING_CHANNELS, "numTrkChUse": self.config.num_trk_ch_use}
+            return [self._poll_reply("CFG-GNSS", head, [self.config.gnss[g] for g in sorted(self.config.gnss)]),
+                    self._ack(key)]
+        try:
+            head, rows = enc.unpack(enc.LAYOUTS["CFG-GNSS"], payload)
+        except enc.LayoutError:
+            return [self._nak(key)]
+        use = M8T_TRACKING_CHANNELS if head["numTrkChUse"] == 0xFF else head["numTrkChUse"]
+        if head["msgVer"] != 0 or not 1 <= use <= M8T_TRACKING_CHANNELS:
+            return [self._nak(key)]
+        new = {g: dict(b) for g, b in self.config.gnss.items()}
+        for row in rows:
+            if row["gnssId"] not in new:
+                return [self._nak(key)]
+            kept_high = new[row["gnssId"]]["flags"] & GNSS_RESERVED_HIGH  # the receiver's own reserved byte
+            new[row["gnssId"]] = {**row, "reserved1": 0, "flags": (row["flags"] & ~GNSS_RESERVED_HIGH) | kept_high}
+        enabled = [b for b in new.values() if b["flags"] & GNSS_ENABLE]
+        majors = [b for b in enabled if b["gnssId"] in MAJOR_GNSS]
+        valid = (all(b["resTrkCh"] <= b["maxTrkCh"] <= use for b in new.values())
+                 and all(b["maxTrkCh"] >= 4 for b in majors)
+                 and all(b["flags"] & GNSS_SIG_MASK for b in enabled)
+                 and 1 <= len(majors) <= MAX_MAJOR_GNSS
+                 and sum(b["resTrkCh"] for b in enabled) <= use)
+        if not valid:
+            log.info("CFG-GNSS breaks the M8 channel rules (%d major enabled, %d channels): NAK", len(majors), use)
+            return [self._nak(key)]
+        self.config.gnss = new
+        self.config.num_trk_ch_use = use
+        return [self._ack(key)]
+
+    def _cfg_rst(self, payload: bytes) -> list[bytes]:
+        if len(payload) == 4:
+            self.stats.gnss_restarts += 1  # never acknowledged; tracking goes on (no restart modelled)
+        return []
+
     def _cfg_cfg(self, payload: bytes) -> list[bytes]:
         key = (0x06, 0x09)
         if len(payload) not in (12, 13):
@@ -516,7 +588,7 @@ class ReceiverCore:
         head, _ = enc.unpack(enc.LAYOUTS["CFG-CFG"], payload[:12])
         factory = Config.factory(self.model)
         sections: tuple[tuple[int, tuple[str, ...]], ...] = (
-            (CFG_IOPORT, ("ports",)), (CFG_MSGCONF, ("msg_rates",)), (CFG_NAVCONF, ("rate", "tp5", "tp")))
+            (CFG_IOPORT, ("ports",)), (CFG_MSGCONF, ("msg_rates",)), (CFG_NAVCONF, ("rate", "tp5", "tp", "gnss", "num_trk_ch_use")))
         for bit, names in sections:
             for name in names:
                 if head["clearMask"] & bit:
@@ -600,6 +672,9 @@ class ReceiverCore:
         idx = self._epoch_index
         valid = self.time_valid(t)
         obs = self.world.observe(self.options.receiver, t)
+        enabled = self.config.gnss_enabled()
+        if enabled is not None and not np.all(np.isin(obs.gnss_id, list(enabled))):
+            obs = obs.select(np.isin(obs.gnss_id, list(enabled)))  # CFG-GNSS: disabled systems are not tracked
         self._tracked = sorted(int(s) for g, s in zip(obs.gnss_id, obs.sv_id, strict=True)
                                if int(g) == GNSS_GPS and 1 <= int(s) <= 32)
         self._process_camera(t)

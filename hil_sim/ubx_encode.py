@@ -73,6 +73,9 @@ LAYOUTS: dict[str, Layout] = {lay.name: lay for lay in (
                              "antennaCableDelay:h rfGroupDelay:h userDelay:i"),
     _L("CFG-RATE", 0x06, 0x08, "measRate:H navRate:H timeRef:H"),
     _L("CFG-CFG", 0x06, 0x09, "clearMask:I saveMask:I loadMask:I"),
+    _L("CFG-RST", 0x06, 0x04, "navBbrMask:H resetMode:B reserved1:B"),
+    _L("CFG-GNSS", 0x06, 0x3E, "msgVer:B numTrkChHw:B numTrkChUse:B numConfigBlocks:B",
+       "gnssId:B resTrkCh:B maxTrkCh:B reserved1:B flags:I", "numConfigBlocks"),
     _L("CFG-TP5", 0x06, 0x31, "tpIdx:B version:B reserved0:H antCableDelay:h rfGroupDelay:h freqPeriod:I "
                               "freqPeriodLock:I pulseLenRatio:I pulseLenRatioLock:I userConfigDelay:i flags:I"),
     _L("MON-VER", 0x0A, 0x04, "swVersion:30s hwVersion:10s", "extension:30s"),

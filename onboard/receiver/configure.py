@@ -364,6 +364,12 @@ async def _apply_entry(
 ) -> tuple[MessageResult, int | None]:
     """Send one CFG (with retries), poll it back and compare. Returns the result and the link's baud after."""
     result = MessageResult(entry.label, entry.name)
+    if not entry.expect_ack:  # never answered (CFG-RST): nothing to wait for, nothing to read back
+        result.attempts = 1
+        await link.send(entry.raw)
+        result.status = "sent"
+        result.detail = "not acknowledged by design"
+        return result, current_baud
     changes_baud = entry.baud_change is not None and entry.baud_change != current_baud
     for _ in range(1 + options.retries):
         result.attempts += 1

@@ -50,6 +50,40 @@ PORT_RATE_FIELD: Mapping[int, str] = MappingProxyType(
 )
 UART_PORTS = (1, 2)
 NMEA_DEFAULT_ON = ("NMEA-GGA", "NMEA-GLL", "NMEA-GSA", "NMEA-GSV", "NMEA-RMC", "NMEA-VTG")
+
+
+@dataclass(frozen=True, slots=True)
+class GnssChannels:
+    """One CFG-GNSS block of the M8 channel budget: `gnss_id` (u-blox gnssId), `major` (GPS, GLONASS, Galileo,
+    BeiDou: the M8 tracks at most three of them at once), `res_trk_ch`/`max_trk_ch` the reserved (minimum, when
+    enabled) and maximum tracking channels, `sig_cfg_mask` the signal (0x01: the L1-band signal of the system)."""
+
+    gnss_id: int
+    major: bool
+    res_trk_ch: int
+    max_trk_ch: int
+    sig_cfg_mask: int = 0x01
+
+
+# u-blox M8 receiver description UBX-13003221, CFG-GNSS and "GNSS configuration": 32 hardware channels; each
+# enabled major GNSS needs maxTrkCh ≥ 4; the reserved channels of the enabled systems must fit numTrkChUse;
+# at most 3 major GNSS concurrently; GPS and QZSS enabled together (cross-correlation). The allocations are the
+# M8 defaults as the real NEO-M8T dump (rtkbase_U-Blox_NEO-M8T_rtkbase.txt) reports them, Galileo at the M8
+# default 4/8. Names are the keys of the profile's CFG-GNSS fields ("enable_GLONASS").
+M8_GNSS_CHANNELS: Mapping[str, GnssChannels] = MappingProxyType({
+    "GPS": GnssChannels(0, True, 8, 16),
+    "SBAS": GnssChannels(1, False, 1, 3),
+    "Galileo": GnssChannels(2, True, 4, 8),
+    "BeiDou": GnssChannels(3, True, 8, 16),
+    "IMES": GnssChannels(4, False, 0, 8),
+    "QZSS": GnssChannels(5, False, 0, 3),
+    "GLONASS": GnssChannels(6, True, 8, 14),
+})
+M8_TRACKING_CHANNELS = 32
+M8_MAX_MAJOR_GNSS = 3
+GNSS_BLOCK_FIELDS = ("enable", "resTrkCh", "maxTrkCh", "sigCfMask")
+"""The CFG-GNSS block fields we set and compare (pyubx2 names); the flags' reserved high byte is the
+receiver's own (the real M8T dump reads back 0x01/0x03/0x05 there) and is not compared."""
 # CFG-CFG save mask: ioPort, msgConf, infMsg, navConf, rxmConf (bits 0–4, the same on u-blox 6 and M8).
 CFG_SAVE_MASK = 0x0000001F
 
@@ -88,6 +122,7 @@ class ReceiverOptions:
     retries: int = 2
     baud_settle_s: float = 0.1
     aid_eph_poll_s: float = 1800.0
+    gnss: str = "GPS,GLONASS,Galileo,QZSS"
 
     def __post_init__(self) -> None:
         if self.port_id not in PORT_RATE_FIELD:
@@ -106,6 +141,24 @@ class ReceiverOptions:
         if self.aid_eph_poll_s < 0:
             raise ValueError(f"aid_eph_poll_s must be ≥ 0 (0 = never), got {self.aid_eph_poll_s}")
         camera_pulse_spec(self.camera_period_s, self.pulse_len_ms, self.pulse_rising)  # validates both
+        if not isinstance(self.gnss, str):
+            raise TypeError(f"gnss must be text such as 'GPS,GLONASS,Galileo,QZSS', got {self.gnss!r}")
+        unknown = [g for g in self.gnss_systems if g not in M8_GNSS_CHANNELS]
+        if unknown:
+            raise ValueError(f"gnss: unknown system(s) {unknown}; known: {', '.join(M8_GNSS_CHANNELS)}")
+        if len(set(self.gnss_systems)) != len(self.gnss_systems):
+            raise ValueError(f"gnss: a system named twice in {self.gnss!r}")
+        majors = [g for g in self.gnss_systems if M8_GNSS_CHANNELS[g].major]
+        if not 1 <= len(majors) <= M8_MAX_MAJOR_GNSS:
+            raise ValueError(f"gnss: the M8 tracks 1 to {M8_MAX_MAJOR_GNSS} major systems (GPS, GLONASS, "
+                             f"Galileo, BeiDou) at once, got {majors}")
+        if ("GPS" in self.gnss_systems) != ("QZSS" in self.gnss_systems):
+            raise ValueError("gnss: enable GPS and QZSS together (u-blox: cross-correlation otherwise)")
+
+    @property
+    def gnss_systems(self) -> tuple[str, ...]:
+        """`gnss` as a tuple of system names."""
+        return tuple(g.strip() for g in self.gnss.split(",") if g.strip())
 
 
 @dataclass(frozen=True, slots=True)
@@ -115,7 +168,8 @@ class ProfileEntry:
     `label` unique human name ("CFG-TP5 TIMEPULSE2 camera"); `name` the UBX message; `fields` its SET values;
     `poll` the poll key payload (None: cannot be read back, e.g. CFG-CFG); `compare` the fields checked on
     poll-back; `may_alter` fields the receiver is known to change (recorded, not an error); `group` fallback
-    group; `baud_change` the CFG-PRT that moves the link to a new baud rate; `raw` the serialised frame.
+    group; `baud_change` the CFG-PRT that moves the link to a new baud rate; `raw` the serialised frame;
+    `expect_ack` False for a message the receiver never acknowledges (CFG-RST).
     """
 
     label: str
@@ -127,6 +181,7 @@ class ProfileEntry:
     may_alter: frozenset[str] = frozenset()
     group: str | None = None
     baud_change: int | None = None
+    expect_ack: bool = True
 
 
 @dataclass(frozen=True, slots=True)
@@ -153,11 +208,37 @@ class Profile:
 _MASK_FIELDS = ("clearMask", "saveMask", "loadMask")
 
 
+def _gnss_to_pyubx2(fields: Mapping[str, int]) -> dict[str, Any]:
+    """Our CFG-GNSS fields (per system: "enable_GPS", …) → pyubx2's numbered repeating group, gnssId order."""
+    systems = sorted((g for g in M8_GNSS_CHANNELS if f"enable_{g}" in fields),
+                     key=lambda g: M8_GNSS_CHANNELS[g].gnss_id)
+    out: dict[str, Any] = {"msgVer": fields["msgVer"], "numTrkChHw": 0, "numTrkChUse": fields["numTrkChUse"],
+                           "numConfigBlocks": len(systems)}
+    for n, g in enumerate(systems, start=1):
+        out[f"gnssId_{n:02d}"] = M8_GNSS_CHANNELS[g].gnss_id
+        out |= {f"{f}_{n:02d}": fields[f"{f}_{g}"] for f in GNSS_BLOCK_FIELDS}
+    return out
+
+
+def _gnss_from_pyubx2(parsed: Mapping[str, int]) -> dict[str, int]:
+    """pyubx2's parsed CFG-GNSS (numbered blocks in the receiver's order) → our per-system field names."""
+    names = {c.gnss_id: g for g, c in M8_GNSS_CHANNELS.items()}
+    out = {k: parsed[k] for k in ("msgVer", "numTrkChHw", "numTrkChUse", "numConfigBlocks") if k in parsed}
+    for n in range(1, parsed.get("numConfigBlocks", 0) + 1):
+        gnss_id = parsed.get(f"gnssId_{n:02d}")
+        name = names.get(gnss_id, f"gnssId{gnss_id}") if gnss_id is not None else None
+        if name is None or f"enable_{name}" in out:
+            raise ReceiverError(f"CFG-GNSS: block {n} has no or a repeated gnssId ({gnss_id})")
+        out |= {f"{f}_{name}": parsed[f"{f}_{n:02d}"] for f in GNSS_BLOCK_FIELDS}
+    return out
+
+
 def encode_cfg(name: str, fields: Mapping[str, int]) -> bytes:
-    """A CFG SET frame for `name` with `fields` (pyubx2 names): pyubx2 builds it unless we own the layout."""
+    """A CFG SET frame for `name` with `fields` (pyubx2 names; CFG-GNSS blocks named per system, "enable_GPS"):
+    pyubx2 builds it unless we own the layout."""
     if name in LAYOUTS:
         return build_frame(LAYOUTS[name], fields)
-    kwargs: dict[str, Any] = dict(fields)
+    kwargs: dict[str, Any] = _gnss_to_pyubx2(fields) if name == "CFG-GNSS" else dict(fields)
     for mask in _MASK_FIELDS:  # pyubx2 wants X4 masks as bytes
         if mask in kwargs:
             kwargs[mask] = int(kwargs[mask]).to_bytes(4, "little")
@@ -177,6 +258,8 @@ def decode_cfg(raw: bytes, *, mode: int = GET) -> dict[str, int]:
     lengths = CFG_PAYLOAD_LENGTHS.get(name)
     if lengths is not None and len(raw) - 8 not in lengths:
         raise ReceiverError(f"{name}: payload is {len(raw) - 8} bytes, expected {' or '.join(map(str, lengths))}")
+    if name == "CFG-GNSS" and (len(raw) - 8 < 4 or (len(raw) - 12) % 8 or (len(raw) - 12) // 8 != raw[9]):
+        raise ReceiverError(f"CFG-GNSS: payload of {len(raw) - 8} bytes is not 4 + 8 × numConfigBlocks")
     try:
         msg = UBXReader.parse(raw, msgmode=mode)
     except (UBXParseError, UBXMessageError, UBXTypeError, ValueError, KeyError, IndexError, struct.error) as exc:
@@ -189,7 +272,7 @@ def decode_cfg(raw: bytes, *, mode: int = GET) -> dict[str, int]:
             value = int.from_bytes(value, "little")
         if isinstance(value, int):
             out[key] = value
-    return out
+    return _gnss_from_pyubx2(out) if name == "CFG-GNSS" else out
 
 
 def _entry(
@@ -202,11 +285,12 @@ def _entry(
     may_alter: frozenset[str] = frozenset(),
     group: str | None = None,
     baud_change: int | None = None,
+    expect_ack: bool = True,
 ) -> ProfileEntry:
     fields = MappingProxyType(dict(fields))
     compare = tuple(k for k in fields if k not in compare_skip)
     return ProfileEntry(
-        label, name, fields, poll, compare, encode_cfg(name, fields), may_alter, group, baud_change
+        label, name, fields, poll, compare, encode_cfg(name, fields), may_alter, group, baud_change, expect_ack
     )
 
 
@@ -281,6 +365,31 @@ def legacy_tp_entry(options: ReceiverOptions) -> ProfileEntry:
     return _entry("CFG-TP TIMEPULSE camera", "CFG-TP", legacy_tp_fields(spec), poll_key("CFG-TP"))
 
 
+def gnss_entry(options: ReceiverOptions) -> ProfileEntry:
+    """CFG-GNSS (M8): `options.gnss` enabled with their channel budget, every other system off (reserving none).
+
+    All seven blocks are sent, so the result does not depend on what the receiver had enabled before; the poll
+    answer (every supported system, in the receiver's order) is compared per system.
+    """
+    fields: dict[str, int] = {"msgVer": 0, "numTrkChUse": M8_TRACKING_CHANNELS}
+    for name, ch in M8_GNSS_CHANNELS.items():
+        on = name in options.gnss_systems
+        fields |= {f"enable_{name}": int(on), f"resTrkCh_{name}": ch.res_trk_ch if on else 0,
+                   f"maxTrkCh_{name}": ch.max_trk_ch, f"sigCfMask_{name}": ch.sig_cfg_mask}
+    reserved = sum(fields[f"resTrkCh_{g}"] for g in M8_GNSS_CHANNELS)
+    assert reserved <= M8_TRACKING_CHANNELS, "M8_GNSS_CHANNELS reserves more channels than the M8 has"
+    label = "CFG-GNSS " + "+".join(options.gnss_systems)
+    return _entry(label, "CFG-GNSS", fields, poll_key("CFG-GNSS"))
+
+
+def gnss_restart_entry() -> ProfileEntry:
+    """CFG-RST hot start, controlled software reset of the GNSS part only (resetMode 0x02: ports, configuration
+    and stored orbits kept): the M8 applies a new CFG-GNSS channel allocation at the next GNSS start. CFG-RST is
+    never acknowledged; not polled (*check on hardware*: whether an unchanged CFG-GNSS needs it)."""
+    fields = {"navBbrMask": 0x0000, "resetMode": 0x02, "reserved1": 0}
+    return _entry("CFG-RST GNSS restart (hot)", "CFG-RST", fields, None, expect_ack=False)
+
+
 def cfg_save_entry() -> ProfileEntry:
     """CFG-CFG: save the current configuration to battery-backed RAM (not polled back)."""
     fields = {"clearMask": 0, "saveMask": CFG_SAVE_MASK, "loadMask": 0, "devBBR": 1}
@@ -296,6 +405,8 @@ def build_profile(model: str, options: ReceiverOptions) -> Profile:
     camera = camera_pulse_spec(options.camera_period_s, options.pulse_len_ms, options.pulse_rising,
                                options.ant_cable_delay_ns)
     entries: list[ProfileEntry] = [prt_entry(options)]
+    if model == "m8t":  # an "unknown" receiver may be a u-blox 6 (no CFG-GNSS): it keeps its own systems
+        entries += [gnss_entry(options), gnss_restart_entry()]
     entries += [msg_entry(options, nmea, 0) for nmea in NMEA_DEFAULT_ON]
     entries.append(rate_entry(options))
     fallbacks: dict[str, tuple[ProfileEntry, ...]] = {"tp5": (legacy_tp_entry(options),)}

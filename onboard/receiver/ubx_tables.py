@@ -21,10 +21,12 @@ UBX_IDS: Mapping[str, tuple[int, int]] = {
     "ACK-ACK": (0x05, 0x01),
     "CFG-PRT": (0x06, 0x00),
     "CFG-MSG": (0x06, 0x01),
+    "CFG-RST": (0x06, 0x04),
     "CFG-TP": (0x06, 0x07),
     "CFG-RATE": (0x06, 0x08),
     "CFG-CFG": (0x06, 0x09),
     "CFG-TP5": (0x06, 0x31),
+    "CFG-GNSS": (0x06, 0x3E),
     "MON-VER": (0x0A, 0x04),
     "NAV-SOL": (0x01, 0x06),
     "NAV-PVT": (0x01, 0x07),
@@ -90,7 +92,12 @@ CFG_TP = Layout(
     ),
 )
 
-LAYOUTS: Mapping[str, Layout] = {CFG_TP.name: CFG_TP}
+# u-blox M8 receiver description, CFG-RST (4 bytes; never acknowledged). navBbrMask: the battery-backed data to
+# clear (0x0000 hot start, 0xFFFF cold start; pyubx2 only takes it bit by bit); resetMode 0x02: controlled
+# software reset of the GNSS part only (ports and configuration kept).
+CFG_RST = Layout("CFG-RST", (("navBbrMask", "H"), ("resetMode", "B"), ("reserved1", "B")))
+
+LAYOUTS: Mapping[str, Layout] = {CFG_TP.name: CFG_TP, CFG_RST.name: CFG_RST}
 
 
 def pack_payload(layout: Layout, values: Mapping[str, int]) -> bytes:
@@ -134,6 +141,7 @@ CFG_PAYLOAD_LENGTHS: Mapping[str, tuple[int, ...]] = {
     "CFG-TP5": (32,),
     "CFG-TP": (20,),
     "CFG-CFG": (12, 13),
+    "CFG-RST": (4,),
 }
 
 # Polls: message name -> struct code of its key payload (empty for a poll without payload). The poll answer
@@ -144,6 +152,7 @@ POLL_KEYS: Mapping[str, str] = {
     "CFG-RATE": "",
     "CFG-TP": "",
     "CFG-TP5": "B",  # tpIdx: built by hand, pyubx2 prints a debug line for it
+    "CFG-GNSS": "",  # the answer holds a block for every GNSS the receiver supports, enabled or not
     "MON-VER": "",
     "AID-EPH": "",  # empty: all 32 GPS SVs (a one-byte svid polls one; pyubx2's keyword forms poll all)
 }

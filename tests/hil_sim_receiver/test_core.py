@@ -362,3 +362,52 @@ def test_u_blox_6_specifics_nav_pvt_naked_and_tp5_version_reads_zero(standin_wor
     assert acked(send(m8, "CFG-MSG3", {"msgClass": 0x01, "msgID": 0x07, "rate": 1}))
     pvts = [UBXReader.parse(f.raw) for f in ubx_of(run(m8, 3.0), (0x01, 0x07))]
     assert len(pvts) == 3 and all(p.fixType == 3 for p in pvts)
+
+
+def _gnss_blocks(core: ReceiverCore) -> tuple[dict, list[dict]]:
+    frames = send(core, "CFG-GNSS", raw_payload=b"")
+    reply = next(f for f in frames if (f.msg_class, f.msg_id) == (0x06, 0x3E))
+    return enc.unpack(enc.LAYOUTS["CFG-GNSS"], reply.payload)
+
+
+def _gnss_set(enabled: dict[int, tuple[int, int]], use: int = 32) -> bytes:
+    rows = [{"gnssId": g, "resTrkCh": (enabled.get(g) or (0, 8))[0], "maxTrkCh": (enabled.get(g) or (0, 8))[1],
+             "flags": 0x00010001 if g in enabled else 0x00010000} for g in range(7)]
+    return enc.pack(enc.LAYOUTS["CFG-GNSS"], {"msgVer": 0, "numTrkChUse": use}, rows)
+
+
+def test_m8t_cfg_gnss_poll_is_the_real_dump_and_sets_follow_the_m8_rules(standin_world) -> None:
+    from tests.conftest import shared_file
+
+    core = core_for("m8t", standin_world)
+    head, rows = _gnss_blocks(core)
+    line = next(s for s in shared_file("ubx/rtkbase_U-Blox_NEO-M8T_rtkbase.txt").read_text().splitlines()
+                if s.startswith("CFG-GNSS"))
+    assert enc.pack(enc.LAYOUTS["CFG-GNSS"], head, rows) == bytes.fromhex(line.split(" - ", 1)[1])[4:]
+    good = {0: (8, 16), 2: (4, 8), 5: (0, 3), 6: (8, 14)}
+    four_majors = {**good, 3: (8, 16)}
+    assert acked(send(core, "CFG-GNSS", raw_payload=_gnss_set(four_majors))) is False  # 3 major GNSS at most
+    assert acked(send(core, "CFG-GNSS", raw_payload=_gnss_set({0: (8, 16), 6: (30, 30)}))) is False  # 38 reserved
+    assert acked(send(core, "CFG-GNSS", raw_payload=_gnss_set({0: (8, 16), 6: (2, 3)}))) is False  # maxTrkCh < 4
+    assert acked(send(core, "CFG-GNSS", raw_payload=_gnss_set({5: (0, 3)}))) is False  # no major GNSS
+    assert acked(send(core, "CFG-GNSS", raw_payload=_gnss_set(good, use=33))) is False  # 32 channels
+    assert core.config.gnss_enabled() == {0, 1, 2, 3, 5}  # NAKs changed nothing
+    assert acked(send(core, "CFG-GNSS", raw_payload=_gnss_set(good)))
+    _, rows = _gnss_blocks(core)
+    by_id = {r["gnssId"]: r for r in rows}
+    assert {g for g, r in by_id.items() if r["flags"] & 1} == {0, 2, 5, 6}
+    assert by_id[5]["flags"] >> 24 == 0x05  # the receiver's reserved byte survives a SET
+    lea = core_for("lea6t", standin_world)
+    assert acked(send(lea, "CFG-GNSS", raw_payload=_gnss_set(good))) is False
+    assert send(core, "CFG-RST", {"navBbrMask": 0, "resetMode": 2}) == [] and core.stats.gnss_restarts == 1
+
+
+def test_m8t_rawx_carries_only_the_enabled_systems(standin_world) -> None:
+    core = core_for("m8t", standin_world)
+    configure(core)
+    n_gps = len(standin_world.observe("rover", standin_world.start))
+    first = [UBXReader.parse(f.raw) for f in run(core, 1.0) if (f.msg_class, f.msg_id) == RXM_RAWX]
+    assert first and all(m.numMeas == n_gps for m in first)
+    assert acked(send(core, "CFG-GNSS", raw_payload=_gnss_set({2: (4, 8), 6: (8, 14)})))  # GPS off
+    later = [UBXReader.parse(f.raw) for f in run(core, 1.0) if (f.msg_class, f.msg_id) == RXM_RAWX]
+    assert later and all(m.numMeas == 0 for m in later)

@@ -42,6 +42,7 @@ def test_m8t_profile_applied_and_verified_alignment_clear_recorded() -> None:
     report, link = _configure(FakeUblox())
     assert report.ok, report.errors
     statuses = {m.label: m.status for m in report.messages}
+    assert statuses.pop("CFG-RST GNSS restart (hot)") == "sent"  # never acknowledged, never polled
     assert all(s == "ok" for label, s in statuses.items() if label != "CFG-TP5 TIMEPULSE2 camera")
     cam = report.result("CFG-TP5 TIMEPULSE2 camera")
     # The receiver cleared alignToTow for the 3 s period: recorded as applied, a warning, not an error.
@@ -51,7 +52,7 @@ def test_m8t_profile_applied_and_verified_alignment_clear_recorded() -> None:
     # One CFG at a time: every SET is followed by its own poll before the next SET goes out.
     sets = [f for f in link.sent if len(iter_frames(f)[0].payload) > 2]
     assert [s for s in sets] == build_profile("m8t", ReceiverOptions()).frames()
-    assert len(link.sent) == 2 * len(sets)
+    assert len(link.sent) == 2 * len(sets) - 1  # CFG-RST is not polled
     assert set(link.timeouts) == {1.0}  # ACK and poll answers awaited for 1 s
     json.dumps(report.to_json())  # JSON-able for the status snapshot
 
@@ -98,10 +99,11 @@ def test_silent_receiver_every_message_reported_nothing_raised() -> None:
     rx.silent = True
     report, link = _configure(rx, retries=1)
     assert not report.ok and len(link.sent) >= len(report.messages)
-    assert {m.status for m in report.messages} == {"silent"}
-    assert all(m.attempts == 2 for m in report.messages if m.label != "CFG-PRT port 1")
+    rst = report.result("CFG-RST GNSS restart (hot)")
+    assert {m.status for m in report.messages if m is not rst} == {"silent"} and rst.status == "sent"
+    assert all(m.attempts == 2 for m in report.messages if m.label != "CFG-PRT port 1" and m is not rst)
     names = [e.message for e in report.errors]
-    assert names == [e.label for e in build_profile("m8t", ReceiverOptions()).entries]
+    assert names == [e.label for e in build_profile("m8t", ReceiverOptions()).entries if e.name != "CFG-RST"]
     assert "no ACK/NAK within 1.0 s" in str(report.errors[3])
     doc = report.to_json()
     assert doc["ok"] is False and doc["errors"][0]["message"] == "CFG-PRT port 1"
@@ -163,8 +165,8 @@ def test_unanswered_poll_back_is_a_warning_unverified() -> None:
     rx = FakeUblox()
     rx.answer_polls = False
     report, _ = _configure(rx, retries=0)
-    assert report.ok and {m.status for m in report.messages} == {"unverified"}
-    assert len(report.warnings) == len(report.messages)
+    assert report.ok and {m.status for m in report.messages if m.name != "CFG-RST"} == {"unverified"}
+    assert len(report.warnings) == len(report.messages) - 1  # not CFG-RST
 
 
 def test_lost_first_frame_is_retried() -> None:
@@ -289,3 +291,45 @@ def test_baud_change_acked_but_poll_unanswered_stays_at_the_new_rate() -> None:
     assert (prt.ack, prt.status) == ("ack", "unverified")
     assert link.baud == 115200 and report.baud == 115200
     assert report.result("CFG-RATE 200 ms").ack == "ack"  # the rest went through at the new rate
+
+
+GNSS_LABEL = "CFG-GNSS GPS+GLONASS+Galileo+QZSS"
+
+
+def test_cfg_gnss_nak_is_an_error_naming_it_and_the_rest_is_applied() -> None:
+    rx = FakeUblox()
+    rx.nak = lambda c, i, p: (c, i) == (0x06, 0x3E) and len(p) > 0
+    report, _ = _configure(rx)
+    [err] = report.errors
+    assert err.message == GNSS_LABEL and "NAKed" in err.detail
+    assert report.result("CFG-RATE 200 ms").status == "ok"
+
+
+def test_cfg_gnss_poll_back_without_glonass_is_an_error_naming_the_system_field() -> None:
+    def glonass_off(payload: bytes) -> bytes:  # the receiver answers with the GLONASS block disabled
+        out = bytearray(payload)
+        for k in range(payload[3]):
+            if out[4 + 8 * k] == 6:
+                out[4 + 8 * k + 4] &= 0xFE
+        return bytes(out)
+
+    rx = FakeUblox()
+    rx.tamper[(0x06, 0x3E)] = glonass_off
+    report, _ = _configure(rx)
+    [err] = report.errors
+    assert (err.message, err.field) == (GNSS_LABEL, "enable_GLONASS")
+    assert "applied 0, we sent 1" in err.detail
+
+
+def test_cfg_gnss_poll_back_in_another_block_order_and_reserved_bytes_is_ok() -> None:
+    def reordered(payload: bytes) -> bytes:  # blocks reversed, flags' reserved high byte set as the real M8T
+        blocks = [bytearray(payload[4 + 8 * k: 12 + 8 * k]) for k in range(payload[3])]
+        for b in blocks:
+            b[7] = 0x05
+        return payload[:1] + b"\x20" + payload[2:4] + b"".join(reversed(blocks))
+
+    rx = FakeUblox()
+    rx.tamper[(0x06, 0x3E)] = reordered
+    report, _ = _configure(rx)
+    assert report.ok, report.errors
+    assert report.result(GNSS_LABEL).status == "ok" and report.result(GNSS_LABEL).applied["enable_Galileo"] == 1

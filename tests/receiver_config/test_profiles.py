@@ -10,7 +10,7 @@ from pyubx2.exceptions import UBXTypeError
 
 from onboard.errors import ReceiverError
 from onboard.receiver.framing import iter_frames, ubx_frame
-from onboard.receiver.profiles import ReceiverOptions, build_profile, decode_cfg
+from onboard.receiver.profiles import M8_GNSS_CHANNELS, ReceiverOptions, build_profile, decode_cfg
 from onboard.receiver.ubx_tables import CFG_TP, pack_payload, poll_frame, unpack_payload
 from tests.conftest import shared_file
 
@@ -25,6 +25,15 @@ COMMON_HEAD = [
     ("CFG-MSG NMEA-VTG off", "b56206010800f0050000000000000446"),
     ("CFG-RATE 200 ms", "b56206080600c80001000100de6a"),
 ]
+# M8T only: CFG-GNSS (GPS 8/16, Galileo 4/8, QZSS 0/3, GLONASS 8/14 on; SBAS, BeiDou, IMES off) and the GNSS
+# restart that applies it, right after the port.
+M8T_GNSS = [
+    ("CFG-GNSS GPS+GLONASS+Galileo+QZSS",
+     ("b562063e3c000000200700081000010001000100030000000100020408000100010003001000000001000400080000000100050003"
+      "000100010006080e00010001001fab")),
+    ("CFG-RST GNSS restart (hot)", "b56206040400000002001068"),
+]
+M8T_HEAD = COMMON_HEAD[:1] + M8T_GNSS + COMMON_HEAD[1:]
 GOLDEN = {
     ("lea6t", True): COMMON_HEAD + [
         ("CFG-MSG RXM-RAW every 1", "b5620601080002100001000000002228"),
@@ -44,7 +53,7 @@ GOLDEN = {
         ("CFG-TP5 TIMEPULSE camera",
          "b562063120000000000032000000c0c62d00c0c62d0000000000a086010000000000f70000000def"),
     ],
-    ("m8t", True): COMMON_HEAD + [
+    ("m8t", True): M8T_HEAD + [
         ("CFG-MSG RXM-RAWX every 1", "b562060108000215000100000000274b"),
         ("CFG-MSG RXM-SFRBX every 1", "b562060108000213000100000000253d"),
         ("CFG-MSG TIM-TM2 every 1", "b562060108000d030001000000002025"),
@@ -54,7 +63,7 @@ GOLDEN = {
         ("CFG-TP5 TIMEPULSE2 camera",
          "b562063120000101000032000000c0c62d00c0c62d0000000000a086010000000000f70000000f2e"),
     ],
-    ("m8t", False): COMMON_HEAD + [
+    ("m8t", False): M8T_HEAD + [
         ("CFG-MSG RXM-RAWX every 1", "b562060108000215000100000000274b"),
         ("CFG-MSG RXM-SFRBX every 1", "b562060108000213000100000000253d"),
         ("CFG-MSG TIM-TM2 every 1", "b562060108000d030001000000002025"),
@@ -89,6 +98,17 @@ def test_every_pyubx2_frame_decodes_back_to_the_intended_fields(model: str, tp2:
     for entry in profile.entries:
         parsed = UBXReader.parse(entry.raw, msgmode=SET)
         assert parsed.identity == entry.name
+        if entry.name == "CFG-RST":  # our layout (pyubx2 takes navBbrMask only bit by bit): hot start, GNSS only
+            assert (parsed.resetMode, parsed.eph, parsed.alm, parsed.rtc) == (2, 0, 0, 0)
+            continue
+        if entry.name == "CFG-GNSS":  # pyubx2 numbers the blocks; ours are named by system
+            by_system = {M8_GNSS_CHANNELS[g].gnss_id: g for g in M8_GNSS_CHANNELS}
+            for n in range(1, parsed.numConfigBlocks + 1):
+                g = by_system[getattr(parsed, f"gnssId_{n:02d}")]
+                for f in ("enable", "resTrkCh", "maxTrkCh", "sigCfMask"):
+                    assert getattr(parsed, f"{f}_{n:02d}") == entry.fields[f"{f}_{g}"], f"{entry.label}.{f}_{g}"
+            assert parsed.numConfigBlocks == 7 and parsed.numTrkChUse == entry.fields["numTrkChUse"]
+            continue
         for name, value in entry.fields.items():
             got = getattr(parsed, name)
             got = int.from_bytes(got, "little") if isinstance(got, bytes) else got
@@ -210,3 +230,62 @@ def test_decode_cfg_refuses_garbage_with_the_message_name() -> None:
     # pyubx2 would read a truncated answer as zeros (a false "applied 0"): the length is checked first.
     with pytest.raises(ReceiverError, match="CFG-TP5: payload is 7 bytes, expected 32"):
         decode_cfg(ubx_frame(0x06, 0x31, b"\x00" * 7))
+
+
+def _m8t_dump_frame(line: str) -> bytes:
+    """A frame of the real NEO-M8T dump (u-center text: "NAME - cls id len … payload")."""
+    body = bytes.fromhex(line.split(" - ", 1)[1])
+    return ubx_frame(body[0], body[1], body[4:])
+
+
+def test_m8t_gnss_setting_is_the_m8_channel_budget_and_reads_the_real_dump() -> None:
+    """Three major systems (GPS, GLONASS, Galileo) + QZSS within the 32 channels; BeiDou, SBAS, IMES off; the real
+    NEO-M8T's CFG-GNSS answer (7 blocks, reserved flag bytes 0x01/0x03/0x05) decodes into the same per-system
+    names our comparison uses."""
+    entry = next(e for e in build_profile("m8t", ReceiverOptions()).entries if e.name == "CFG-GNSS")
+    f = entry.fields
+    on = [g for g in M8_GNSS_CHANNELS if f[f"enable_{g}"]]
+    assert sorted(on) == ["GLONASS", "GPS", "Galileo", "QZSS"]
+    assert sum(f[f"resTrkCh_{g}"] for g in M8_GNSS_CHANNELS) <= f["numTrkChUse"] == 32
+    assert all(f[f"maxTrkCh_{g}"] >= 4 for g in ("GPS", "GLONASS", "Galileo"))
+    assert entry.poll == b"" and entry.expect_ack
+    lea = build_profile("lea6t", ReceiverOptions())
+    assert not any(e.name in ("CFG-GNSS", "CFG-RST") for e in lea.entries)  # the LEA-6T stays GPS-only
+    line = next(s for s in shared_file("ubx/rtkbase_U-Blox_NEO-M8T_rtkbase.txt").read_text().splitlines()
+                if s.startswith("CFG-GNSS"))
+    dump = decode_cfg(_m8t_dump_frame(line))
+    assert dump["numTrkChHw"] == 32 and dump["numConfigBlocks"] == 7
+    assert (dump["enable_BeiDou"], dump["enable_GLONASS"], dump["resTrkCh_GLONASS"], dump["maxTrkCh_GLONASS"]) \
+        == (1, 0, 8, 14)
+    assert {k for k in dump if k.endswith("_QZSS")} == {"enable_QZSS", "resTrkCh_QZSS", "maxTrkCh_QZSS",
+                                                         "sigCfMask_QZSS"}
+
+
+@pytest.mark.parametrize(("gnss", "fragment"), [
+    ("GPS,GLONASS,Galileo,BeiDou,QZSS", "1 to 3 major"),
+    ("QZSS", "1 to 3 major"),
+    ("GPS,GLONASS", "GPS and QZSS together"),
+    ("GPS,QZSS,Glonass", "unknown system"),
+    ("GPS,QZSS,GPS", "named twice"),
+])
+def test_gnss_option_refuses_what_the_m8_cannot_do(gnss: str, fragment: str) -> None:
+    with pytest.raises(ValueError, match=fragment):
+        ReceiverOptions(gnss=gnss)
+
+
+def test_gnss_option_changes_the_blocks() -> None:
+    entry = next(e for e in build_profile("m8t", ReceiverOptions(gnss="GPS,QZSS,BeiDou")).entries
+                 if e.name == "CFG-GNSS")
+    assert entry.label == "CFG-GNSS GPS+QZSS+BeiDou"
+    assert (entry.fields["enable_BeiDou"], entry.fields["resTrkCh_BeiDou"], entry.fields["enable_GLONASS"],
+            entry.fields["resTrkCh_GLONASS"]) == (1, 8, 0, 0)
+
+
+def test_cfg_gnss_answer_with_a_wrong_block_count_is_refused() -> None:
+    entry = next(e for e in build_profile("m8t", ReceiverOptions()).entries if e.name == "CFG-GNSS")
+    payload = bytearray(entry.raw[6:-2])
+    payload[3] = 8  # announces 8 blocks, carries 7
+    with pytest.raises(ReceiverError, match="numConfigBlocks"):
+        decode_cfg(ubx_frame(0x06, 0x3E, bytes(payload)))
+    with pytest.raises(ReceiverError, match="numConfigBlocks"):
+        decode_cfg(ubx_frame(0x06, 0x3E, bytes(entry.raw[6:-2])[:-3]))
