@@ -33,7 +33,8 @@ from sqlalchemy import select
 
 from ground.api.deps import SettingsDep, StoreDep, require_token
 from ground.api.job_kinds import check_job
-from ground.api.jobs import JobRunner
+from ground.api.job_outputs import job_output_dir
+from ground.api.queue import JobQueue
 from ground.api.schemas import FileOut, FlightCreate, FlightOut, FlightSummary, JobCreate, JobOut
 from ground.api.settings import ApiSettings
 from ground.api.upload import (
@@ -269,7 +270,7 @@ async def put_chunk(
 
 
 def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str, path: Path, offset: int,
-                  body: bytes, claimed: str, client: str, jobs: JobRunner, locks: FileLocks) -> FileOut:
+                  body: bytes, claimed: str, client: str, jobs: JobQueue, locks: FileLocks) -> FileOut:
     with locks.get(flight_id, name), store.session() as s:
         flight, f = _lookup_file(s, flight_id, name)
         if f.status == "complete":
@@ -354,7 +355,7 @@ ADJUST_ROLES = ("events", "orientations")
 RTK_ROLES = ("rover_obs", "base_obs")
 
 
-def _maybe_auto_adjust(store: Store, flight_id: str, jobs: JobRunner) -> None:
+def _maybe_auto_adjust(store: Store, flight_id: str, jobs: JobQueue) -> None:
     """Once every file is in, queue the automatic jobs (only on a flight that has none yet):
     RTK re-processing when rover and base observations were uploaded, then the adjustment when events and
     orientations were uploaded with a trajectory (uploaded, or the one the RTK job will write)."""
@@ -376,10 +377,10 @@ def _maybe_auto_adjust(store: Store, flight_id: str, jobs: JobRunner) -> None:
         jobs.submit(job_id)
 
 
-@router.post("/{flight_id}/jobs", response_model=JobOut, status_code=status.HTTP_202_ACCEPTED,
-             responses={404: {}, 409: {}, 413: {}, 422: {}})
-def create_job(flight_id: str, body: JobCreate, request: Request, store: StoreDep) -> JobOut:
-    """Queue a processing job (runs in the background; poll its status)."""
+def validate_and_queue_job(store: Store, jobs: JobQueue, flight_id: str, kind: str,
+                           params: dict[str, Any]) -> JobOut:
+    """Check a job against the flight (404 no flight, 409 upload not complete, 422 bad parameters or missing
+    files: HTTPException with the reason in words), record it `queued` and hand it to the job queue."""
     with store.session() as s:
         flight = s.get(Flight, flight_id)
         if flight is None:
@@ -387,15 +388,22 @@ def create_job(flight_id: str, body: JobCreate, request: Request, store: StoreDe
         if flight.status != "complete":
             raise HTTPException(status_code=409, detail="the flight's upload is not complete")
         try:
-            check_job(body.kind, body.params, {f.name: f.role for f in flight.files if f.status == "complete"})
+            check_job(kind, params, {f.name: f.role for f in flight.files if f.status == "complete"})
         except InputError as exc:
-            raise HTTPException(status_code=422, detail=f"{body.kind} job: {exc}") from exc
-        job = Job(flight_id=flight_id, kind=body.kind, params=body.params)
+            raise HTTPException(status_code=422, detail=f"{kind} job: {exc}") from exc
+        job = Job(flight_id=flight_id, kind=kind, params=params)
         s.add(job)
         s.commit()
         out = job_out(job)
-    request.app.state.jobs.submit(out.id)
+    jobs.submit(out.id)
     return out
+
+
+@router.post("/{flight_id}/jobs", response_model=JobOut, status_code=status.HTTP_202_ACCEPTED,
+             responses={404: {}, 409: {}, 413: {}, 422: {}})
+def create_job(flight_id: str, body: JobCreate, request: Request, store: StoreDep) -> JobOut:
+    """Queue a processing job (runs in the background; poll its status)."""
+    return validate_and_queue_job(store, request.app.state.jobs, flight_id, body.kind, body.params)
 
 
 @router.get("/{flight_id}/jobs/{job_id}", response_model=JobOut)
@@ -416,7 +424,7 @@ def _latest_output(settings: ApiSettings, store: Store, flight_id: str, filename
         done = [j for j in flight.jobs if j.kind == "adjust" and j.status == "done"]
     if not done:
         raise HTTPException(status_code=404, detail="no finished adjustment for this flight")
-    path = settings.data_dir / "outputs" / flight_id / done[-1].id / filename
+    path = job_output_dir(settings.data_dir, flight_id, done[-1].id) / filename
     if not path.is_file():
         raise HTTPException(status_code=404, detail=f"{filename} missing from the last adjustment")
     return path
