@@ -1,4 +1,4 @@
-"""Flight store: SQLAlchemy models (flights, files, upload sessions, jobs) and small transactional helpers.
+"""Flight store: SQLAlchemy models (flights, files, upload sessions, jobs, API tokens) and small helpers.
 
 SQLite file by default (`sqlite:///<data_dir>/directgeo.sqlite3`), any SQLAlchemy URL (PostgreSQL) through
 `DATABASE_URL`. Raw files live on disk under `<data_dir>/flights/<flight id>/`; the database holds what was
@@ -21,6 +21,8 @@ from sqlalchemy import (
     Text,
     UniqueConstraint,
     create_engine,
+    inspect,
+    text,
 )
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column, relationship, sessionmaker
@@ -49,6 +51,9 @@ class Flight(Base):
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=_now)
     status: Mapped[str] = mapped_column(String(32), default="uploading")  # uploading | complete
     manifest: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    #: id of the API token that created the flight (None: the bootstrap token, or a flight older than tokens);
+    #: a drone token may only touch the flights it created
+    created_by: Mapped[str | None] = mapped_column(String(32), nullable=True)
     files: Mapped[list[FlightFile]] = relationship(back_populates="flight", cascade="all, delete-orphan",
                                                    order_by="FlightFile.name")
     jobs: Mapped[list[Job]] = relationship(back_populates="flight", cascade="all, delete-orphan",
@@ -107,8 +112,50 @@ class Job(Base):
     flight: Mapped[Flight] = relationship(back_populates="jobs")
 
 
+class ApiToken(Base):
+    """A bearer token with a role. Only its SHA-256 is kept: the clear token is shown once, at creation.
+
+    A plain SHA-256 (no salt, no slow KDF) is the right hash here: tokens are 32 random bytes from `secrets`
+    (256 bits), so there is no dictionary to try and a brute force of the digest is out of reach whatever its
+    speed; a slow KDF would only cost time on every request, and an unsalted digest can be looked up directly.
+    """
+
+    __tablename__ = "api_tokens"
+
+    id: Mapped[str] = mapped_column(String(32), primary_key=True, default=new_id)
+    name: Mapped[str] = mapped_column(String(100), unique=True, index=True)
+    role: Mapped[str] = mapped_column(String(16))  # drone | engineer | admin | worker (ground.api.auth.Role)
+    token_sha256: Mapped[str] = mapped_column(String(64), unique=True, index=True)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=_now)
+    revoked_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    last_used_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+
+
+def _add_missing_columns(engine: Engine) -> list[str]:
+    """Add the nullable columns a newer model has and an existing database lacks (e.g. `flights.created_by`);
+    returns the `table.column` names added. The schema only ever grows by nullable columns, so this is the
+    whole migration."""
+    insp = inspect(engine)
+    added: list[str] = []
+    with engine.begin() as conn:
+        for table in Base.metadata.sorted_tables:
+            if not insp.has_table(table.name):
+                continue
+            present = {c["name"] for c in insp.get_columns(table.name)}
+            for col in table.columns:
+                if col.name in present:
+                    continue
+                if not col.nullable:
+                    raise RuntimeError(f"the database's table {table.name} lacks the non-null column {col.name}")
+                ddl = col.type.compile(dialect=engine.dialect)
+                conn.execute(text(f'ALTER TABLE {table.name} ADD COLUMN {col.name} {ddl}'))
+                added.append(f"{table.name}.{col.name}")
+    return added
+
+
 class Store:
-    """Engine + session factory; `create_all` on open (the schema is small and additive)."""
+    """Engine + session factory; `create_all` on open, plus the nullable columns an older database lacks (the
+    schema is small and additive)."""
 
     def __init__(self, database_url: str) -> None:
         kwargs: dict[str, Any] = {}
@@ -116,6 +163,7 @@ class Store:
             # uvicorn serves sync endpoints from a thread pool and jobs run in a worker thread
             kwargs["connect_args"] = {"check_same_thread": False, "timeout": 30}
         self.engine: Engine = create_engine(database_url, **kwargs)
+        _add_missing_columns(self.engine)
         Base.metadata.create_all(self.engine)
         self.sessions = sessionmaker(self.engine, expire_on_commit=False)
 

@@ -10,9 +10,10 @@ from contextlib import asynccontextmanager
 from fastapi import FastAPI
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from ground.api.auth import document_roles
 from ground.api.jobs import JobFunction, JobRunner
 from ground.api.queue import make_job_queue
-from ground.api.routes import flights, worker_jobs
+from ground.api.routes import flights, tokens, worker_jobs
 from ground.api.settings import ApiSettings
 from ground.store import Store
 
@@ -98,7 +99,8 @@ def create_app(settings: ApiSettings, job_functions: dict[str, JobFunction] | No
         version="0.1.0",
         description="Flight store with resumable, checksummed upload (manifest with SHA-256, chunks with "
         "offsets and per-chunk SHA-256), processing jobs (RTK re-processing, final adjustment) and reports. "
-        "Every /flights route needs `Authorization: Bearer <token>`.",
+        "Every route but /health needs `Authorization: Bearer <token>` of a role it lets through (its "
+        "`x-roles`: drone, engineer, worker; admin passes every check): `python -m ground token create`.",
         lifespan=lifespan,
     )
     app.state.settings = settings
@@ -106,10 +108,12 @@ def create_app(settings: ApiSettings, job_functions: dict[str, JobFunction] | No
     app.add_middleware(BodyLimit, limit=settings.max_json_bytes)
     app.include_router(flights.router)
     app.include_router(worker_jobs.router)
+    app.include_router(tokens.router)
 
     @app.get("/health", tags=["health"])
     def health() -> dict[str, str]:
         """Liveness probe (no flight data, no authentication)."""
         return {"status": "ok"}
 
+    document_roles(app)  # last: every route is in place
     return app

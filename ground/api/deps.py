@@ -1,17 +1,13 @@
-"""FastAPI dependencies: settings, store and the bearer-token check (constant-time)."""
+"""FastAPI dependencies: settings and store (the token check is `ground.api.auth.require_role`)."""
 
 from __future__ import annotations
 
-import hmac
 from typing import Annotated
 
-from fastapi import Depends, HTTPException, Request, status
-from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from fastapi import Depends, Request
 
 from ground.api.settings import ApiSettings
 from ground.store import Store
-
-_bearer = HTTPBearer(auto_error=False, description="the ground API token ($DIRECTGEO_TOKEN or --token-file)")
 
 
 def get_settings(request: Request) -> ApiSettings:
@@ -28,15 +24,4 @@ def get_store(request: Request) -> Store:
 
 SettingsDep = Annotated[ApiSettings, Depends(get_settings)]
 StoreDep = Annotated[Store, Depends(get_store)]
-CredentialsDep = Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
 
-
-def require_token(credentials: CredentialsDep, settings: SettingsDep) -> None:
-    """401 unless `Authorization: Bearer <token>` matches the configured token (compared in constant time)."""
-    supplied = credentials.credentials if credentials is not None else ""
-    if not hmac.compare_digest(supplied.encode(), settings.token.encode()):
-        raise HTTPException(
-            status_code=status.HTTP_401_UNAUTHORIZED,
-            detail="missing or wrong API token",
-            headers={"WWW-Authenticate": "Bearer"},
-        )

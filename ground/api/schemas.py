@@ -31,6 +31,12 @@ class FlightCreate(BaseModel):
     meta: dict[str, Any] = Field(default_factory=dict, description="free metadata (receiver, onboard manifest)")
 
 
+class FilesAdd(BaseModel):
+    """File entries to add to an existing flight (then uploaded by PUT like the manifest's)."""
+
+    files: list[ManifestFile]
+
+
 class FileOut(BaseModel):
     """Upload state of one file."""
 

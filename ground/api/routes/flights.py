@@ -1,6 +1,7 @@
 """Flights: create from a manifest, resumable checksummed file upload, jobs, results and report.
 
-Upload protocol (every route needs `Authorization: Bearer <token>`):
+Upload protocol (every route needs `Authorization: Bearer <token>` of a role the route lets through, see
+`ground.api.auth`: a drone token creates flights and uploads the files of its own flights, nothing else):
 
 1. `POST /flights` {name, files: [{name, size, sha256, role?}]} → 201 with the flight id (200 with the same
    flight when name and files are identical: an uploader restarted from scratch resumes; 409 when the name
@@ -11,6 +12,8 @@ Upload protocol (every route needs `Authorization: Bearer <token>`):
    413 for a chunk over the limit or past the promised size; 507 when the disk cannot take it. When the last
    byte arrives the whole file's SHA-256 is checked: the file moves into place (`complete`), or it is discarded
    and restarts at 0 (422).
+   `POST /flights/{id}/files` {files: [...]} adds entries (office files: orientations, GCPs) to an existing
+   flight, validated as the manifest; their bytes then go by the same PUT.
 4. Once every file is complete, jobs are queued by role: `rtk` when `rover_obs` + `base_obs` are present,
    `adjust` when `events` + `orientations` (+ `trajectory`, or the RTK job's) are; or `POST /flights/{id}/jobs`.
    `GET /flights/{id}/results` and `/report` serve the latest finished adjustment.
@@ -23,6 +26,7 @@ import hashlib
 import logging
 import os
 import threading
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -31,11 +35,21 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
 from sqlalchemy import select
 
-from ground.api.deps import SettingsDep, StoreDep, require_token
+from ground.api.auth import Principal, Role, check_flight_owner, require_role
+from ground.api.deps import SettingsDep, StoreDep
 from ground.api.job_kinds import check_job
 from ground.api.job_outputs import job_output_dir
 from ground.api.queue import JobQueue
-from ground.api.schemas import FileOut, FlightCreate, FlightOut, FlightSummary, JobCreate, JobOut
+from ground.api.schemas import (
+    FileOut,
+    FilesAdd,
+    FlightCreate,
+    FlightOut,
+    FlightSummary,
+    JobCreate,
+    JobOut,
+    ManifestFile,
+)
 from ground.api.settings import ApiSettings
 from ground.api.upload import (
     Limits,
@@ -50,7 +64,14 @@ from onboard.errors import InputError
 
 log = logging.getLogger(__name__)
 
-router = APIRouter(prefix="/flights", tags=["flights"], dependencies=[Depends(require_token)])
+router = APIRouter(prefix="/flights", tags=["flights"])
+
+#: who may call what (ADMIN passes every check); a drone only ever sees the flights it created
+Uploader = Annotated[Principal, Depends(require_role(Role.DRONE, Role.ENGINEER))]
+FlightReader = Annotated[Principal, Depends(require_role(Role.DRONE, Role.ENGINEER, Role.WORKER))]
+FileReader = Annotated[Principal, Depends(require_role(Role.ENGINEER, Role.WORKER))]
+JobReader = Annotated[Principal, Depends(require_role(Role.ENGINEER, Role.WORKER))]
+Engineer = Annotated[Principal, Depends(require_role(Role.ENGINEER))]
 
 CHUNK_SHA_HEADER = "X-Chunk-SHA256"
 OFFSET_HEADER = "Upload-Offset"
@@ -119,25 +140,58 @@ def _flight_out(f: Flight) -> FlightOut:
                      files=[_file_out(x) for x in f.files], jobs=[job_out(j) for j in f.jobs])
 
 
-def _get_flight(store: Store, flight_id: str) -> Flight:
+def _flight_of(s: Any, flight_id: str, principal: Principal) -> Flight:
+    """The flight, 404 when absent, 403 when a drone token did not create it."""
+    flight = s.get(Flight, flight_id)
+    if flight is None:
+        raise HTTPException(status_code=404, detail=f"no flight {flight_id}")
+    check_flight_owner(principal, flight.created_by)
+    return flight  # type: ignore[no-any-return]
+
+
+def _get_flight(store: Store, flight_id: str, principal: Principal) -> Flight:
     with store.session() as s:
-        f = s.get(Flight, flight_id)
-        if f is None:
-            raise HTTPException(status_code=404, detail=f"no flight {flight_id}")
+        f = _flight_of(s, flight_id, principal)
         f.files, f.jobs  # noqa: B018 - load relationships before the session closes
         return f
+
+
+def _entry_triples(files: list[ManifestFile], limits: Limits,
+                   held: Sequence[tuple[str, int, str]] = ()) -> list[tuple[str, int, str]]:
+    """(name, size, sha256) of manifest entries, checked by the manifest's rules (names, duplicates, sizes),
+    and with the files a flight already `held` against the per-flight limits."""
+    triples = [(f.name, f.size, check_sha256(f.sha256)) for f in files]
+    check_manifest_files(triples, limits)
+    if held:
+        check_manifest_files([*held, *triples], limits)
+    return triples
+
+
+def _register_files(settings: ApiSettings, s: Any, flight: Flight, files: list[ManifestFile]) -> None:
+    """Add rows for new manifest entries to `flight` (in session `s`) and verify the empty ones at once."""
+    new = [FlightFile(name=f.name, size=f.size, sha256=f.sha256.strip().lower(), role=f.role,
+                      status="pending" if f.size else "partial") for f in files]
+    flight.files.extend(new)
+    if any(f.size for f in new):
+        flight.status = "uploading"
+    s.add(flight)
+    s.flush()  # the flight's id exists from here
+    flight_dir(settings, flight.id).mkdir(parents=True, exist_ok=True)
+    for ff in new:
+        if ff.size == 0:  # nothing to send: verify the empty file's hash now
+            _finish_file(settings, s, flight, ff, safe_path(settings, flight.id, ff.name))
 
 
 @router.post("", response_model=FlightOut, status_code=status.HTTP_201_CREATED,
              responses={200: {"model": FlightOut, "description": "identical flight already exists (resume)"},
                         400: {}, 409: {}, 413: {}, 422: {}})
 def create_flight(body: FlightCreate, response: Response, settings: SettingsDep,
-                  store: StoreDep) -> FlightOut:
-    """Create a flight from its upload manifest; the same name and files again returns the existing flight."""
+                  store: StoreDep, principal: Uploader) -> FlightOut:
+    """Create a flight from its upload manifest; the same name and files again returns the existing flight
+    (409 when it exists with other files, or was created by another drone token)."""
     try:
         check_file_name(body.name)
-        triples = [(f.name, f.size, check_sha256(f.sha256)) for f in body.files]
-        check_manifest_files(triples, _limits(settings))
+        triples = _entry_triples(body.files, _limits(settings))
     except UploadRejected as exc:
         raise _http(exc) from exc
     with store.session() as s:
@@ -146,26 +200,59 @@ def create_flight(body: FlightCreate, response: Response, settings: SettingsDep,
             same = sorted((f.name, f.size, f.sha256) for f in existing.files) == sorted(triples)
             if not same:
                 raise HTTPException(status_code=409, detail=f"flight {body.name!r} exists with other files")
+            if principal.role is Role.DRONE and existing.created_by != principal.token_id:
+                raise HTTPException(status_code=409, detail=f"flight {body.name!r} exists, created by another token")
             response.status_code = status.HTTP_200_OK
             existing.files, existing.jobs  # noqa: B018
             return _flight_out(existing)
-        flight = Flight(name=body.name, manifest=body.model_dump())
-        for f in body.files:
-            flight.files.append(FlightFile(name=f.name, size=f.size, sha256=f.sha256.lower(), role=f.role,
-                                           status="pending" if f.size else "partial"))
-        s.add(flight)
-        s.commit()
-        flight_dir(settings, flight.id).mkdir(parents=True, exist_ok=True)
-        for ff in flight.files:
-            if ff.size == 0:  # nothing to send: verify the empty file's hash now
-                _finish_file(settings, s, flight, ff, safe_path(settings, flight.id, ff.name))
+        flight = Flight(name=body.name, manifest=body.model_dump(), created_by=principal.token_id)
+        _register_files(settings, s, flight, body.files)
         s.commit()
         log.info("flight %s (%s) created with %d files", flight.id, flight.name, len(flight.files))
         return _flight_out(flight)
 
 
+def add_files(settings: ApiSettings, store: Store, flight_id: str, files: list[ManifestFile],
+              principal: Principal) -> FlightOut:
+    """Add manifest entries to an existing flight (office files: orientations, GCPs, …); the bytes then go by
+    `PUT /flights/{id}/files/{name}` (or `_append_chunk`). Checked as the manifest at creation, together with
+    the files held for the per-flight limits; an entry identical (name, size, SHA-256) to one held is kept as
+    it is; a held name with another size or hash → `HTTPException(409)`; bad entries → 400/413/422; 404/403
+    as the flight routes. The flight goes back to `uploading` until the new files are complete."""
+    with store.session() as s:
+        flight = _flight_of(s, flight_id, principal)
+        held = {f.name: f for f in flight.files}
+        try:
+            _entry_triples(files, _limits(settings))
+            for f in files:
+                h = held.get(f.name)
+                if h is not None and (h.size, h.sha256) != (f.size, check_sha256(f.sha256)):
+                    raise UploadRejected(409, f"{f.name!r} is already in this flight with another size or "
+                                              "SHA-256")
+            new = [f for f in files if f.name not in held]
+            if new:  # with the files held: the flight's file count and total size
+                _entry_triples(new, _limits(settings), [(h.name, h.size, h.sha256) for h in held.values()])
+        except UploadRejected as exc:
+            raise _http(exc) from exc
+        if new:
+            _register_files(settings, s, flight, new)
+            s.commit()
+            log.info("flight %s: %d files added by %s", flight.id, len(new), principal.name)
+        flight.files, flight.jobs  # noqa: B018
+        return _flight_out(flight)
+
+
+@router.post("/{flight_id}/files", response_model=FlightOut, responses={400: {}, 404: {}, 409: {}, 413: {}, 422: {}})
+def add_flight_files(flight_id: str, body: FilesAdd, settings: SettingsDep, store: StoreDep,
+                     principal: Uploader) -> FlightOut:
+    """Add file entries (name, size, SHA-256, role) to an existing flight, e.g. the bundle adjustment's
+    orientations and the GCP file; then upload their bytes with PUT. Identical entries again change nothing;
+    a name held with another size or SHA-256 → 409."""
+    return add_files(settings, store, flight_id, body.files, principal)
+
+
 @router.get("", response_model=list[FlightSummary])
-def list_flights(store: StoreDep) -> list[FlightSummary]:
+def list_flights(store: StoreDep, _: Engineer) -> list[FlightSummary]:
     """All flights, newest first."""
     with store.session() as s:
         rows = s.scalars(select(Flight).order_by(Flight.created_at.desc())).all()
@@ -175,15 +262,13 @@ def list_flights(store: StoreDep) -> list[FlightSummary]:
 
 
 @router.get("/{flight_id}", response_model=FlightOut)
-def get_flight(flight_id: str, store: StoreDep) -> FlightOut:
-    """A flight with its files and jobs."""
-    return _flight_out(_get_flight(store, flight_id))
+def get_flight(flight_id: str, store: StoreDep, principal: FlightReader) -> FlightOut:
+    """A flight with its files and jobs (a drone token: only a flight it created)."""
+    return _flight_out(_get_flight(store, flight_id, principal))
 
 
-def _lookup_file(s: Any, flight_id: str, name: str) -> tuple[Flight, FlightFile]:
-    flight = s.get(Flight, flight_id)
-    if flight is None:
-        raise HTTPException(status_code=404, detail=f"no flight {flight_id}")
+def _lookup_file(s: Any, flight_id: str, name: str, principal: Principal) -> tuple[Flight, FlightFile]:
+    flight = _flight_of(s, flight_id, principal)
     f = s.scalar(select(FlightFile).where(FlightFile.flight_id == flight_id, FlightFile.name == name))
     if f is None:
         raise HTTPException(status_code=404, detail=f"{name!r} is not in this flight's manifest")
@@ -192,14 +277,14 @@ def _lookup_file(s: Any, flight_id: str, name: str) -> tuple[Flight, FlightFile]
 
 @router.get("/{flight_id}/files/{name}/content", response_class=FileResponse)
 def download_file(flight_id: str, name: str, settings: SettingsDep,
-                  store: StoreDep) -> FileResponse:
+                  store: StoreDep, principal: FileReader) -> FileResponse:
     """The bytes of a completely uploaded file."""
     try:
         path = safe_path(settings, flight_id, name)
     except UploadRejected as exc:
         raise _http(exc) from exc
     with store.session() as s:
-        _, f = _lookup_file(s, flight_id, name)
+        _, f = _lookup_file(s, flight_id, name, principal)
         if f.status != "complete":
             raise HTTPException(status_code=409, detail=f"{name} is not completely uploaded")
     return FileResponse(path, media_type="application/octet-stream", filename=name)
@@ -207,22 +292,22 @@ def download_file(flight_id: str, name: str, settings: SettingsDep,
 
 @router.head("/{flight_id}/files/{name:path}")
 def file_offset_head(flight_id: str, name: str, settings: SettingsDep,
-                     store: StoreDep) -> Response:
+                     store: StoreDep, principal: FlightReader) -> Response:
     """Upload-Offset (bytes received, where to resume) and Upload-Length (promised size) as headers."""
-    out = file_status(flight_id, name, settings, store)
+    out = file_status(flight_id, name, settings, store, principal)
     return Response(status_code=200, headers={OFFSET_HEADER: str(out.received), LENGTH_HEADER: str(out.size)})
 
 
 @router.get("/{flight_id}/files/{name:path}", response_model=FileOut)
 def file_status(flight_id: str, name: str, settings: SettingsDep,
-                store: StoreDep) -> FileOut:
+                store: StoreDep, principal: FlightReader) -> FileOut:
     """Upload state of one file (received bytes = where an interrupted upload resumes)."""
     try:
         safe_path(settings, flight_id, name)
     except UploadRejected as exc:
         raise _http(exc) from exc
     with store.session() as s:
-        _, f = _lookup_file(s, flight_id, name)
+        _, f = _lookup_file(s, flight_id, name, principal)
         return _file_out(f)
 
 
@@ -248,6 +333,7 @@ async def put_chunk(
     request: Request,
     settings: SettingsDep,
     store: StoreDep,
+    principal: Uploader,
     offset: Annotated[int, Query(ge=0, description="byte offset of this chunk in the file (= bytes received so far)")],
 ) -> FileOut:
     """Append one chunk at `offset`. Header `X-Chunk-SHA256` (hex) must match the body or the chunk is refused.
@@ -266,13 +352,14 @@ async def put_chunk(
         raise HTTPException(status_code=400, detail=f"missing {CHUNK_SHA_HEADER} header")
     client = request.client.host if request.client else ""
     return await run_in_threadpool(_append_chunk, settings, store, flight_id, name, path, offset, body,
-                                   claimed, client, request.app.state.jobs, request.app.state.file_locks)
+                                   claimed, client, request.app.state.jobs, request.app.state.file_locks, principal)
 
 
 def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str, path: Path, offset: int,
-                  body: bytes, claimed: str, client: str, jobs: JobQueue, locks: FileLocks) -> FileOut:
+                  body: bytes, claimed: str, client: str, jobs: JobQueue, locks: FileLocks,
+                  principal: Principal) -> FileOut:
     with locks.get(flight_id, name), store.session() as s:
-        flight, f = _lookup_file(s, flight_id, name)
+        flight, f = _lookup_file(s, flight_id, name, principal)
         if f.status == "complete":
             raise HTTPException(status_code=409, detail=f"{name} is already complete")
         part = partial_path(path)
@@ -377,14 +464,13 @@ def _maybe_auto_adjust(store: Store, flight_id: str, jobs: JobQueue) -> None:
         jobs.submit(job_id)
 
 
-def validate_and_queue_job(store: Store, jobs: JobQueue, flight_id: str, kind: str,
-                           params: dict[str, Any]) -> JobOut:
-    """Check a job against the flight (404 no flight, 409 upload not complete, 422 bad parameters or missing
-    files: HTTPException with the reason in words), record it `queued` and hand it to the job queue."""
+def validate_and_queue_job(store: Store, jobs: JobQueue, flight_id: str, kind: str, params: dict[str, Any],
+                           principal: Principal) -> JobOut:
+    """Check a job against the flight (404 no flight, 403 not the caller's, 409 upload not complete, 422 bad
+    parameters or missing files: HTTPException with the reason in words), record it `queued` and hand it to
+    the job queue."""
     with store.session() as s:
-        flight = s.get(Flight, flight_id)
-        if flight is None:
-            raise HTTPException(status_code=404, detail=f"no flight {flight_id}")
+        flight = _flight_of(s, flight_id, principal)
         if flight.status != "complete":
             raise HTTPException(status_code=409, detail="the flight's upload is not complete")
         try:
@@ -401,13 +487,13 @@ def validate_and_queue_job(store: Store, jobs: JobQueue, flight_id: str, kind: s
 
 @router.post("/{flight_id}/jobs", response_model=JobOut, status_code=status.HTTP_202_ACCEPTED,
              responses={404: {}, 409: {}, 413: {}, 422: {}})
-def create_job(flight_id: str, body: JobCreate, request: Request, store: StoreDep) -> JobOut:
+def create_job(flight_id: str, body: JobCreate, request: Request, store: StoreDep, principal: Engineer) -> JobOut:
     """Queue a processing job (runs in the background; poll its status)."""
-    return validate_and_queue_job(store, request.app.state.jobs, flight_id, body.kind, body.params)
+    return validate_and_queue_job(store, request.app.state.jobs, flight_id, body.kind, body.params, principal)
 
 
 @router.get("/{flight_id}/jobs/{job_id}", response_model=JobOut)
-def get_job(flight_id: str, job_id: str, store: StoreDep) -> JobOut:
+def get_job(flight_id: str, job_id: str, store: StoreDep, _: JobReader) -> JobOut:
     """A job's status and message."""
     with store.session() as s:
         job = s.get(Job, job_id)
@@ -432,7 +518,7 @@ def _latest_output(settings: ApiSettings, store: Store, flight_id: str, filename
 
 @router.get("/{flight_id}/results", response_class=JSONResponse)
 def get_results(flight_id: str, settings: SettingsDep,
-                store: StoreDep) -> Response:
+                store: StoreDep, _: Engineer) -> Response:
     """`results.json` of the latest finished adjustment."""
     path = _latest_output(settings, store, flight_id, "results.json")
     return Response(content=path.read_bytes(), media_type="application/json")
@@ -440,21 +526,21 @@ def get_results(flight_id: str, settings: SettingsDep,
 
 @router.get("/{flight_id}/report", response_class=HTMLResponse)
 def get_report(flight_id: str, settings: SettingsDep,
-               store: StoreDep) -> Response:
+               store: StoreDep, _: Engineer) -> Response:
     """The self-contained HTML report of the latest finished adjustment."""
     path = _latest_output(settings, store, flight_id, "report.html")
     return HTMLResponse(content=path.read_text(encoding="utf-8"))
 
 
 @router.get("/{flight_id}/exports", response_model=list[str])
-def list_exports(flight_id: str, settings: SettingsDep, store: StoreDep) -> list[str]:
+def list_exports(flight_id: str, settings: SettingsDep, store: StoreDep, _: Engineer) -> list[str]:
     """Geotag/orientation export files of the latest finished adjustment (geo.txt, pix4d.csv, …)."""
     folder = _latest_output(settings, store, flight_id, "results.json").parent / "exports"
     return sorted(p.name for p in folder.iterdir() if p.is_file()) if folder.is_dir() else []
 
 
 @router.get("/{flight_id}/exports/{name}", response_class=FileResponse)
-def get_export(flight_id: str, name: str, settings: SettingsDep, store: StoreDep) -> FileResponse:
+def get_export(flight_id: str, name: str, settings: SettingsDep, store: StoreDep, _: Engineer) -> FileResponse:
     """One export file of the latest finished adjustment."""
     try:
         check_file_name(name)

@@ -27,7 +27,8 @@ from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse
 
-from ground.api.deps import SettingsDep, StoreDep, require_token
+from ground.api.auth import Role, require_role
+from ground.api.deps import SettingsDep, StoreDep
 from ground.api.job_kinds import reprocessed_trajectory
 from ground.api.job_outputs import (
     OutputFile,
@@ -45,9 +46,10 @@ from onboard.errors import InputError
 log = logging.getLogger(__name__)
 
 CONTENT_SHA_HEADER = "X-Content-SHA256"
-#: role dependencies (the shared token until scoped tokens exist)
-WORKER_ONLY = [Depends(require_token)]
-READERS = [Depends(require_token)]
+#: who may call: workers run jobs (admin passes every check); engineers and workers read outputs (a worker
+#: fetches an earlier job's trajectory)
+WORKER_ONLY = [Depends(require_role(Role.WORKER))]
+READERS = [Depends(require_role(Role.ENGINEER, Role.WORKER))]
 
 router = APIRouter(prefix="/flights", tags=["jobs"])
 
