@@ -86,6 +86,10 @@ def install_outputs(archive: Path, dest: Path) -> list[OutputFile]:
                 bad = [m.name for m in members if not (m.isfile() or m.isdir())]
                 if bad:
                     raise InputError(f"outputs archive: not a regular file: {', '.join(bad[:5])}")
+                bad = [m.name for m in members if m.name.startswith("/") or any(
+                    part in ("", "..") or part.startswith(".") for part in m.name.rstrip("/").split("/"))]
+                if bad:
+                    raise InputError(f"outputs archive: names outside the job's folder: {', '.join(bad[:5])}")
                 # the "data" filter refuses absolute names, `..`, links out of the folder and device files
                 tar.extractall(staging, members=members, filter="data")
         except (tarfile.TarError, EOFError) as exc:  # FilterError (a refused member) is a TarError
