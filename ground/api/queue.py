@@ -17,6 +17,7 @@ the procrastinate job only carries "run job X" to a worker.
 from __future__ import annotations
 
 import logging
+import time
 from typing import Protocol
 
 from ground.api.settings import ApiSettings
@@ -28,6 +29,9 @@ log = logging.getLogger(__name__)
 TASK_NAME = "directgeo.run_job"
 #: the procrastinate queue of processing jobs
 QUEUE_NAME = "directgeo-jobs"
+#: attempts to defer a job when the database connection fails, and the wait before the n-th retry (n × s)
+DEFER_ATTEMPTS = 5
+DEFER_RETRY_S = 0.5
 
 
 class JobQueue(Protocol):
@@ -81,7 +85,7 @@ class PostgresJobQueue:
 
     def submit(self, job_id: str) -> None:
         """Defer `run_job(job_id)` under the flight's lock; a job already waiting is not queued twice."""
-        from procrastinate.exceptions import AlreadyEnqueued
+        from procrastinate.exceptions import AlreadyEnqueued, ConnectorException
 
         with self.store.session() as s:
             job = s.get(Job, job_id)
@@ -89,10 +93,18 @@ class PostgresJobQueue:
                 raise KeyError(f"no job {job_id}")
             flight_id = job.flight_id
         task = self.app.configure_task(name=TASK_NAME, queue=QUEUE_NAME, lock=flight_id, queueing_lock=job_id)
-        try:
-            task.defer(job_id=job_id, flight_id=flight_id)
-        except AlreadyEnqueued:
-            log.info("job %s is already waiting in the queue", job_id)
+        for attempt in range(DEFER_ATTEMPTS):
+            try:
+                task.defer(job_id=job_id, flight_id=flight_id)
+                return
+            except AlreadyEnqueued:
+                log.info("job %s is already waiting in the queue", job_id)
+                return
+            except ConnectorException:  # the database restarted: the pool hands out a fresh connection next
+                if attempt == DEFER_ATTEMPTS - 1:
+                    raise
+                log.warning("job %s: cannot reach the queue, retrying", job_id, exc_info=True)
+                time.sleep(DEFER_RETRY_S * (attempt + 1))
 
     def requeue_unfinished(self) -> int:
         """Store jobs queued/running with no procrastinate job waiting or running (a server stopped between the
