@@ -227,7 +227,7 @@ def upload_phase(label: str, tag: str, srv: Server, root: Path, n: int, flight_m
     gp95, greq, gerr = poller.stop()
     corrupted, lost = verify_server_side(srv, folders, run)
     return (f"{label:26s} {run.bytes_sent / 2**20 / run.seconds:7.1f} MiB/s  chunk p95 {p95(run.chunk_lat) * 1e3:6.1f} ms "
-            f"({len(run.chunk_lat)} chunks)  GET /flights p95 {gp95 * 1e3:6.1f} ms ({greq} req, {gerr} failed)  "
+            f"({len(run.chunk_lat)} PUTs, {run.retries} retried)  GET /flights p95 {gp95 * 1e3:6.1f} ms ({greq} req, {gerr} failed)  "
             f"corrupted {corrupted}  lost {lost}  failed uploads {len(run.failures)}")
 
 

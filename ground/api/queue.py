@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from typing import Protocol
 
 from ground.api.settings import ApiSettings
@@ -125,9 +126,8 @@ class PostgresJobQueue:
         self.app.close()
 
 
-def make_job_queue(settings: ApiSettings, store: Store, runner_factory) -> JobQueue:  # type: ignore[no-untyped-def]
+def make_job_queue(settings: ApiSettings, store: Store, runner_factory: Callable[[], JobQueue]) -> JobQueue:
     """The queue `settings.job_queue` names: `runner_factory()` (the in-process runner) or PostgreSQL."""
     if settings.job_queue == "postgres":
         return PostgresJobQueue(settings, store)
-    queue: JobQueue = runner_factory()
-    return queue
+    return runner_factory()

@@ -114,6 +114,29 @@ def test_outputs_archive_round_trip_and_refusals(tmp_path: Path) -> None:
     assert sorted(p.name for p in dest.parent.iterdir()) == ["j"]
 
 
+def test_worker_and_queue_options_are_checked_before_starting(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """Exit 2 with the reason: no queue database, a non-PostgreSQL one, a stalled age within two heartbeats,
+    an unreachable database; `serve --queue postgres` on SQLite."""
+    from ground.cli import EXIT_USAGE, main
+
+    monkeypatch.delenv("DATABASE_URL", raising=False)
+    token = write_token_file(tmp_path / "t", "w" * 32)
+    base = ["worker", "--api", "http://127.0.0.1:9", "--token-file", str(token)]
+    cases = [
+        (base, "no queue database"),
+        ([*base, "--database-url", "sqlite:///x.db"], "not a PostgreSQL URL"),
+        ([*base, "--database-url", "postgresql://u@127.0.0.1:9/db", "--heartbeat-s", "10", "--stalled-after-s", "15"],
+         "must exceed two heartbeats"),
+        ([*base, "--database-url", "postgresql://u@127.0.0.1:9/db"], "cannot reach the queue database"),
+        (["serve", "--data-dir", str(tmp_path / "d"), "--token-file", str(token), "--queue", "postgres"],
+         "needs a PostgreSQL database URL"),
+    ]
+    for argv, reason in cases:
+        assert main(argv) == EXIT_USAGE, argv
+        assert reason in capsys.readouterr().err, argv
+
+
 @pytest.mark.slow
 def test_worker_runs_a_job_submitted_through_the_api(postgres_cluster: PostgresCluster, tmp_path: Path) -> None:
     """Upload → the adjustment is queued in PostgreSQL → `python -m ground worker` (role worker, its own cache)
