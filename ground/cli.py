@@ -1,4 +1,4 @@
-"""`python -m ground adjust|calibrate|serve`: the command line of the ground app (a thin shell over
+"""`python -m ground adjust|calibrate|serve|token`: the command line of the ground app (a thin shell over
 `ground.pipeline`, the calibration core and the API).
 
 Every value is checked by a type function (`onboard.validate`), errors read `directgeo: ground <command>:
@@ -172,15 +172,16 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser(
         "serve", help="run the ground API (FastAPI + uvicorn)",
         description="Flight store and processing server: resumable checksummed uploads, RTK re-processing and "
-                    "adjustment jobs, reports. Every flight route needs 'Authorization: Bearer TOKEN'; OpenAPI "
+                    "adjustment jobs, reports. Every route but /health needs 'Authorization: Bearer TOKEN' of a role it "
+                    "lets through (the bootstrap token of --token-file/$DIRECTGEO_TOKEN is an admin; others: "
+                    "`token create`); OpenAPI "
                     "at /docs and /openapi.json. Example: DIRECTGEO_TOKEN=... python -m ground serve --port 8600 "
                     "--data-dir /srv/directgeo")
+    _store_options(s)
     s.add_argument("--host", default="127.0.0.1", help="address to listen on, e.g. 0.0.0.0 for every interface (default: %(default)s)")
     s.add_argument("--port", type=validate.arg_type(validate.tcp_port), default=8600, help="TCP port, 1–65535 (default: %(default)s)")
-    s.add_argument("--data-dir", type=Path, metavar="DIR", default=Path("ground-data"),
-                   help="raw flight files and the default SQLite store (default: %(default)s)")
-    s.add_argument("--token-file", type=Path, metavar="FILE", help="file holding the API token (else $DIRECTGEO_TOKEN)")
-    s.add_argument("--database-url", metavar="URL", help="SQLAlchemy URL (else $DATABASE_URL, else SQLite in the data dir)")
+    s.add_argument("--token-file", type=Path, metavar="FILE", help="file holding the bootstrap admin token (else "
+                   "$DIRECTGEO_TOKEN); other tokens: `token create`")
     s.add_argument("--max-chunk-mib", type=validate.arg_type(validate.positive, unit=" MiB", maximum=1024.0),
                    default=16.0, help="largest upload chunk (default: %(default)s MiB)")
     s.add_argument("--max-file-gib", type=validate.arg_type(validate.positive, unit=" GiB", maximum=1024.0),
@@ -214,7 +215,55 @@ def build_parser() -> argparse.ArgumentParser:
                    default=30.0, help="a worker silent this long is taken for dead and its job is run again "
                    "(> 2 heartbeats) (default: %(default)s s)")
     w.add_argument("--name", default="", help="worker name in the queue (default: host-pid)")
+    t = sub.add_parser(
+        "token", help="create, revoke and list the API tokens (roles drone, engineer, worker, admin)",
+        description="API tokens with roles, in the flight store `serve` uses (same --data-dir / --database-url / "
+                    "$DATABASE_URL). Only each token's SHA-256 is stored: `create` prints the token once. Roles: "
+                    "drone (create flights, upload their files), engineer (read and process everything), worker "
+                    "(processing machines), admin (everything and the tokens). Example: python -m ground token "
+                    "create --role drone --name drone-07 --data-dir /srv/directgeo > /etc/directgeo/token")
+    tsub = t.add_subparsers(dest="token_command", required=True)
+    tc = tsub.add_parser("create", help="create a token: prints it (and only it) on stdout, once",
+                         description="Create a token; stdout is the token alone (capture it: it is not stored "
+                                     "and cannot be shown again), its id and name go to stderr.")
+    tc.add_argument("--role", required=True, choices=_role_names(), help="what the token may do")
+    tc.add_argument("--name", metavar="NAME", help="unique name, e.g. the drone's (default: <role>-<8 hex digits>)")
+    _store_options(tc)
+    tr = tsub.add_parser("revoke", help="revoke a token by id or name (refused from then on)",
+                         description="Revoke a token; exit 0 when revoked, 2 when no active token has that id or name.")
+    tr.add_argument("token", metavar="ID|NAME", help="the token's id or name (see `token list`)")
+    _store_options(tr)
+    tl = tsub.add_parser("list", help="list the tokens (no secrets: id, name, role, created, last used, revoked)")
+    tl.add_argument("--json", action="store_true", help="one JSON array instead of a table")
+    _store_options(tl)
     return p
+
+
+def _role_names() -> list[str]:
+    from ground.api.roles import Role  # not ground.api.auth: no FastAPI import for the parser
+
+    return [r.value for r in Role]
+
+
+def _store_options(p: argparse.ArgumentParser) -> None:
+    """--data-dir and --database-url: where `serve` and `token` find the flight store."""
+    p.add_argument("--data-dir", type=Path, metavar="DIR", default=Path("ground-data"),
+                   help="raw flight files and the default SQLite store (default: %(default)s)")
+    p.add_argument("--database-url", metavar="URL",
+                   help="SQLAlchemy URL (else $DATABASE_URL, else SQLite in the data dir)")
+
+
+def _open_store(data_dir: Path, db_url: str) -> Any:
+    """The flight store, or a clear `ConfigFileError` (unreachable server, missing driver, unwritable dir)."""
+    from sqlalchemy.exc import SQLAlchemyError
+
+    from ground.store import Store
+
+    try:
+        data_dir.mkdir(parents=True, exist_ok=True)
+        return Store(db_url)
+    except (SQLAlchemyError, ImportError, OSError) as exc:
+        raise ConfigFileError(f"cannot open the flight store {db_url.split('@')[-1]}: {exc}") from exc
 
 
 def _calibrate(args: argparse.Namespace) -> int:
@@ -278,11 +327,9 @@ def _adjust(args: argparse.Namespace) -> int:
 def _serve(args: argparse.Namespace) -> int:
     """`serve`: settings checked, the store opened once (a clear error here, not in the server), then uvicorn."""
     import uvicorn
-    from sqlalchemy.exc import SQLAlchemyError
 
     from ground.api.app import create_app
     from ground.api.settings import ApiSettings, load_token
-    from ground.store import Store
 
     settings = ApiSettings(
         data_dir=args.data_dir, token=load_token(args.token_file),
@@ -290,11 +337,7 @@ def _serve(args: argparse.Namespace) -> int:
         max_chunk_bytes=int(args.max_chunk_mib * 1024**2), max_file_bytes=int(args.max_file_gib * 1024**3),
         job_queue=args.queue, job_timeout_s=args.job_timeout_s,
     )
-    try:  # fail here, clearly, rather than inside the server's start-up
-        settings.data_dir.mkdir(parents=True, exist_ok=True)
-        Store(settings.db_url).close()
-    except (SQLAlchemyError, ImportError, OSError) as exc:
-        raise ConfigFileError(f"cannot open the flight store {settings.db_url.split('@')[-1]}: {exc}") from exc
+    _open_store(settings.data_dir, settings.db_url).close()  # fail here, clearly, not inside the server's start-up
     uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level="info")
     return EXIT_OK
 
@@ -325,7 +368,44 @@ def _worker(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-COMMANDS = {"adjust": _adjust, "calibrate": _calibrate, "serve": _serve, "worker": _worker}
+def _token(args: argparse.Namespace) -> int:
+    """`token create|revoke|list` on the store of --data-dir / --database-url / $DATABASE_URL."""
+    from ground.api.auth import Role, create_token, default_token_name, list_tokens, revoke_token
+    from ground.api.settings import database_url
+
+    store = _open_store(args.data_dir, database_url(args.data_dir, args.database_url
+                                                    or os.environ.get("DATABASE_URL")))
+    try:
+        if args.token_command == "create":
+            role = Role(args.role)
+            name = args.name or default_token_name(role)
+            token_id, clear = create_token(store, role, name)
+            print(clear)  # stdout: the token alone, for `> token-file` or $(…)
+            print(f"created {role.value} token {name!r} (id {token_id}); it is shown only this once",
+                  file=sys.stderr)
+            return EXIT_OK
+        if args.token_command == "revoke":
+            if not revoke_token(store, args.token):
+                raise InputError(f"no active token with id or name {args.token!r} (see `token list`)")
+            print(f"revoked {args.token}", file=sys.stderr)
+            return EXIT_OK
+        rows = list_tokens(store)
+        if args.json:
+            print(json.dumps([{"id": t.id, "name": t.name, "role": t.role.value,
+                               **{k: (None if getattr(t, k) is None else getattr(t, k).isoformat())
+                                  for k in ("created_at", "last_used_at", "revoked_at")}} for t in rows], indent=2))
+            return EXIT_OK
+        print(f"{'id':32}  {'name':24} {'role':8}  {'created (UTC)':16}  {'last used':16}  revoked")
+        for t in rows:
+            when = [x.strftime("%Y-%m-%d %H:%M") if x is not None else "-" for x in
+                    (t.created_at, t.last_used_at, t.revoked_at)]
+            print(f"{t.id:32}  {t.name:24} {t.role.value:8}  {when[0]:16}  {when[1]:16}  {when[2]}")
+        return EXIT_OK
+    finally:
+        store.close()
+
+
+COMMANDS = {"adjust": _adjust, "calibrate": _calibrate, "serve": _serve, "token": _token, "worker": _worker}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -54,6 +54,10 @@ class Flight(Base):
     #: id of the API token that created the flight (None: the bootstrap token, or a flight older than tokens);
     #: a drone token may only touch the flights it created
     created_by: Mapped[str | None] = mapped_column(String(32), nullable=True)
+    #: that token (its name: the drone's, for a drone's upload); no foreign key: tokens are revoked, never deleted,
+    #: and flights of older databases have none
+    creator: Mapped[ApiToken | None] = relationship(primaryjoin="foreign(Flight.created_by) == ApiToken.id",
+                                                    viewonly=True, lazy="joined")
     files: Mapped[list[FlightFile]] = relationship(back_populates="flight", cascade="all, delete-orphan",
                                                    order_by="FlightFile.name")
     jobs: Mapped[list[Job]] = relationship(back_populates="flight", cascade="all, delete-orphan",

@@ -122,9 +122,24 @@ def _stop(proc: subprocess.Popen[bytes], timeout_s: float = 30.0) -> int:
     return int(proc.returncode)
 
 
+def _ground_token(data_dir: Path, role: str, name: str, token_file: Path) -> str:
+    """A `role` token made by `python -m ground token create` (its stdout is the token), kept in `token_file`
+    (mode 0600)."""
+    from onboard.formats.atomic import write_atomic
+
+    made = subprocess.run([sys.executable, "-m", "ground", "token", "create", "--role", role, "--name", name,
+                           "--data-dir", str(data_dir)], cwd=PROJECT_ROOT, capture_output=True, text=True,
+                          timeout=120, check=True, env=dict(os.environ, PYTHONPATH=str(PROJECT_ROOT)))
+    token = made.stdout.strip()
+    write_atomic(token_file, token + "\n")
+    token_file.chmod(0o600)
+    return token
+
+
 class GroundServer:
-    """`python -m ground serve` on a free local port: SQLite and flight files in `data_dir`, a generated token
-    in `token_file` (mode 0600)."""
+    """`python -m ground serve` on a free local port: SQLite and flight files in `data_dir`, a generated
+    bootstrap (admin) token in `token_file`, a drone token for the companion in `drone_token_file` and an
+    engineer token for the office's reads and jobs in `engineer_token_file` (mode 0600)."""
 
     def __init__(self, out: Path) -> None:
         import secrets
@@ -136,6 +151,9 @@ class GroundServer:
         self.token = secrets.token_urlsafe(32)
         write_atomic(self.token_file, self.token + "\n")
         self.token_file.chmod(0o600)
+        self.drone_token_file, self.engineer_token_file = out / "drone-token", out / "engineer-token"
+        _ground_token(self.data_dir, "drone", "companion", self.drone_token_file)
+        self.engineer_token = _ground_token(self.data_dir, "engineer", "office", self.engineer_token_file)
         self.port = _free_tcp_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.proc = _popen(["-m", "ground", "serve", "--host", "127.0.0.1", "--port", str(self.port), "--data-dir",
@@ -145,7 +163,8 @@ class GroundServer:
     def client(self) -> Any:
         import httpx
 
-        return httpx.Client(base_url=self.url, headers={"Authorization": f"Bearer {self.token}"}, timeout=60.0)
+        return httpx.Client(base_url=self.url, headers={"Authorization": f"Bearer {self.engineer_token}"},
+                            timeout=60.0)
 
     def wait_ready(self, timeout_s: float = 60.0) -> None:
         import httpx
@@ -244,7 +263,7 @@ def record_flight(args: argparse.Namespace, out: Path, standin_options: Any = No
             "rover", rover_port, out, args.camera_period, meas_rate_ms,
             extra_config=f'[rtk]\nbase_stream = "mavlink"\n[autopilot]\nlink = "serial:{autopilot_port}@921600"\n'
                          f"settle_s = {SETTLE_S}\n" + ("" if server is None else
-                         f'[upload]\nurl = "{server.url}"\ntoken_file = "{server.token_file}"\npoll_s = 0.5\n'))
+                         f'[upload]\nurl = "{server.url}"\ntoken_file = "{server.drone_token_file}"\npoll_s = 0.5\n'))
         if server is not None:
             # the drone's automatic upload, a process of its own as on the Pi (directgeo-upload.service)
             procs["upload"] = _popen(["-m", "onboard", "upload-daemon", "--config", str(out / "rover.toml"),
@@ -643,10 +662,11 @@ def _server_flight(client: Any, name: str) -> dict[str, Any] | None:
 
 
 def _run_uploader(server: GroundServer, folder: Path, roles: dict[str, str] | None = None,
-                  ) -> subprocess.CompletedProcess[str]:
-    """`python -m onboard.upload` of `folder` to `server` (file roles as NAME=ROLE), output captured."""
+                  token_file: Path | None = None) -> subprocess.CompletedProcess[str]:
+    """`python -m onboard.upload` of `folder` to `server` (file roles as NAME=ROLE) with `token_file` (default:
+    the companion's drone token), output captured."""
     return subprocess.run([sys.executable, "-m", "onboard.upload", "--url", server.url, "--token-file",
-                           str(server.token_file), *(f"--role={k}={v}" for k, v in (roles or {}).items()),
+                           str(token_file or server.drone_token_file), *(f"--role={k}={v}" for k, v in (roles or {}).items()),
                            str(folder)], cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=300,
                           check=False, env=dict(os.environ, PYTHONPATH=str(PROJECT_ROOT)))
 
@@ -716,7 +736,7 @@ def ground_processing(rover: Path, base: Path, out: Path, ctx: dict[str, Any], s
         (office / name).write_bytes(Path(src).read_bytes())
     roles = {"rover.ubx": "rover_obs", "images.txt": "orientations", "capture_times.csv": "capture_times",
              "gcp.csv": "gcp"}
-    proc = _run_uploader(server, office, roles)
+    proc = _run_uploader(server, office, roles, server.engineer_token_file)
     if proc.returncode != 0:
         return [StageResult("ground RTK job", False, f"processing set upload failed: {proc.stderr.strip()[-400:]}")]
     lever = np.asarray(world.scenario.flight.lever_arm_cam_m) + np.random.default_rng(seed).normal(0, 0.003, 3)
@@ -840,7 +860,8 @@ def main(args: argparse.Namespace) -> int:
         print(f"  [{'ok' if s.ok else 'FAILED'}] {s.name}: {s.summary}")
         for key, value in s.outputs.items():
             print(f"        {key}: {value}")
-    print(f"ground server data (SQLite, flight files, job outputs): {server.data_dir}; token: {server.token_file}")
+    print(f"ground server data (SQLite, flight files, job outputs): {server.data_dir}; tokens: {server.token_file} (admin), "
+          f"{server.drone_token_file} (drone), {server.engineer_token_file} (engineer)")
     print(f"summary: {summary}")
     return 0 if all(s.ok for s in stages) else 1
 

@@ -24,7 +24,6 @@ import re
 import secrets
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from enum import StrEnum
 from typing import Annotated, Any
 
 from fastapi import Depends, FastAPI, HTTPException, Request, status
@@ -34,8 +33,9 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy import or_, select
 from starlette.routing import BaseRoute
 
+from ground.api.roles import Role
 from ground.api.settings import ApiSettings
-from ground.store import ApiToken, Store
+from ground.store import ApiToken, Store, new_id
 from onboard.errors import InputError
 
 #: bytes of randomness of a created token (256 bits; token_urlsafe gives 43 characters)
@@ -43,21 +43,14 @@ TOKEN_BYTES = 32
 #: `last_used_at` is written at most this often per token (s): not one database write per upload chunk
 LAST_USED_RESOLUTION_S = 60.0
 OPENAPI_ROLES_KEY = "x-roles"
+__all__ = ["Principal", "Role", "authenticate", "check_flight_owner", "create_token", "document_roles",
+           "hash_token", "list_tokens", "principal_for_id", "require_role", "revoke_token"]
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._@+\-]{0,99}$")
 _ID_RE = re.compile(r"^[0-9a-f]{32}$")
 
 _bearer = HTTPBearer(auto_error=False, description="an API token: `python -m ground token create --role …`, "
                      "or the bootstrap admin token ($DIRECTGEO_TOKEN or --token-file)")
 CredentialsDep = Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
-
-
-class Role(StrEnum):
-    """What a token may do (see the module docstring)."""
-
-    DRONE = "drone"
-    ENGINEER = "engineer"
-    ADMIN = "admin"
-    WORKER = "worker"
 
 
 @dataclass(frozen=True)
@@ -126,12 +119,27 @@ def authenticate(store: Store, settings: ApiSettings, token: str) -> Principal |
         return Principal(token_id=row.id, name=row.name, role=role)
 
 
+def principal_for_id(store: Store, token_id: str) -> Principal | None:
+    """The principal of an active stored token by its id (e.g. a web session that keeps the token id, not the
+    token), None when unknown or revoked: a revoked token ends the sessions opened with it."""
+    with store.session() as s:
+        row = s.get(ApiToken, token_id)
+        if row is None or row.revoked_at is not None or row.role not in set(Role):
+            return None
+        return Principal(token_id=row.id, name=row.name, role=Role(row.role))
+
+
 def check_token_name(name: str) -> str:
     """A token name (1–100 of letters, digits, . _ @ + -; not 32 hex digits, which would read as an id)."""
     if not _NAME_RE.match(name) or _ID_RE.match(name):
         raise InputError(f"token name {name!r}: 1-100 letters, digits, . _ @ + - (starting with a letter or "
                          "digit), and not 32 hex digits")
     return name
+
+
+def default_token_name(role: Role) -> str:
+    """`<role>-<8 random hex digits>`: the name of a token created without one."""
+    return f"{Role(role).value}-{new_id()[:8]}"
 
 
 def create_token(store: Store, role: Role, name: str) -> tuple[str, str]:

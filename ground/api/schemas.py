@@ -108,6 +108,8 @@ class FlightOut(BaseModel):
     name: str
     status: str
     created_at: dt.datetime
+    created_by: str | None = Field(default=None, description="name of the token that created the flight (a "
+                                   "drone's name for its uploads; None: the bootstrap token)")
     files: list[FileOut]
     jobs: list[JobOut]
 
@@ -119,6 +121,7 @@ class FlightSummary(BaseModel):
     name: str
     status: str
     created_at: dt.datetime
+    created_by: str | None = Field(default=None, description="name of the token that created the flight")
     files: int
     bytes_total: int
     bytes_received: int

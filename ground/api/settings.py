@@ -58,12 +58,17 @@ class ApiSettings:
     @property
     def db_url(self) -> str:
         """`database_url`, or a SQLite file in the data directory."""
-        return self.database_url or f"sqlite:///{self.data_dir / 'directgeo.sqlite3'}"
+        return database_url(self.data_dir, self.database_url)
 
     @property
     def flights_dir(self) -> Path:
         """Where raw flight files live."""
         return self.data_dir / "flights"
+
+
+def database_url(data_dir: Path, url: str | None = None) -> str:
+    """The store's SQLAlchemy URL: `url` when given, else the SQLite file `directgeo.sqlite3` in `data_dir`."""
+    return url or f"sqlite:///{data_dir / 'directgeo.sqlite3'}"
 
 
 def load_token(token_file: str | Path | None = None, environ: dict[str, str] | None = None) -> str:

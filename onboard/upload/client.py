@@ -8,7 +8,8 @@ chunks, each with its own SHA-256. Network errors and rejected chunks are retrie
 the server's offset moved: ask again and continue from there. The server verifies the whole file at the end.
 
 Usage: `python -m onboard.upload --url http://ground:8600 [--token-file F] FLIGHT_DIR` (token also from
-$DIRECTGEO_TOKEN).
+$DIRECTGEO_TOKEN). A drone token is enough (and all a drone should hold): the uploader only creates its flight,
+asks offsets, sends chunks and reads its flight back.
 """
 
 from __future__ import annotations
@@ -309,7 +310,8 @@ def main(argv: list[str] | None = None) -> int:
         epilog="example: python -m onboard.upload --url http://ground:8600 --token-file /etc/directgeo/token "
                "/var/lib/directgeo/flight-20260501T101500Z")
     p.add_argument("--url", required=True, type=arg_type(ground_url), help="ground API base URL, e.g. http://ground:8600")
-    p.add_argument("--token-file", type=Path, help="file holding the API token (else $DIRECTGEO_TOKEN)")
+    p.add_argument("--token-file", type=Path, help="file holding the API token, the drone's own drone token "
+                   "(`python -m ground token create --role drone` on the ground) (else $DIRECTGEO_TOKEN)")
     p.add_argument("--chunk-mib", type=arg_type(number, unit=" MiB", minimum=CHUNK_MIB_MIN, maximum=CHUNK_MIB_MAX),
                    default=4.0, metavar="MIB",
                    help=f"chunk size in MiB, {CHUNK_MIB_MIN:g}–{CHUNK_MIB_MAX:g} (default %(default)s; halved "

@@ -4,12 +4,15 @@ checked per role against a live server, a drone confined to its own flights, the
 from __future__ import annotations
 
 import hashlib
+import io
+import json
 import sqlite3
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import httpx
 import pytest
+from fastapi import APIRouter, Depends, FastAPI, HTTPException
 
 from ground.api.auth import (
     OPENAPI_ROLES_KEY,
@@ -18,12 +21,16 @@ from ground.api.auth import (
     TokenNameTaken,
     authenticate,
     create_token,
+    document_roles,
     hash_token,
     list_tokens,
+    principal_for_id,
     require_role,
     revoke_token,
 )
+from ground.api.routes.flights import write_file_bytes
 from ground.api.settings import ApiSettings
+from ground.cli import main
 from ground.store import Store
 from onboard.errors import InputError
 from tests.ground_api.conftest import TOKEN, LiveServer
@@ -59,8 +66,11 @@ def test_created_token_authenticates_with_its_role_until_revoked(tmp_path: Path)
         [info] = list_tokens(store)
         assert (info.id, info.name, info.role, info.revoked_at) == (tid, "drone-7", Role.DRONE, None)
         assert info.last_used_at is not None  # written by authenticate
+        assert principal_for_id(store, tid) == authenticate(store, settings, clear)
+        assert principal_for_id(store, "0" * 32) is None
         assert revoke_token(store, "drone-7") is True
         assert authenticate(store, settings, clear) is None
+        assert principal_for_id(store, tid) is None
         assert revoke_token(store, tid) is False  # already revoked
         assert revoke_token(store, "nobody") is False
         assert list_tokens(store)[0].revoked_at is not None
@@ -178,6 +188,13 @@ def _call(c: httpx.Client, method: str, path: str, op: dict[str, Any]) -> httpx.
     return c.request(method.upper(), path, **kw)
 
 
+class _Ids(dict[str, str]):
+    """Path parameters: the walk's flight and file, any other id a made-up one (answered 404 after the check)."""
+
+    def __missing__(self, key: str) -> str:
+        return "0" * 32
+
+
 def test_every_operation_refuses_exactly_the_roles_outside_its_x_roles(live: LiveServer) -> None:
     """Walk the OpenAPI operations: for every caller (no token, revoked, each role) the answer is 401/403
     exactly when the caller is outside the operation's `x-roles`, and never 401/403 inside them."""
@@ -197,7 +214,7 @@ def test_every_operation_refuses_exactly_the_roles_outside_its_x_roles(live: Liv
             continue
         assert roles, f"{method.upper()} {path} states no role"
         assert "admin" in roles and f"Roles: {', '.join(roles)}." in op["description"]
-        url = path.format(**values)
+        url = path.format_map(_Ids(values))
         for caller in CALLERS:
             with live.client(token=tokens.get(caller)) as c:
                 status = _call(c, method, url, op).status_code
@@ -241,4 +258,133 @@ def test_a_drone_touches_only_the_flights_it_created(live: LiveServer) -> None:
         assert a.get(f"/flights/{fid}").json()["status"] == "complete"
         assert a.get(f"{url}/content").status_code == 403  # a drone never downloads
         assert eng.get(f"{url}/content").content == data
-        assert [f["id"] for f in eng.get("/flights").json()] == [fid]
+        assert [(f["id"], f["created_by"]) for f in eng.get("/flights").json()] == [(fid, "drone-a")]
+        assert flight["created_by"] == eng.get(f"/flights/{fid}").json()["created_by"] == "drone-a"
+    with live.client() as admin:  # the bootstrap token's flights have no creator token
+        assert _drone_flight(admin, "flight-admin", {"x.txt": b"x"})["created_by"] is None
+
+
+def test_office_files_are_added_to_a_flight_and_uploaded(live: LiveServer) -> None:
+    """`POST /flights/{id}/files`: an engineer adds orientations and GCPs to a drone's complete flight (checked
+    like the manifest: bad name 400, a held name with another hash 409, the same entries again change nothing),
+    the flight is `uploading` until their bytes arrive by PUT (or `write_file_bytes`, the web form's path)."""
+    with live.client() as admin:
+        drone_token = admin.post("/tokens", json={"role": "drone", "name": "d"}).json()["token"]
+        eng_token = admin.post("/tokens", json={"role": "engineer", "name": "e"}).json()["token"]
+    poses, gcp, empty = b"image,X,Y,Z\n" * 50, b"name,role,x,y,z\n", b""
+    entries = [{"name": "poses.csv", "size": len(poses), "sha256": _sha(poses), "role": "orientations"},
+               {"name": "gcp.csv", "size": len(gcp), "sha256": _sha(gcp), "role": "gcp"},
+               {"name": "empty.txt", "size": 0, "sha256": _sha(empty)}]
+    with live.client(token=drone_token) as drone, live.client(token=eng_token) as eng:
+        flight = _drone_flight(drone, "f-office", {"events.jsonl": b""})
+        fid = flight["id"]
+        assert flight["status"] == "complete"
+        for bad, status in (([{"name": "../x", "size": 1, "sha256": _sha(b"x")}], 400),
+                            ([{"name": "x", "size": 1, "sha256": "z" * 64}], 400),
+                            ([{"name": "x", "size": 1, "sha256": _sha(b"x")}] * 2, 400),
+                            ([{"name": "x", "size": 0, "sha256": _sha(b"x")}], 422),
+                            ([{"name": "x", "size": 10**9, "sha256": _sha(b"x")}], 413),
+                            ([], 400),
+                            ([{"name": "events.jsonl", "size": 1, "sha256": _sha(b"x")}], 409)):
+            r = eng.post(f"/flights/{fid}/files", json={"files": bad})
+            assert r.status_code == status, (bad, r.text)
+        assert eng.post("/flights/nope/files", json={"files": entries}).status_code == 404
+        r = eng.post(f"/flights/{fid}/files", json={"files": entries})
+        assert r.status_code == 200, r.text
+        state = {f["name"]: f for f in r.json()["files"]}
+        assert r.json()["status"] == "uploading"
+        assert (state["poses.csv"]["status"], state["poses.csv"]["role"]) == ("pending", "orientations")
+        assert state["empty.txt"]["status"] == "complete"  # nothing to send: verified at once
+        again = eng.post(f"/flights/{fid}/files", json={"files": entries[:1]})
+        assert again.status_code == 200 and again.json()["files"] == r.json()["files"]
+        changed = dict(entries[0], sha256=_sha(b"other"))
+        assert eng.post(f"/flights/{fid}/files", json={"files": [changed]}).status_code == 409
+        r = eng.put(f"/flights/{fid}/files/poses.csv", params={"offset": 0}, content=poses,
+                    headers={"X-Chunk-SHA256": _sha(poses)})
+        assert r.status_code == 200 and r.json()["status"] == "complete", r.text
+        state_ = live.server.config.app.state
+        principal = authenticate(state_.store, live.settings, eng_token)
+        assert principal is not None
+        with pytest.raises(HTTPException) as refused:  # bytes that are not the listed ones: refused, not stored
+            write_file_bytes(live.settings, state_.store, state_.jobs, state_.file_locks, fid, "gcp.csv",
+                             io.BytesIO(b"NAME,role,x,y,z\n"), principal)
+        assert refused.value.status_code == 422
+        out = write_file_bytes(live.settings, state_.store, state_.jobs, state_.file_locks, fid, "gcp.csv",
+                               io.BytesIO(gcp), principal)
+        assert out.status == "complete"
+        assert eng.get(f"/flights/{fid}/files/gcp.csv/content").content == gcp
+        assert eng.get(f"/flights/{fid}").json()["status"] == "complete"
+        assert drone.post(f"/flights/{fid}/files", json={"files": [
+            {"name": "late.txt", "size": 1, "sha256": _sha(b"x")}]}).status_code == 200  # its own flight
+
+
+def test_token_command_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`python -m ground token create|list|revoke` on the data dir: create prints the token alone on stdout,
+    list shows no secret, revoke refuses it; usage errors exit 2 with the product's error line."""
+    data = ["--data-dir", str(tmp_path)]
+    assert main(["token", "create", "--role", "drone", "--name", "drone-07", *data]) == 0
+    out, err = capsys.readouterr()
+    token = out.strip()
+    assert out == token + "\n" and len(token) >= 43 and "drone-07" in err and token not in err
+    assert main(["token", "create", "--role", "engineer", *data]) == 0
+    eng = capsys.readouterr().out.strip()
+    store, settings = _store(tmp_path), _settings(tmp_path)
+    try:
+        assert authenticate(store, settings, token) is not None
+        assert authenticate(store, settings, eng).role is Role.ENGINEER  # type: ignore[union-attr]
+        assert main(["token", "list", "--json", *data]) == 0
+        listed = capsys.readouterr().out
+        assert token not in listed and eng not in listed
+        rows = json.loads(listed)
+        assert (rows[0]["name"], rows[0]["role"], rows[0]["revoked_at"]) == ("drone-07", "drone", None)
+        assert rows[1]["name"].startswith("engineer-")
+        assert main(["token", "list", *data]) == 0
+        table = capsys.readouterr().out
+        assert "drone-07" in table and token not in table
+        assert main(["token", "revoke", "drone-07", *data]) == 0
+        assert authenticate(store, settings, token) is None
+        assert main(["token", "revoke", "drone-07", *data]) == 2
+        assert "no active token" in capsys.readouterr().err
+        assert main(["token", "create", "--role", "drone", "--name", "drone-07", *data]) == 2
+        assert "exists already" in capsys.readouterr().err
+        with pytest.raises(SystemExit) as usage:
+            main(["token", "create", "--role", "pilot", *data])
+        assert usage.value.code == 2
+    finally:
+        store.close()
+
+
+_DroneOnly = Annotated[Principal, Depends(require_role(Role.DRONE))]
+
+
+def test_document_roles_reads_the_role_checks_of_each_route() -> None:
+    """`x-roles` comes from the `require_role` dependencies wherever they are (parameter, `dependencies=`,
+    router-level; two checks → their intersection); an open route states none; twice is the same as once."""
+    app = FastAPI()
+    router = APIRouter(prefix="/w", dependencies=[Depends(require_role(Role.WORKER, Role.ENGINEER))])
+
+    @router.get("/a")
+    def a() -> None:
+        """Worker or engineer."""
+
+    @router.get("/b", dependencies=[Depends(require_role(Role.WORKER))])
+    def b() -> None:
+        """Both checks: worker only."""
+
+    @app.get("/c")
+    def c(p: _DroneOnly) -> None:
+        """Drone."""
+
+    @app.get("/open")
+    def open_() -> None:
+        """No check."""
+
+    app.include_router(router)
+    document_roles(app)
+    document_roles(app)
+    paths = app.openapi()["paths"]
+    assert paths["/w/a"]["get"][OPENAPI_ROLES_KEY] == ["engineer", "admin", "worker"]
+    assert paths["/w/b"]["get"][OPENAPI_ROLES_KEY] == ["admin", "worker"]
+    assert paths["/c"]["get"][OPENAPI_ROLES_KEY] == ["drone", "admin"]
+    assert paths["/c"]["get"]["description"] == "Drone.\n\nRoles: drone, admin."
+    assert OPENAPI_ROLES_KEY not in paths["/open"]["get"]

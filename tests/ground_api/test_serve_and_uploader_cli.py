@@ -53,8 +53,10 @@ def test_serve_refuses_to_start_without_a_token(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_serve_and_uploader_command_lines(tmp_path: Path) -> None:
-    """Server from `python -m ground serve --token-file`, flight sent by `python -m onboard.upload` (token from
-    the environment), SQLite file in the data dir; a second uploader run sends nothing."""
+    """Server from `python -m ground serve --token-file` (the bootstrap admin token), a drone and an engineer
+    token made by `python -m ground token create` (stdout: the token alone), flight sent by
+    `python -m onboard.upload` with the drone token (from the environment), read back with the engineer's;
+    SQLite file in the data dir; a second uploader run sends nothing; a revoked drone token is refused."""
     token_file = tmp_path / "token"
     token_file.write_text(TOKEN + "\n")
     port = _free_port()
@@ -74,6 +76,13 @@ def test_serve_and_uploader_command_lines(tmp_path: Path) -> None:
             assert time.monotonic() < deadline and srv.poll() is None, "server did not start"
             time.sleep(0.1)
         assert httpx.get(f"{url}/flights").status_code == 401
+
+        def token(*args: str) -> str:
+            out = subprocess.run([sys.executable, "-m", "ground", "token", *args, "--data-dir", str(data)],
+                                 cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=60, check=True)
+            return out.stdout.strip()
+
+        drone, engineer = token("create", "--role", "drone", "--name", "drone-1"), token("create", "--role", "engineer")
         flight = tmp_path / "flight-20240501T120000Z"
         flight.mkdir()
         seg = os.urandom(150_000)
@@ -81,17 +90,22 @@ def test_serve_and_uploader_command_lines(tmp_path: Path) -> None:
         m = Manifest(flight.name, 1, [SegmentInfo("000000.ubx", len(seg), hashlib.sha256(seg).hexdigest())])
         (flight / "manifest.json").write_text(json.dumps(m.to_json()))
         cmd = [sys.executable, "-m", "onboard.upload.client", "--url", url, "--chunk-mib", "0.05", str(flight)]
-        up = subprocess.run(cmd, cwd=ROOT, env=_env(DIRECTGEO_TOKEN=TOKEN), capture_output=True, text=True,
+        up = subprocess.run(cmd, cwd=ROOT, env=_env(DIRECTGEO_TOKEN=drone), capture_output=True, text=True,
                             timeout=60, check=False)
         assert up.returncode == 0, up.stderr
         assert "complete" in up.stdout
-        again = subprocess.run(cmd, cwd=ROOT, env=_env(DIRECTGEO_TOKEN=TOKEN), capture_output=True, text=True,
+        again = subprocess.run(cmd, cwd=ROOT, env=_env(DIRECTGEO_TOKEN=drone), capture_output=True, text=True,
                                timeout=60, check=False)
         assert again.returncode == 0 and " 0 bytes sent" in again.stdout
         bad = subprocess.run(cmd, cwd=ROOT, env=_env(DIRECTGEO_TOKEN="wrong-token-0123456789"),
                              capture_output=True, text=True, timeout=60, check=False)
         assert bad.returncode == 1 and "401" in bad.stderr
-        flights = httpx.get(f"{url}/flights", headers={"Authorization": f"Bearer {TOKEN}"}).json()
+        assert httpx.get(f"{url}/flights", headers={"Authorization": f"Bearer {drone}"}).status_code == 403
+        token("revoke", "drone-1")
+        revoked = subprocess.run(cmd, cwd=ROOT, env=_env(DIRECTGEO_TOKEN=drone), capture_output=True, text=True,
+                                 timeout=60, check=False)
+        assert revoked.returncode == 1 and "401" in revoked.stderr
+        flights = httpx.get(f"{url}/flights", headers={"Authorization": f"Bearer {engineer}"}).json()
         fid = flights[0]["id"]
         assert (data / "flights" / fid / "000000.ubx").read_bytes() == seg
         assert (data / "directgeo.sqlite3").is_file()

@@ -19,6 +19,9 @@ from typing import Any
 import httpx
 import pytest
 
+from ground.api.auth import Role, create_token
+from ground.api.settings import database_url
+from ground.store import Store
 from onboard.hw.ports import SystemClock
 from onboard.logger.events import read_events
 from onboard.logger.journal import Journal, JournalOptions, iter_journal_bytes, read_manifest
@@ -42,20 +45,30 @@ def free_tcp_port() -> int:
 
 
 class Ground:
-    """`python -m ground serve` on a fixed port (restartable on the same data and port)."""
+    """`python -m ground serve` on a fixed port (restartable on the same data and port), started with a
+    bootstrap admin token; the companion uploads with a drone token (`token_file`), the test reads with an
+    engineer token (`token`)."""
 
     def __init__(self, tmp: Path) -> None:
-        self.token = secrets.token_hex(16)
-        self.token_file = tmp / "ground.token"
-        self.token_file.write_text(self.token + "\n")
+        self.admin_token_file = tmp / "ground-admin.token"
+        self.admin_token_file.write_text(secrets.token_hex(16) + "\n")
         self.port = free_tcp_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.data = tmp / "ground"
+        self.data.mkdir(parents=True, exist_ok=True)
+        store = Store(database_url(self.data))
+        try:
+            drone = create_token(store, Role.DRONE, "companion")[1]
+            self.token = create_token(store, Role.ENGINEER, "office")[1]
+        finally:
+            store.close()
+        self.token_file = tmp / "ground-drone.token"
+        self.token_file.write_text(drone + "\n")
         self.proc: subprocess.Popen[bytes] | None = None
 
     def start(self) -> None:
         self.proc = subprocess.Popen([sys.executable, "-m", "ground", "serve", "--port", str(self.port),
-                                      "--data-dir", str(self.data), "--token-file", str(self.token_file)],
+                                      "--data-dir", str(self.data), "--token-file", str(self.admin_token_file)],
                                      cwd=PROJECT, env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         deadline = time.monotonic() + 60
         while True:

@@ -1,4 +1,4 @@
-"""The uploader's loop against a live ground API (in process, SQLite): oldest first, byte-identical, never while
+"""The uploader's loop against a live ground API (in process, SQLite) with a drone token: oldest first, byte-identical, never while
 armed (also stopping mid-flight-upload when the vehicle arms, then resuming without sending a byte twice),
 backoff when the server is unreachable, deletion only when configured and after the server confirmed every
 SHA-256, a damaged local copy set aside, upload.json with the keys the pre-flight page reads."""
@@ -18,7 +18,9 @@ from typing import Any
 
 import pytest
 
-from ground.api.settings import ApiSettings
+from ground.api.auth import Role, create_token
+from ground.api.settings import ApiSettings, database_url
+from ground.store import Store
 from onboard.hw.ports import SystemClock
 from onboard.logger.journal import Journal, JournalOptions
 from onboard.recorder.settings import Settings
@@ -53,9 +55,22 @@ def make_flight(data: Path, name: str, size: int, seed: int) -> Path:
     return d
 
 
-def settings_for(tmp_path: Path, url: str, **kw: Any) -> Settings:
+def drone_token_file(tmp_path: Path) -> Path:
+    """The companion's drone token (what a drone is given: create flights, upload their files), made once in
+    the store the live server uses (tmp_path/ground)."""
     token = tmp_path / "token"
-    token.write_text(TOKEN + "\n")
+    if not token.exists():
+        (tmp_path / "ground").mkdir(exist_ok=True)
+        store = Store(database_url(tmp_path / "ground"))
+        try:
+            token.write_text(create_token(store, Role.DRONE, "companion")[1] + "\n")
+        finally:
+            store.close()
+    return token
+
+
+def settings_for(tmp_path: Path, url: str, **kw: Any) -> Settings:
+    token = drone_token_file(tmp_path)
     base: dict[str, Any] = {"data_dir": tmp_path / "data", "status_path": tmp_path / "run" / "status.json",
                             "upload_url": url, "upload_token_file": str(token), "upload_chunk_mib": 0.0625,
                             "upload_backoff_min_s": 0.5, "upload_backoff_max_s": 2.0, "upload_poll_s": 0.2}
@@ -66,7 +81,8 @@ def settings_for(tmp_path: Path, url: str, **kw: Any) -> Settings:
 
 def service_for(settings: Settings) -> UploadService:
     stop = threading.Event()
-    return UploadService(settings, http_uploader_for(settings, TOKEN, stop), stop)
+    token = Path(str(settings.upload_token_file)).read_text().strip()
+    return UploadService(settings, http_uploader_for(settings, token, stop), stop)
 
 
 def server_files(live: LiveServer) -> dict[str, dict[str, str]]:

@@ -28,7 +28,7 @@ import os
 import threading
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, BinaryIO
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
@@ -135,9 +135,14 @@ def job_out(j: Job) -> JobOut:
                   created_at=j.created_at, started_at=j.started_at, finished_at=j.finished_at)
 
 
+def _creator(f: Flight) -> str | None:
+    return f.creator.name if f.creator is not None else None
+
+
 def _flight_out(f: Flight) -> FlightOut:
-    return FlightOut(id=f.id, name=f.name, status=f.status, created_at=f.created_at,
-                     files=[_file_out(x) for x in f.files], jobs=[job_out(j) for j in f.jobs])
+    return FlightOut(id=f.id, name=f.name, status=f.status, created_at=f.created_at, created_by=_creator(f),
+                     files=[_file_out(x) for x in sorted(f.files, key=lambda x: x.name)],  # as loaded, also
+                     jobs=[job_out(j) for j in f.jobs])  # right after files were appended in this session
 
 
 def _flight_of(s: Any, flight_id: str, principal: Principal) -> Flight:
@@ -146,7 +151,7 @@ def _flight_of(s: Any, flight_id: str, principal: Principal) -> Flight:
     if flight is None:
         raise HTTPException(status_code=404, detail=f"no flight {flight_id}")
     check_flight_owner(principal, flight.created_by)
-    return flight  # type: ignore[no-any-return]
+    return flight
 
 
 def _get_flight(store: Store, flight_id: str, principal: Principal) -> Flight:
@@ -256,7 +261,8 @@ def list_flights(store: StoreDep, _: Engineer) -> list[FlightSummary]:
     """All flights, newest first."""
     with store.session() as s:
         rows = s.scalars(select(Flight).order_by(Flight.created_at.desc())).all()
-        return [FlightSummary(id=f.id, name=f.name, status=f.status, created_at=f.created_at, files=len(f.files),
+        return [FlightSummary(id=f.id, name=f.name, status=f.status, created_at=f.created_at,
+                              created_by=_creator(f), files=len(f.files),
                               bytes_total=sum(x.size for x in f.files), bytes_received=sum(x.received for x in f.files))
                 for f in rows]
 
@@ -412,6 +418,27 @@ def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str
                                                         "the data was discarded, upload again from offset 0")
     if flight.status == "complete":
         _maybe_auto_adjust(store, flight_id, jobs)
+    return out
+
+
+def write_file_bytes(settings: ApiSettings, store: Store, jobs: JobRunner, locks: FileLocks, flight_id: str,
+                     name: str, source: BinaryIO, principal: Principal, client: str = "web") -> FileOut:
+    """Store the whole content of a file the flight lists (e.g. added by `add_files` from a web form), read
+    from `source` at the server's offset (an interrupted earlier write resumes), in chunks of the chunk limit,
+    each through the same path as `PUT …/files/{name}` (locks, checks, whole-file SHA-256, automatic jobs).
+    Returns the file's state; `HTTPException` as the PUT route (422: the bytes' SHA-256 differs from the listed
+    one, or `source` ends before the listed size; 413: it runs past it)."""
+    path = safe_path(settings, flight_id, name)
+    with store.session() as s:
+        _, f = _lookup_file(s, flight_id, name, principal)
+        out = _file_out(f)
+    source.seek(out.received)
+    while out.status != "complete":
+        chunk = source.read(settings.max_chunk_bytes)
+        if not chunk:
+            raise HTTPException(status_code=422, detail=f"{name}: {out.received} bytes given, {out.size} listed")
+        out = _append_chunk(settings, store, flight_id, name, path, out.received, chunk,
+                            hashlib.sha256(chunk).hexdigest(), client, jobs, locks, principal)
     return out
 
 

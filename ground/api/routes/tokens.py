@@ -13,12 +13,12 @@ from ground.api.auth import (
     Role,
     TokenNameTaken,
     create_token,
+    default_token_name,
     list_tokens,
     require_role,
     revoke_token,
 )
 from ground.api.deps import StoreDep
-from ground.store import new_id
 from onboard.errors import InputError
 
 router = APIRouter(prefix="/tokens", tags=["tokens"])
@@ -50,11 +50,6 @@ class TokenCreated(BaseModel):
     name: str
     role: Role
     token: str
-
-
-def default_token_name(role: Role) -> str:
-    """`<role>-<8 random hex digits>`: the name of a token created without one."""
-    return f"{Role(role).value}-{new_id()[:8]}"
 
 
 @router.post("", response_model=TokenCreated, status_code=status.HTTP_201_CREATED, responses={409: {}, 422: {}})
