@@ -42,15 +42,16 @@ def _serve(settings: ApiSettings) -> tuple[str, uvicorn.Server, threading.Thread
     return f"http://127.0.0.1:{sock.getsockname()[1]}", server, th
 
 
-def _flight(root: Path, total_bytes: int, segment_bytes: int) -> Path:
-    d = root / "flight-bench"
+def _flight(root: Path, total_bytes: int, segment_bytes: int, name: str = "flight-bench") -> Path:
+    """A recorded flight folder `root/name`: random segments and the onboard manifest naming them."""
+    d = root / name
     d.mkdir(parents=True)
     segs = []
     for i in range(max(1, total_bytes // segment_bytes)):
         b = os.urandom(segment_bytes)
         (d / f"{i:06d}.ubx").write_bytes(b)
         segs.append(SegmentInfo(f"{i:06d}.ubx", len(b), hashlib.sha256(b).hexdigest()))
-    (d / "manifest.json").write_text(json.dumps(Manifest("flight-bench", 1, segs, closed=True).to_json()))
+    (d / "manifest.json").write_text(json.dumps(Manifest(name, 1, segs, closed=True).to_json()))
     return d
 
 

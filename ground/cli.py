@@ -187,6 +187,35 @@ def build_parser() -> argparse.ArgumentParser:
                    default=16.0, help="largest upload chunk (default: %(default)s MiB)")
     s.add_argument("--max-file-gib", type=validate.arg_type(validate.positive, unit=" GiB", maximum=1024.0),
                    default=8.0, help="largest uploaded file (default: %(default)s GiB)")
+    s.add_argument("--queue", choices=("inprocess", "postgres"), default="inprocess",
+                   help="where jobs run: inprocess (child processes of this server; SQLite is enough) or postgres "
+                   "(a procrastinate queue in the PostgreSQL database, run by 'python -m ground worker' "
+                   "processes) (default: %(default)s)")
+    s.add_argument("--job-timeout-s", type=validate.arg_type(validate.positive, unit=" s"), default=4 * 3600.0,
+                   help="a job running longer is stopped and failed (default: %(default)s s)")
+    w = sub.add_parser(
+        "worker", help="run processing jobs from the PostgreSQL queue (stateless; run one per core/machine)",
+        description="A processing worker: takes jobs from the procrastinate queue in PostgreSQL, fetches each "
+                    "flight's files through the API (local cache, SHA-256 checked), runs the job in a child "
+                    "process with the server's time limit and posts outputs and status through the API. A "
+                    "worker killed mid-job has its job retried by another after --stalled-after-s. Stop with "
+                    "SIGTERM (the running job is finished first). Example: python -m ground worker --api "
+                    "http://ground:8600 --token-file /etc/directgeo/worker.token --database-url "
+                    "postgresql://directgeo@db/directgeo")
+    w.add_argument("--api", required=True, metavar="URL", help="base URL of the ground API, e.g. http://ground:8600")
+    w.add_argument("--token-file", type=Path, metavar="FILE", help="file holding the worker's API token "
+                   "(else $DIRECTGEO_TOKEN)")
+    w.add_argument("--database-url", metavar="URL", help="the queue's PostgreSQL database, libpq or SQLAlchemy "
+                   "URL (else $DATABASE_URL)")
+    w.add_argument("--cache-dir", type=Path, metavar="DIR", default=Path("ground-worker-cache"),
+                   help="local copies of flight files and per-job scratch folders (default: %(default)s)")
+    w.add_argument("--heartbeat-s", type=validate.arg_type(validate.positive, unit=" s", maximum=3600.0),
+                   default=10.0, help="heartbeat period, also how often stalled jobs are looked for "
+                   "(default: %(default)s s)")
+    w.add_argument("--stalled-after-s", type=validate.arg_type(validate.positive, unit=" s", maximum=86400.0),
+                   default=30.0, help="a worker silent this long is taken for dead and its job is run again "
+                   "(> 2 heartbeats) (default: %(default)s s)")
+    w.add_argument("--name", default="", help="worker name in the queue (default: host-pid)")
     t = sub.add_parser(
         "token", help="create, revoke and list the API tokens (roles drone, engineer, worker, admin)",
         description="API tokens with roles, in the flight store `serve` uses (same --data-dir / --database-url / "
@@ -307,9 +336,36 @@ def _serve(args: argparse.Namespace) -> int:
         data_dir=args.data_dir, token=load_token(args.token_file),
         database_url=args.database_url or os.environ.get("DATABASE_URL"),
         max_chunk_bytes=int(args.max_chunk_mib * 1024**2), max_file_bytes=int(args.max_file_gib * 1024**3),
+        job_queue=args.queue, job_timeout_s=args.job_timeout_s,
     )
     _open_store(settings.data_dir, settings.db_url).close()  # fail here, clearly, not inside the server's start-up
     uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level="info")
+    return EXIT_OK
+
+
+def _worker(args: argparse.Namespace) -> int:
+    """`worker`: options checked, the queue reached once (a clear error here), then procrastinate's worker."""
+    import psycopg
+
+    from ground.api.queue import libpq_dsn
+    from ground.api.settings import load_token
+    from ground.api.worker import WorkerOptions, serve
+
+    url = args.database_url or os.environ.get("DATABASE_URL")
+    if not url:
+        raise ConfigFileError("no queue database: pass --database-url or set $DATABASE_URL (PostgreSQL)")
+    try:
+        dsn = libpq_dsn(url)
+        options = WorkerOptions(api_url=args.api, token=load_token(args.token_file), dsn=dsn,
+                                cache_dir=args.cache_dir, heartbeat_s=args.heartbeat_s,
+                                stalled_after_s=args.stalled_after_s, name=args.name)
+    except ValueError as exc:
+        raise ConfigFileError(str(exc)) from None
+    try:
+        psycopg.connect(dsn, connect_timeout=10).close()
+    except psycopg.Error as exc:
+        raise ConfigFileError(f"cannot reach the queue database {dsn.split('@')[-1]}: {exc}") from exc
+    serve(options)
     return EXIT_OK
 
 
@@ -350,7 +406,7 @@ def _token(args: argparse.Namespace) -> int:
         store.close()
 
 
-COMMANDS = {"adjust": _adjust, "calibrate": _calibrate, "serve": _serve, "token": _token}
+COMMANDS = {"adjust": _adjust, "calibrate": _calibrate, "serve": _serve, "token": _token, "worker": _worker}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

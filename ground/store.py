@@ -184,6 +184,8 @@ class Store:
         if database_url.startswith("sqlite"):
             # uvicorn serves sync endpoints from a thread pool and jobs run in a worker thread
             kwargs["connect_args"] = {"check_same_thread": False, "timeout": 30}
+        else:  # a database server restarted: pooled connections are tested (one round trip) before use
+            kwargs["pool_pre_ping"] = True
         self.engine: Engine = create_engine(database_url, **kwargs)
         _add_missing_columns(self.engine)
         Base.metadata.create_all(self.engine)

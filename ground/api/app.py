@@ -12,7 +12,8 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from ground.api.auth import document_roles
 from ground.api.jobs import JobFunction, JobRunner
-from ground.api.routes import flights, tokens
+from ground.api.queue import make_job_queue
+from ground.api.routes import flights, tokens, worker_jobs
 from ground.api.settings import ApiSettings
 from ground.store import Store
 from ground.web import routes as web
@@ -34,8 +35,9 @@ def _streams_files(scope: Scope) -> bool:
 
 
 class BodyLimit:
-    """ASGI middleware: a request body other than an upload chunk (`PUT …/files/…`) or the web adjustment form
-    (both capped by their routes) larger than `limit` bytes is answered 413 before the application parses it."""
+    """ASGI middleware: a request body other than an upload chunk (`PUT …/files/…`), a worker's outputs
+    archive (`PUT …/outputs`) or the web adjustment form (each capped by its route) larger than `limit`
+    bytes is answered 413 before the application parses it."""
 
     def __init__(self, app: ASGIApp, limit: int) -> None:
         self.app = app
@@ -43,7 +45,8 @@ class BodyLimit:
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http" or scope["method"] in ("GET", "HEAD") or (
-                scope["method"] == "PUT" and "/files/" in scope["path"]) or _streams_files(scope):
+                scope["method"] == "PUT" and ("/files/" in scope["path"] or scope["path"].endswith("/outputs"))
+        ) or _streams_files(scope):
             await self.app(scope, receive, send)
             return
         declared = dict(scope["headers"]).get(b"content-length", b"")
@@ -80,13 +83,15 @@ class BodyLimit:
 
 
 def create_app(settings: ApiSettings, job_functions: dict[str, JobFunction] | None = None) -> FastAPI:
-    """Build the app: store opened, job runner started and unfinished jobs re-queued in the lifespan."""
+    """Build the app: store opened, job queue (`settings.job_queue`: in-process runner or PostgreSQL workers)
+    opened and unfinished jobs re-queued in the lifespan."""
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         settings.flights_dir.mkdir(parents=True, exist_ok=True)
         store = Store(settings.db_url)
-        runner = JobRunner(settings, store, job_functions if job_functions is not None else default_job_functions())
+        functions = job_functions if job_functions is not None else default_job_functions()
+        runner = make_job_queue(settings, store, lambda: JobRunner(settings, store, functions))
         app.state.settings, app.state.store, app.state.jobs = settings, store, runner
         n = runner.requeue_unfinished()
         if n:
@@ -110,6 +115,7 @@ def create_app(settings: ApiSettings, job_functions: dict[str, JobFunction] | No
     app.state.file_locks = flights.FileLocks()
     app.add_middleware(BodyLimit, limit=settings.max_json_bytes)
     app.include_router(flights.router)
+    app.include_router(worker_jobs.router)
     app.include_router(tokens.router)
     web.install(app)  # the web interface under /ui (its own routes, outside the OpenAPI schema)
 

@@ -93,7 +93,7 @@ def adjust_job(settings: ApiSettings, params: dict[str, Any], files: dict[str, s
     p = _params("adjust", params)
     assert isinstance(p, AdjustParams)
     chosen = _adjust_files(p, files)
-    trajectory = flight_dir / chosen["trajectory"] if chosen["trajectory"] else _reprocessed(out_dir)
+    trajectory = flight_dir / chosen["trajectory"] if chosen["trajectory"] else reprocessed_trajectory(out_dir)
     if trajectory is None:
         raise InputError("missing uploaded trajectory (set role trajectory) and no RTK job output for this flight")
     caps: Any = None
@@ -109,9 +109,10 @@ def adjust_job(settings: ApiSettings, params: dict[str, Any], files: dict[str, s
     return run_adjust(inputs, p.job_options(), out_dir).summary()
 
 
-def _reprocessed(out_dir: Path) -> Path | None:
+def reprocessed_trajectory(out_dir: Path) -> Path | None:
     """The newest `SOL.pos` written by an RTK job of the same flight (sibling job folders), if any."""
-    sols = sorted(out_dir.parent.glob("*/SOL.pos"), key=lambda q: q.stat().st_mtime)
+    sols = sorted((q for q in out_dir.parent.glob("*/SOL.pos") if not q.parent.name.startswith(".")),
+                  key=lambda q: q.stat().st_mtime)  # ".incoming-…": a worker's outputs being installed
     return sols[-1] if sols else None
 
 

@@ -19,6 +19,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
+from ground.api.job_outputs import job_output_dir
 from ground.api.settings import ApiSettings
 from ground.store import Flight, Job, Store
 
@@ -128,7 +129,7 @@ class JobRunner:
         func = self.functions.get(kind)
         if func is None:
             return "failed", f"unknown job kind {kind!r}"
-        out_dir = self.settings.data_dir / "outputs" / flight_id / job_id
+        out_dir = job_output_dir(self.settings.data_dir, flight_id, job_id)
         out_dir.mkdir(parents=True, exist_ok=True)
         args = (self.settings, params, files, self.settings.flights_dir / flight_id, out_dir)
         return run_job_process(func, args, self.settings.job_timeout_s)

@@ -64,6 +64,46 @@ class JobOut(BaseModel):
     finished_at: dt.datetime | None
 
 
+class OutputFileOut(BaseModel):
+    """One output file of a job: path relative to the job's folder, size (bytes), SHA-256 (hex)."""
+
+    name: str
+    size: int
+    sha256: str
+
+
+class JobInputFile(BaseModel):
+    """A file a worker fetches for a job: a flight file (`job_id` None, from `/files/{name}/content`) or an
+    output of an earlier job of the flight (`/jobs/{job_id}/outputs/{name}`), with its size and SHA-256."""
+
+    name: str
+    role: str | None = None
+    size: int
+    sha256: str
+    job_id: str | None = None
+
+
+class JobSpec(BaseModel):
+    """What a worker needs to run a job: kind, parameters, time limit (s) and the files to fetch."""
+
+    job_id: str
+    flight_id: str
+    kind: str
+    params: dict[str, Any]
+    time_limit_s: float
+    files: list[JobInputFile]
+    earlier_outputs: list[JobInputFile]
+
+
+class JobFinish(BaseModel):
+    """A worker's final word on a job: done or failed, with the job's message."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    status: Literal["done", "failed"]
+    message: str = Field(max_length=100_000)
+
+
 class FlightOut(BaseModel):
     """A flight with its files and jobs."""
 

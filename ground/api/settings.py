@@ -11,6 +11,8 @@ from onboard.errors import ConfigFileError
 
 TOKEN_ENV = "DIRECTGEO_TOKEN"
 MIN_TOKEN_CHARS = 16
+#: where accepted jobs run: in child processes of the server, or on `ground worker`s through PostgreSQL
+JOB_QUEUES = ("inprocess", "postgres")
 
 
 @dataclass(frozen=True)
@@ -31,15 +33,25 @@ class ApiSettings:
     max_json_bytes: int = 4 * 1024**2
     #: a web sign-in session ends this many seconds after sign-in (s)
     web_session_s: float = 12 * 3600.0
+    #: largest outputs archive a worker may post for one job (bytes)
+    max_output_bytes: int = 2 * 1024**3
+    #: one of JOB_QUEUES: "inprocess" (default, no broker) or "postgres" (procrastinate; needs a PostgreSQL
+    #: database_url; jobs run by `python -m ground worker`)
+    job_queue: str = "inprocess"
 
     def __post_init__(self) -> None:
         if len(self.token) < MIN_TOKEN_CHARS:
             raise ConfigFileError(f"the API token must have at least {MIN_TOKEN_CHARS} characters")
         for name in ("max_file_bytes", "max_flight_bytes", "max_chunk_bytes", "max_files_per_flight",
-                     "max_json_bytes", "job_workers"):
+                     "max_json_bytes", "max_output_bytes", "job_workers"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
                 raise ConfigFileError(f"{name} {value!r}: must be a whole number > 0")
+        if self.job_queue not in JOB_QUEUES:
+            raise ConfigFileError(f"job queue {self.job_queue!r}: must be one of {', '.join(JOB_QUEUES)}")
+        if self.job_queue == "postgres" and not (self.database_url or "").startswith(("postgresql", "postgres")):
+            raise ConfigFileError("the postgres job queue needs a PostgreSQL database URL (--database-url or "
+                                  "$DATABASE_URL, e.g. postgresql+psycopg://directgeo@db/directgeo)")
         try:
             validate.positive(self.job_timeout_s, name="job_timeout_s", unit=" s")
             validate.positive(self.web_session_s, name="web_session_s", unit=" s", maximum=30 * 86400.0)

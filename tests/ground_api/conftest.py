@@ -15,6 +15,7 @@ import uvicorn
 
 from ground.api.app import create_app
 from ground.api.settings import ApiSettings
+from tests.postgres_cluster import postgres_cluster, postgres_url  # noqa: F401 - fixtures for this folder
 
 TOKEN = "test-token-0123456789abcdef"
 

@@ -1,19 +1,13 @@
 """The flight store on a real PostgreSQL server (DATABASE_URL), not only SQLite.
 
-A throw-away PostgreSQL cluster is created with the machine's `initdb`/`pg_ctl` in tmp_path (run as the
-unprivileged `nobody` user when the tests run as root, since PostgreSQL refuses root), listening on 127.0.0.1
-on a free port; the API and the uploader then run exactly as with SQLite. Skips, with the reason, when the
+A throw-away PostgreSQL cluster (`tests.postgres_cluster`, fixture `postgres_url`) is created with the machine's
+`initdb`/`pg_ctl`; the API and the uploader then run exactly as with SQLite. Skips, with the reason, when the
 PostgreSQL server binaries or the psycopg driver are absent.
 """
 
 from __future__ import annotations
 
 import os
-import shutil
-import socket
-import subprocess
-import tempfile
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -24,56 +18,6 @@ from tests.ground_api.conftest import TOKEN, start_server
 from tests.ground_api.test_api import _create, _flight_folder, _put, _sha, interrupt_upload, resume_upload
 
 pytestmark = pytest.mark.timeout(180)
-
-
-def _tool(name: str) -> str | None:
-    found = shutil.which(name)
-    if found:
-        return found
-    for d in sorted(Path("/usr/lib/postgresql").glob("*/bin"), reverse=True):
-        if (d / name).exists():
-            return str(d / name)
-    return None
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-@pytest.fixture
-def postgres_url() -> Iterator[str]:
-    """A running PostgreSQL cluster in tmp_path; yields its SQLAlchemy URL; stopped afterwards."""
-    pytest.importorskip("psycopg", reason="psycopg (PostgreSQL driver) not installed: PostgreSQL test skipped")
-    initdb, pg_ctl = _tool("initdb"), _tool("pg_ctl")
-    if not initdb or not pg_ctl:
-        pytest.skip("PostgreSQL server binaries (initdb, pg_ctl) not installed: PostgreSQL test skipped")
-    as_user: list[str] = []
-    # not under tmp_path: pytest's base directory is private to the current user, the server runs as nobody
-    root = Path(tempfile.mkdtemp(prefix="directgeo-pg-"))
-    if os.geteuid() == 0:  # postgres will not run as root
-        runuser = shutil.which("runuser")
-        if not runuser:
-            shutil.rmtree(root)
-            pytest.skip("running as root without runuser: cannot start PostgreSQL as an unprivileged user")
-        as_user = [runuser, "-u", "nobody", "--"]
-        shutil.chown(root, "nobody")
-    data = root / "data"
-    port = _free_port()
-    env = {"PATH": os.environ.get("PATH", ""), "LC_ALL": "C"}
-    subprocess.run([*as_user, initdb, "-D", str(data), "-U", "directgeo", "--auth=trust", "-E", "UTF8"],
-                   check=True, capture_output=True, env=env, timeout=60)
-    opts = f"-h 127.0.0.1 -p {port} -k {root}"
-    subprocess.run([*as_user, pg_ctl, "-D", str(data), "-o", opts, "-l", str(root / "log"), "-w", "start"],
-                   check=True, capture_output=True, env=env, timeout=60)
-    try:
-        yield f"postgresql+psycopg://directgeo@127.0.0.1:{port}/postgres"
-    finally:
-        subprocess.run([*as_user, pg_ctl, "-D", str(data), "-m", "fast", "-w", "stop"], check=False,
-                       capture_output=True,
-                       env=env, timeout=60)
-        shutil.rmtree(root, ignore_errors=True)
 
 
 @pytest.mark.slow

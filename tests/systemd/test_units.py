@@ -17,6 +17,8 @@ SYSTEMD_DIR = Path(__file__).resolve().parents[2] / "systemd"
 RECORDER = SYSTEMD_DIR / "directgeo-recorder.service"
 WEB = SYSTEMD_DIR / "directgeo-web.service"
 UPLOAD = SYSTEMD_DIR / "directgeo-upload.service"
+GROUND = SYSTEMD_DIR / "directgeo-ground.service"
+WORKER = SYSTEMD_DIR / "directgeo-worker@.service"
 
 
 def unit(path: Path) -> configparser.RawConfigParser:
@@ -70,12 +72,44 @@ def test_upload_unit_low_priority_after_not_requires_recorder() -> None:
     assert "PrivateNetwork" not in svc  # it talks to the ground app
 
 
+def test_ground_unit_serves_with_its_queue_and_a_credential_token() -> None:
+    from ground.cli import EXIT_USAGE as GROUND_EXIT_USAGE
+
+    svc = unit(GROUND)["Service"]
+    assert "python -m ground serve" in svc["ExecStart"] and "--queue ${DIRECTGEO_QUEUE}" in svc["ExecStart"]
+    assert svc["Environment"] == "DIRECTGEO_QUEUE=inprocess"  # one machine needs no configuration file
+    assert svc["EnvironmentFile"].startswith("-")  # optional: the fleet's DATABASE_URL and queue
+    assert "--token-file %d/ground.token" in svc["ExecStart"] and svc["LoadCredential"].startswith("ground.token:")
+    assert "--data-dir /var/lib/directgeo-ground" in svc["ExecStart"] and svc["StateDirectory"] == "directgeo-ground"
+    assert svc["User"] == "directgeo-ground" and svc["ProtectSystem"] == "strict" and svc["NoNewPrivileges"] == "yes"
+    assert svc["Restart"] == "on-failure" and svc["RestartPreventExitStatus"].split() == [str(GROUND_EXIT_USAGE)]
+    assert svc["KillMode"] == "mixed"  # SIGTERM to the server only: in-process jobs are waited for
+
+
+def test_worker_template_is_stateless_and_lets_its_job_finish() -> None:
+    from ground.cli import EXIT_USAGE as GROUND_EXIT_USAGE
+
+    u = unit(WORKER)
+    svc = u["Service"]
+    assert "python -m ground worker" in svc["ExecStart"] and "--api ${DIRECTGEO_API}" in svc["ExecStart"]
+    assert "--cache-dir /var/cache/directgeo-worker/%i" in svc["ExecStart"]
+    assert svc["CacheDirectory"] == "directgeo-worker/%i" and svc["DynamicUser"] == "yes"
+    assert "--token-file %d/worker.token" in svc["ExecStart"] and svc["LoadCredential"].startswith("worker.token:")
+    assert svc["EnvironmentFile"] == "/etc/directgeo/worker.env"  # DATABASE_URL and DIRECTGEO_API are required
+    # the running job is not signalled: SIGTERM reaches the worker alone, which finishes the job first
+    assert svc["KillMode"] == "mixed"
+    assert svc["Restart"] == "on-failure" and svc["RestartPreventExitStatus"].split() == [str(GROUND_EXIT_USAGE)]
+    assert "directgeo-ground.service" in u["Unit"]["After"]
+    for key in ("Requires", "BindsTo", "PartOf", "Requisite"):  # the API may live on another machine
+        assert "directgeo-ground" not in u["Unit"].get(key, ""), key
+
+
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze is not installed here")
-@pytest.mark.parametrize("path", [RECORDER, WEB, UPLOAD], ids=lambda p: p.name)
+@pytest.mark.parametrize("path", [RECORDER, WEB, UPLOAD, GROUND, WORKER], ids=lambda p: p.name)
 def test_systemd_analyze_verify(tmp_path: Path, path: Path) -> None:
     """Verify a copy whose interpreter path points at this virtualenv (verify checks ExecStart exists)."""
     text = path.read_text().replace("/opt/directgeo/.venv/bin/python", sys.executable)
-    copy = tmp_path / path.name
+    copy = tmp_path / path.name.replace("@.", "@1.")  # a template is verified as one of its instances
     copy.write_text(text)
     proc = subprocess.run(["systemd-analyze", "verify", "--man=no", str(copy)], capture_output=True, text=True,
                           timeout=60, check=False)

@@ -39,7 +39,8 @@ from sqlalchemy import select
 from ground.api.auth import Principal, Role, check_flight_owner, require_role
 from ground.api.deps import SettingsDep, StoreDep
 from ground.api.job_kinds import check_job
-from ground.api.jobs import JobRunner
+from ground.api.job_outputs import job_output_dir
+from ground.api.queue import JobQueue
 from ground.api.schemas import (
     FileOut,
     FilesAdd,
@@ -364,7 +365,7 @@ async def put_chunk(
 
 
 def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str, path: Path, offset: int,
-                  body: bytes, claimed: str, client: str, jobs: JobRunner | None, locks: FileLocks,
+                  body: bytes, claimed: str, client: str, jobs: JobQueue | None, locks: FileLocks,
                   principal: Principal) -> FileOut:
     """Store one chunk (the PUT route's work); the flight's automatic jobs are queued on `jobs` when this chunk
     completes the flight (`jobs` None: the caller queues its own job, e.g. the web adjustment form)."""
@@ -425,7 +426,7 @@ def _append_chunk(settings: ApiSettings, store: Store, flight_id: str, name: str
     return out
 
 
-def write_file_bytes(settings: ApiSettings, store: Store, jobs: JobRunner | None, locks: FileLocks, flight_id: str,
+def write_file_bytes(settings: ApiSettings, store: Store, jobs: JobQueue | None, locks: FileLocks, flight_id: str,
                      name: str, source: BinaryIO, principal: Principal, client: str = "web") -> FileOut:
     """Store the whole content of a file the flight lists (e.g. added by `add_files` from a web form), read
     from `source` at the server's offset (an interrupted earlier write resumes), in chunks of the chunk limit,
@@ -474,7 +475,7 @@ ADJUST_ROLES = ("events", "orientations")
 RTK_ROLES = ("rover_obs", "base_obs")
 
 
-def _maybe_auto_adjust(store: Store, flight_id: str, jobs: JobRunner) -> None:
+def _maybe_auto_adjust(store: Store, flight_id: str, jobs: JobQueue) -> None:
     """Once every file is in, queue the automatic jobs (only on a flight that has none yet):
     RTK re-processing when rover and base observations were uploaded, then the adjustment when events and
     orientations were uploaded with a trajectory (uploaded, or the one the RTK job will write)."""
@@ -496,7 +497,7 @@ def _maybe_auto_adjust(store: Store, flight_id: str, jobs: JobRunner) -> None:
         jobs.submit(job_id)
 
 
-def validate_and_queue_job(store: Store, jobs: JobRunner, flight_id: str, kind: str, params: dict[str, Any],
+def validate_and_queue_job(store: Store, jobs: JobQueue, flight_id: str, kind: str, params: dict[str, Any],
                            principal: Principal) -> JobOut:
     """Check a job against the flight (404 no flight, 403 not the caller's, 409 upload not complete, 422 bad
     parameters or missing files: HTTPException with the reason in words), record it `queued` and hand it to
@@ -543,7 +544,7 @@ def latest_output(settings: ApiSettings, store: Store, flight_id: str, filename:
         done = [j for j in flight.jobs if j.kind == "adjust" and j.status == "done"]
     if not done:
         raise HTTPException(status_code=404, detail="no finished adjustment for this flight")
-    path = settings.data_dir / "outputs" / flight_id / done[-1].id / filename
+    path = job_output_dir(settings.data_dir, flight_id, done[-1].id) / filename
     if not path.is_file():
         raise HTTPException(status_code=404, detail=f"{filename} missing from the last adjustment")
     return path
