@@ -156,7 +156,18 @@ def regular_interval_s(times: Sequence[GpsTime]) -> float | None:
     return float(values[best]) / 1e3 if counts[best] >= 0.9 * steps_ms.size else None
 
 
-def _header(info: ObsHeaderInfo, systems: list[int], summary: ObsWriteSummary) -> list[str]:
+def system_codes(gnss_id: int, signals: set[str]) -> tuple[str, ...]:
+    """The four observation codes (code, phase, Doppler, C/N0) written for a system: of its entries' one signal
+    (`ObsEpoch.signal`, e.g. Galileo "1C" of a u-blox 9) when they all share one, else the SYSTEMS default."""
+    signals = signals - {""}
+    if len(signals) == 1:
+        (sig,) = signals
+        return tuple(q + sig for q in "CLDS")
+    return SYSTEMS[gnss_id][1]
+
+
+def _header(info: ObsHeaderInfo, systems: list[int], summary: ObsWriteSummary,
+            codes_of: dict[int, tuple[str, ...]]) -> list[str]:
     letters = [SYSTEMS[g][0] for g in systems]
     kind = f"{letters[0]}: {_SYSTEM_NAMES[letters[0]]}" if len(letters) == 1 else "M: Mixed"
     out = [f"{RINEX_VERSION:9.2f}{'':11s}{'OBSERVATION DATA':<20s}{kind:<20s}RINEX VERSION / TYPE\n"]
@@ -173,7 +184,7 @@ def _header(info: ObsHeaderInfo, systems: list[int], summary: ObsWriteSummary) -
     h, e, n = info.antenna_delta_hen_m
     out.append(_label(f"{h:14.4f}{e:14.4f}{n:14.4f}", "ANTENNA: DELTA H/E/N"))
     for g in systems:
-        letter, codes, _ref = SYSTEMS[g]
+        letter, codes = SYSTEMS[g][0], codes_of[g]
         out.append(_label(f"{letter}{len(codes):5d}" + "".join(f" {c}" for c in codes), "SYS / # / OBS TYPES"))
     if summary.interval_s is not None:
         out.append(_label(f"{summary.interval_s:10.3f}", "INTERVAL"))
@@ -184,8 +195,8 @@ def _header(info: ObsHeaderInfo, systems: list[int], summary: ObsWriteSummary) -
         out.append(_label(f"  {m.year:04d}    {m.month:02d}    {m.day:02d}    {m.hour:02d}    {m.minute:02d}"
                           f"   {_seconds_text(ticks):>010s}     GPS", label))
     for g in systems:
-        letter, codes, reference = SYSTEMS[g]
-        phase = codes[1]
+        letter, _codes, reference = SYSTEMS[g]
+        phase = codes_of[g][1]
         # Reference signals need no shift; others get an explicit 0 (we apply none), as RTKLIB writes it.
         out.append(_label(f"{letter} {phase}" + ("" if reference else f" {0.0:8.5f}"), "SYS / PHASE SHIFT"))
     if GNSS_GLONASS in systems:
@@ -223,17 +234,21 @@ def write_obs(fp: IO[str], epochs: Sequence[ObsEpoch], marks: Iterable[CameraMar
     """Write a RINEX 3.04 observation file: header, epochs in the given order, an event record (flag 5) for
     each mark with a time, placed before the first epoch at or after it (marks after the last epoch at the end).
 
-    Epochs must carry receiver time tags in increasing order; satellites without a RINEX code are skipped.
+    Epochs must carry receiver time tags in increasing order; satellites without a RINEX code are skipped. Each
+    system's observation codes follow its entries' signal (`system_codes`).
     Returns what was written.
     """
     summary = ObsWriteSummary()
     present: set[int] = set()
+    signals: dict[int, set[str]] = {}
     for ep in epochs:
-        for g, sv in zip(ep.gnss_id.tolist(), ep.sv_id.tolist()):
+        sigs = ep.signal.tolist() if ep.signal.shape[0] == len(ep) else [""] * len(ep)
+        for g, sv, sig in zip(ep.gnss_id.tolist(), ep.sv_id.tolist(), sigs):
             sat = satellite_code(g, sv)
             if sat is not None:
                 present.add(g)
                 summary.satellites.setdefault(sat[0], set()).add(sat)
+                signals.setdefault(g, set()).add(sig)
     systems = [g for letter in SYSTEM_ORDER for g, s in SYSTEMS.items() if s[0] == letter and g in present]
     if not systems:
         systems = [GNSS_GPS]
@@ -241,7 +256,7 @@ def write_obs(fp: IO[str], epochs: Sequence[ObsEpoch], marks: Iterable[CameraMar
     summary.first = epochs[0].time if epochs else None
     summary.last = epochs[-1].time if epochs else None
     summary.interval_s = regular_interval_s([e.time for e in epochs])
-    fp.writelines(_header(info, systems, summary))
+    fp.writelines(_header(info, systems, summary, {g: system_codes(g, signals.get(g, set())) for g in systems}))
     k = 0
     for ep in epochs:
         while k < len(timed) and timed[k].time <= ep.time:  # type: ignore[operator]

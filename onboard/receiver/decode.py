@@ -238,6 +238,12 @@ L1_SIGNAL_CODES: dict[tuple[int, int], str] = {
 _SIGNAL_LOOKUP = np.full((256, 256), "", "<U2")
 for (_g, _s), _code in L1_SIGNAL_CODES.items():
     _SIGNAL_LOOKUP[_g, _s] = _code
+_SIGNAL_LOOKUP_V0 = np.full(256, "", "<U2")
+"""RXM-RAWX version 0 (u-blox M8: sigId always 0): Galileo E1 is B+C ("1X"), as RTKLIB writes it; the others as
+L1_SIGNAL_CODES."""
+for (_g, _s), _code in L1_SIGNAL_CODES.items():
+    if _s == 0:
+        _SIGNAL_LOOKUP_V0[_g] = "1X" if _g == GNSS_GALILEO else _code
 
 CP_STD_CYC_PER_CODE = 0.004
 """RXM-RAWX cpStdev: n · 0.004 cycles."""
@@ -312,7 +318,7 @@ def decode_rxm_rawx(payload: bytes, glo_fcn: dict[int, int] | None = None) -> Ob
     """
     if len(payload) < RXM_RAWX_HEADER.size:
         raise DecodeError(f"RXM-RAWX payload of {len(payload)} bytes is shorter than its header")
-    rcv_tow_s, week, leap_s, num_meas, rec_stat, _version = RXM_RAWX_HEADER.unpack_from(payload)
+    rcv_tow_s, week, leap_s, num_meas, rec_stat, version = RXM_RAWX_HEADER.unpack_from(payload)
     need = RXM_RAWX_HEADER.size + RXM_RAWX_MEAS.itemsize * num_meas
     if len(payload) < need:
         raise DecodeError(f"RXM-RAWX with numMeas={num_meas} needs {need} bytes, got {len(payload)}")
@@ -358,7 +364,8 @@ def decode_rxm_rawx(payload: bytes, glo_fcn: dict[int, int] | None = None) -> Ob
         pr_std_m=PR_STD_M_BASE * np.exp2((m["prStdev"] & 0x0F).astype(np.float64)),
         cp_std_cyc=CP_STD_CYC_PER_CODE * (m["cpStdev"] & 0x0F).astype(np.float64),
         clock_reset=bool(rec_stat & 0x02), leap_s=int(leap_s) if rec_stat & 0x01 else None,
-        glo_fcn=glo_fcn, signal=_SIGNAL_LOOKUP[m["gnssId"], m["sigId"]],
+        glo_fcn=glo_fcn,
+        signal=_SIGNAL_LOOKUP[m["gnssId"], m["sigId"]] if version else _SIGNAL_LOOKUP_V0[m["gnssId"]],
     )
 
 

@@ -52,7 +52,8 @@ class ObsEpoch:
     channel number k (−7…+6; carrier 1602 + 0.5625·k MHz) per entry, FCN_NONE for other systems and unknown
     channels; `signal` RINEX 3 band + attribute of the tracked signal ("1C" GPS/GLONASS/QZSS L1 C/A or
     Galileo E1C, "1B" E1B, "1X" E1B+C, "2I" BeiDou B1I, "1Z" QZSS L1S …), "" where unknown. A u-blox M8
-    (RXM-RAWX version 0) reports no signal id: its L1 signals are "1C", Galileo "1C" (E1C) and BeiDou "2I".
+    (RXM-RAWX version 0) reports no signal id: its L1 signals are "1C", Galileo "1X" (E1 B+C, as RTKLIB) and
+    BeiDou "2I".
     Times of every system are GPS time (receiver time tag); sv_id is the number within the system (QZSS 1–10,
     not PRN 193–202; SBAS keeps its PRN 120–158).
     """
