@@ -10,7 +10,6 @@ archives and equal SHA-256.
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import io
 import os
 import shutil
@@ -20,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from onboard.errors import InputError
+from onboard.formats.digest import sha256_file
 
 OUTPUTS_DIR = "outputs"
 
@@ -38,20 +38,11 @@ def job_output_dir(data_dir: Path, flight_id: str, job_id: str) -> Path:
     return data_dir / OUTPUTS_DIR / flight_id / job_id
 
 
-def file_sha256(path: Path) -> str:
-    """SHA-256 (hex) of a file, read in 1 MiB blocks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def list_outputs(folder: Path) -> list[OutputFile]:
     """Every regular file under `folder` (sorted by relative name); empty when the folder is absent."""
     if not folder.is_dir():
         return []
-    return [OutputFile(p.relative_to(folder).as_posix(), p.stat().st_size, file_sha256(p))
+    return [OutputFile(p.relative_to(folder).as_posix(), p.stat().st_size, sha256_file(p))
             for p in sorted(folder.rglob("*")) if p.is_file() and not p.is_symlink()]
 
 

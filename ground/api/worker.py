@@ -32,7 +32,7 @@ from typing import Any
 
 import httpx
 
-from ground.api.job_outputs import file_sha256, pack_outputs
+from ground.api.job_outputs import pack_outputs, sha256_file
 from ground.api.jobs import JobFunction, run_job_process
 from ground.api.queue import QUEUE_NAME, TASK_NAME, procrastinate_app
 from ground.api.routes.worker_jobs import CONTENT_SHA_HEADER
@@ -93,7 +93,7 @@ class ApiJobClient:
     def fetch(self, flight_id: str, f: JobInputFile, dest: Path) -> None:
         """`f` into `dest`, unless `dest` already holds exactly those bytes; streamed to a temporary name,
         SHA-256 checked, then renamed (a corrupted download never sits under the final name)."""
-        if dest.is_file() and dest.stat().st_size == f.size and file_sha256(dest) == f.sha256:
+        if dest.is_file() and dest.stat().st_size == f.size and sha256_file(dest) == f.sha256:
             return
         path = (f"/flights/{flight_id}/jobs/{f.job_id}/outputs/{f.name}" if f.job_id
                 else f"/flights/{flight_id}/files/{f.name}/content")

@@ -28,6 +28,7 @@ from urllib.parse import quote
 import httpx
 
 from onboard.errors import InputError, OnboardError
+from onboard.formats.digest import sha256_file
 
 log = logging.getLogger(__name__)
 
@@ -107,15 +108,6 @@ class UploadReport:
     files: dict[str, str] = field(default_factory=dict)
     sha256: dict[str, str] = field(default_factory=dict)
     """name → SHA-256 (hex) of every file, as the server confirmed it at the end (`_verify`)."""
-
-
-def sha256_file(path: Path) -> str:
-    """SHA-256 (hex) of a file, read in 1 MiB blocks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def flight_files(flight_dir: Path) -> list[str]:

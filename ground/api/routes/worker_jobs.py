@@ -32,7 +32,6 @@ from ground.api.deps import SettingsDep, StoreDep
 from ground.api.job_kinds import reprocessed_trajectory
 from ground.api.job_outputs import (
     OutputFile,
-    file_sha256,
     install_outputs,
     job_output_dir,
     list_outputs,
@@ -42,6 +41,7 @@ from ground.api.routes.flights import job_out
 from ground.api.schemas import JobFinish, JobInputFile, JobOut, JobSpec, OutputFileOut
 from ground.store import Flight, Job, Store
 from onboard.errors import InputError
+from onboard.formats.digest import sha256_file
 
 log = logging.getLogger(__name__)
 
@@ -86,7 +86,7 @@ def claim_job(flight_id: str, job_id: str, settings: SettingsDep, store: StoreDe
     if kind == "adjust":  # the trajectory an earlier RTK job wrote (the same rule as the in-process runner)
         sol = reprocessed_trajectory(out_dir)
         if sol is not None:
-            earlier.append(JobInputFile(name=sol.name, size=sol.stat().st_size, sha256=file_sha256(sol),
+            earlier.append(JobInputFile(name=sol.name, size=sol.stat().st_size, sha256=sha256_file(sol),
                                         job_id=sol.parent.name))
     log.info("job %s (%s, flight %s) claimed by a worker", job_id, kind, flight_id)
     return JobSpec(job_id=job_id, flight_id=flight_id, kind=kind, params=params,
