@@ -207,8 +207,12 @@ async def serve_async(options: WorkerOptions, functions: Mapping[str, JobFunctio
     def run_job(job_id: str, flight_id: str) -> None:
         try:
             run_one_job(api, flight_id, job_id, options.cache_dir, options.token, functions)
-        except JobGone as exc:
+        except JobGone as exc:  # a refused request (a flight file gone, …): the job fails saying why
             log.error("job %s: %s (not retried)", job_id, exc)
+            try:
+                api.finish(flight_id, job_id, "failed", f"the worker could not run it: {exc}")
+            except (JobGone, httpx.HTTPError):
+                log.error("job %s: cannot record the failure either", job_id)
 
     name = options.name or f"{socket.gethostname()}-{os.getpid()}"
     async with app.open_async():
