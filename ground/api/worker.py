@@ -32,12 +32,13 @@ from typing import Any
 
 import httpx
 
-from ground.api.job_outputs import pack_outputs, sha256_file
+from ground.api.job_outputs import pack_outputs
 from ground.api.jobs import JobFunction, run_job_process
 from ground.api.queue import QUEUE_NAME, TASK_NAME, procrastinate_app
 from ground.api.routes.worker_jobs import CONTENT_SHA_HEADER
 from ground.api.schemas import JobInputFile, JobSpec
 from ground.api.settings import ApiSettings
+from onboard.formats.digest import sha256_file
 
 log = logging.getLogger(__name__)
 
