@@ -30,6 +30,7 @@ from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
 from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states_batch
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.linsolve import LinAlgError, solve
+from onboard.rtk.navstore import BroadcastNavigation
 from onboard.rtk.mlambda import LambdaError, LambdaResult, mlambda
 from onboard.rtk.models import CodeScatter, iono_mapping, median_of_few, phase_variance_m2, saastamoinen_m
 from onboard.rtk.options import RtkOptions
@@ -116,10 +117,12 @@ class NavData(Protocol):
 
 @dataclass
 class Nav:
-    """Navigation data for the engine: ephemerides and optional Klobuchar (alpha, beta)."""
+    """Navigation data for the engine: GPS ephemerides, optional Klobuchar (alpha, beta) and, for the other
+    constellations (RtkOptions.systems), their broadcast ephemerides."""
 
     store: EphemerisStore
     iono: tuple | None = None
+    broadcast: BroadcastNavigation | None = None
 
 
 @dataclass
