@@ -30,9 +30,9 @@ from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
 from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states_batch
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.linsolve import LinAlgError, solve
-from onboard.rtk.navstore import BroadcastNavigation
 from onboard.rtk.mlambda import LambdaError, LambdaResult, mlambda
 from onboard.rtk.models import CodeScatter, iono_mapping, median_of_few, phase_variance_m2, saastamoinen_m
+from onboard.rtk.navstore import BroadcastNavigation
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.pntpos import SppSolution, _norm, pntpos, pntpos_batch, sat_az_el
 from onboard.rtk.standstill import StandstillMonitor
