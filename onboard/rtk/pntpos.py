@@ -77,71 +77,103 @@ def _norm(v: Arr) -> float:
     return math.sqrt(v.dot(v))
 
 
-def _design(e: Arr) -> Arr:
-    """Design matrix [−LOS | 1] (…, n, 4) of position + receiver clock from LOS vectors (…, n, 3)."""
-    h = np.empty(e.shape[:-1] + (4,))
+def _design(e: Arr, clock_onehot: Arr | None = None) -> Arr:
+    """Design matrix [−LOS | 1] (…, n, 4) of position + receiver clock from LOS vectors (…, n, 3); with
+    `clock_onehot` (n, g), one clock per constellation: [−LOS | onehot] (…, n, 3 + g)."""
+    h = np.empty(e.shape[:-1] + (4 if clock_onehot is None else 3 + clock_onehot.shape[1],))
     np.negative(e, out=h[..., :3])
-    h[..., 3] = 1.0
+    if clock_onehot is None:
+        h[..., 3] = 1.0
+    else:
+        h[..., 3:] = clock_onehot
     return h
 
 
-def _least_squares(h: Arr, y: Arr) -> Arr:
-    """Least-squares solutions of h·x ≈ y per epoch, `h` (k, n, 4), `y` (k, n) (zero rows for unused
-    satellites), through the 4×4 normal equations: a fraction of np.linalg.lstsq's cost for well-conditioned
-    SPP designs (GDOP ≤ 30); lstsq for an epoch whose normal matrix is singular."""
+def _least_squares(h: Arr, y: Arr, free_unused: bool = False) -> Arr:
+    """Least-squares solutions of h·x ≈ y per epoch, `h` (k, n, m), `y` (k, n) (zero rows for unused
+    satellites), through the m×m normal equations: a fraction of np.linalg.lstsq's cost for well-conditioned
+    SPP designs (GDOP ≤ 30); lstsq for an epoch whose normal matrix is singular. `free_unused`: a column no
+    row uses (a constellation's clock without satellites this epoch) is solved as zero."""
     nmat = np.einsum("kni,knj->kij", h, h)
     rhs = np.einsum("kni,kn->ki", h, y)
+    if free_unused:
+        _pin_unused(nmat)
     try:
         return np.linalg.solve(nmat, rhs[:, :, None])[:, :, 0]
     except np.linalg.LinAlgError:
         return np.array([np.linalg.lstsq(h[k], y[k], rcond=None)[0] for k in range(h.shape[0])])
 
 
-def _atmosphere_m(llh: Arr, az: Arr, el: Arr, tow_s: float | Arr, iono: tuple | None) -> Arr:
+def _pin_unused(nmat: Arr) -> None:
+    """Put 1 on the diagonal of normal-matrix columns no observation uses (k, m, m), in place: their
+    unknowns (a clock without satellites) stay where they are instead of making the matrix singular."""
+    j = np.arange(nmat.shape[1])
+    diag = nmat[:, j, j]
+    nmat[:, j, j] = np.where(diag == 0.0, 1.0, diag)
+
+
+def _atmosphere_m(llh: Arr, az: Arr, el: Arr, tow_s: float | Arr, iono: tuple | None,
+                  iono_scale: Arr | None = None) -> Arr:
     """Troposphere + ionosphere delays (m) at geodetic position `llh` (rad, rad, m); or of k receivers at
-    once: `llh` (3, k, 1), az/el (k, n), `tow_s` (k, 1)."""
+    once: `llh` (3, k, 1), az/el (k, n), `tow_s` (k, 1). `iono_scale` (n,) (f_L1/f)² per satellite on
+    another carrier than GPS L1 (the Klobuchar delay is GPS L1's)."""
     lat, lon, h = llh
     alpha, beta = (iono if iono is not None else (None, None))
-    return saastamoinen_m(lat, h, el) + klobuchar_m(tow_s, lat, lon, az, el, alpha, beta)
+    if iono_scale is None:
+        return saastamoinen_m(lat, h, el) + klobuchar_m(tow_s, lat, lon, az, el, alpha, beta)
+    return saastamoinen_m(lat, h, el) + klobuchar_m(tow_s, lat, lon, az, el, alpha, beta) * iono_scale
 
 
 def pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: Arr | None = None,
            iono: tuple | None = None, x0_ecef_m: Arr | None = None, max_iter: int = 10,
-           outlier_m: float = 60.0, max_gdop: float = 30.0, clock0_m: float = 0.0) -> SppSolution:
+           outlier_m: float = 60.0, max_gdop: float = 30.0, clock0_m: float = 0.0,
+           clock_group: npt.NDArray[np.int8] | None = None, lam_m: Arr | None = None) -> SppSolution:
     """Position and clock (m) from pseudoranges `pr_m` (n,) with satellite states `sats` (aligned).
 
     `tow_s` receiver time (s of week) for the ionosphere model, `iono` (alpha, beta) Klobuchar coefficients.
     Follows RTKLIB pntpos() estpos()/raim_fde(): drops the satellite with the largest normalised residual
     while the residual RMS exceeds `outlier_m`/… and at least 5 remain. pntpos_batch with one epoch.
+    Several constellations: `clock_group` (n,) the constellation of each satellite (0, 1, …: one receiver
+    clock each, as RTKLIB's inter-system biases; clock_bias_m is then the first one's with satellites), `lam_m`
+    (n,) their carrier wavelengths (m; Doppler, ionosphere scaling).
     """
-    x0 = None if x0_ecef_m is None else np.append(x0_ecef_m, clock0_m).reshape(1, 4)
+    ng = 1 if clock_group is None else int(clock_group.max()) + 1
+    x0 = None if x0_ecef_m is None else np.append(x0_ecef_m, [clock0_m] * ng).reshape(1, 3 + ng)
     return pntpos_batch(pr_m.reshape(1, -1), [sats], [tow_s], elmask_rad,
                         None if dop_hz is None else dop_hz.reshape(1, -1), iono, x0, max_iter, outlier_m,
-                        max_gdop)[0]
+                        max_gdop, clock_group, lam_m)[0]
 
 
 def pntpos_batch(pr_m: Arr, sats: list[SatState], tow_s: npt.ArrayLike, elmask_rad: float,
                  dop_hz: Arr | None = None, iono: tuple | None = None, x0: Arr | None = None,
-                 max_iter: int = 10, outlier_m: float = 60.0, max_gdop: float = 30.0) -> list[SppSolution]:
+                 max_iter: int = 10, outlier_m: float = 60.0, max_gdop: float = 30.0,
+                 clock_group: npt.NDArray[np.int8] | None = None, lam_m: Arr | None = None) -> list[SppSolution]:
     """pntpos() of E epochs at once: pseudoranges `pr_m` (E, n) (m, NaN where absent), their satellite states
     (E of n), receiver times `tow_s` (E,), Doppler `dop_hz` (E, n) or None; `x0` (E, 4) start position (ECEF m)
     and clock (m), zeros when None. The least-squares iterations, the RAIM-like exclusion and the Doppler
     velocity run on every epoch still iterating at once (post-processing solves all rover epochs before the
     filter); each epoch's atmosphere (Klobuchar + Saastamoinen) and elevations are evaluated at its first
-    iterate away from the Earth's centre and again whenever it moves more than 50 m."""
+    iterate away from the Earth's centre and again whenever it moves more than 50 m. `clock_group`, `lam_m`:
+    see pntpos; `x0` then (E, 3 + clocks)."""
     with np.errstate(invalid="ignore", divide="ignore"):  # slots without a satellite give NaN, never used
         return _pntpos_batch(np.asarray(pr_m, float), sats, np.asarray(tow_s, float), elmask_rad, dop_hz, iono,
-                             x0, max_iter, outlier_m, max_gdop)
+                             x0, max_iter, outlier_m, max_gdop, clock_group, lam_m)
 
 
 def _pntpos_batch(pr: Arr, sats: list[SatState], tow_s: Arr, elmask_rad: float, dop_hz: Arr | None,
                   iono: tuple | None, x0: Arr | None, max_iter: int, outlier_m: float,
-                  max_gdop: float) -> list[SppSolution]:
+                  max_gdop: float, clock_group: npt.NDArray[np.int8] | None = None,
+                  lam_m: Arr | None = None) -> list[SppSolution]:
     n_ep, n = pr.shape
+    # one clock per constellation (onehot columns of the design), or the single GPS clock
+    onehot = None if clock_group is None else (clock_group[:, None] == np.arange(int(clock_group.max()) + 1)).astype(float)
+    nc = 1 if onehot is None else onehot.shape[1]
+    multi = onehot is not None
+    iono_scale = None if lam_m is None else (lam_m / LAMBDA_L1_M) ** 2
     spos = np.stack([s.pos_m for s in sats]).reshape(n_ep, n, 3)
     sclk = CLIGHT_M_S * np.stack([s.clock_s for s in sats]).reshape(n_ep, n)
     valid = np.stack([s.ok for s in sats]).reshape(n_ep, n) & np.isfinite(pr)
-    x = np.zeros((n_ep, 4)) if x0 is None else np.array(x0, float).reshape(n_ep, 4)
+    x = np.zeros((n_ep, 3 + nc)) if x0 is None else np.array(x0, float).reshape(n_ep, 3 + nc)
     excluded = np.zeros((n_ep, n), bool)
     az = np.zeros((n_ep, n))
     el = np.full((n_ep, n), np.pi / 2)
@@ -170,7 +202,7 @@ def _pntpos_batch(pr: Arr, sats: list[SatState], tow_s: Arr, elmask_rad: float, 
             kd = ks[due]
             llh = np.array([ecef_to_llh(p) for p in xs[due]])  # (k, 3)
             az[kd], el[kd] = sat_az_el(xs[due], e[due], llh)
-            corr[kd] = _atmosphere_m(llh.T[:, :, None], az[kd], el[kd], tow_s[kd, None], iono)
+            corr[kd] = _atmosphere_m(llh.T[:, :, None], az[kd], el[kd], tow_s[kd, None], iono, iono_scale)
             corr_at[kd] = xs[due]
         return r + sagnac, e
 
@@ -188,14 +220,16 @@ def _pntpos_batch(pr: Arr, sats: list[SatState], tow_s: Arr, elmask_rad: float, 
             has_corr = np.isfinite(corr_at[act, 0])
             mask = use & ((el[act] >= elmask_rad) | ~has_corr[:, None])
             count = mask.sum(axis=1)
-            keep = count >= 4
+            # 3 + one per clock with satellites
+            keep = count >= (4 if not multi else 3 + (mask[:, :, None] & (onehot > 0)).any(axis=1).sum(axis=1))
             if not keep.all():
                 for j in np.flatnonzero(~keep).tolist():
                     fail(int(act[j]), mask[j], f"only {int(count[j])} usable satellites")
                 act, r, e, mask, has_corr = act[keep], r[keep], e[keep], mask[keep], has_corr[keep]
-            res = pr[act] - (r + x[act, 3:4] - sclk[act] + corr[act])
+            res = pr[act] - (r + _clock_m(x[act], clock_group) - sclk[act] + corr[act])
             w = np.where(mask, np.sin(np.maximum(el[act], _MIN_WEIGHT_EL_RAD)) / ERR_CODE_BASE_M, 0.0)
-            dx = _least_squares(np.where(mask[:, :, None], _design(e) * w[:, :, None], 0.0), np.where(mask, res, 0.0) * w)
+            dx = _least_squares(np.where(mask[:, :, None], _design(e, onehot) * w[:, :, None], 0.0),
+                                np.where(mask, res, 0.0) * w, multi)
             x[act] += dx
             done = (np.sqrt(np.add.reduce(dx * dx, axis=1)) < 1e-4) & has_corr
             converged[act[done]] = True
@@ -206,23 +240,28 @@ def _pntpos_batch(pr: Arr, sats: list[SatState], tow_s: Arr, elmask_rad: float, 
         # the solution of each epoch still to decide: residuals, GDOP, RMS at its final position
         r, e = geometry(todo)
         mask = valid[todo] & ~excluded[todo] & (el[todo] >= elmask_rad)
-        res = pr[todo] - (r + x[todo, 3:4] - sclk[todo] + corr[todo])
-        h = np.where(mask[:, :, None], _design(e), 0.0)  # empty slots have NaN LOS
-        gdop = _gdop(h)
+        res = pr[todo] - (r + _clock_m(x[todo], clock_group) - sclk[todo] + corr[todo])
+        h = np.where(mask[:, :, None], _design(e, onehot), 0.0)  # empty slots have NaN LOS
+        gdop = _gdop(h, multi)
         n_used = mask.sum(axis=1)
         rms = np.where(n_used > 0, np.sqrt(np.add.reduce(np.where(mask, res, 0.0) ** 2, axis=1)
                                            / np.maximum(n_used, 1)), np.inf)
-        dof = n_used - 4
+        dof = n_used - (4 if not multi else 3 + (np.abs(h[:, :, 3:]).sum(axis=1) > 0).sum(axis=1))
         good = converged[todo] & ((rms <= outlier_m / 3.0) | (dof < 2))
         if good.any():
             ks = todo[good]
             masks = np.zeros((ks.size, n), bool)
             masks[:] = mask[good]
             vel, drift = _doppler_batch(None if dop_hz is None else dop_hz[ks], [sats[k] for k in ks.tolist()],
-                                        e[good], x[ks, :3], masks)
+                                        e[good], x[ks, :3], masks, lam_m)
             # per-epoch rows of whole-batch arrays (one selection each, not one per epoch)
             az_ok, el_ok = np.where(valid[ks], az[ks], 0.0), np.where(valid[ks], el[ks], 0.0)
-            pos_ok, clk_ok = x[ks, :3], x[ks, 3].tolist()
+            pos_ok = x[ks, :3]
+            if multi:  # the first constellation's clock that has satellites (the solution's time tag)
+                used_clock = (masks[:, :, None] & (onehot > 0)).any(axis=1)
+                clk_ok = x[ks, 3 + np.argmax(used_clock, axis=1)].tolist()
+            else:
+                clk_ok = x[ks, 3].tolist()
             for j, (k, g, rm) in enumerate(zip(ks.tolist(), gdop[good].tolist(), rms[good].tolist(), strict=True)):
                 ok = g <= max_gdop and rm <= outlier_m
                 out[k] = SppSolution(pos_ok[j], clk_ok[j], vel[j], float(drift[j]), masks[j], az_ok[j], el_ok[j], ok,
@@ -245,10 +284,18 @@ def _missing(out: list[SppSolution | None]) -> list[SppSolution]:
     raise AssertionError(f"SPP left {sum(s is None for s in out)} epochs without a result")
 
 
-def _gdop(h: Arr) -> Arr:
-    """GDOP √trace((HᵀH)⁻¹) per epoch of designs `h` (k, n, 4) (rows of unused satellites zero); inf where
-    singular."""
+def _clock_m(x: Arr, clock_group: npt.NDArray[np.int8] | None) -> Arr:
+    """Receiver clock (m) per epoch and satellite from the states `x` (k, 3 + clocks): (k, 1) with one clock,
+    (k, n) with one per constellation."""
+    return x[:, 3:4] if clock_group is None else x[:, 3 + clock_group]
+
+
+def _gdop(h: Arr, free_unused: bool = False) -> Arr:
+    """GDOP √trace((HᵀH)⁻¹) per epoch of designs `h` (k, n, m) (rows of unused satellites zero); inf where
+    singular. `free_unused`: as _least_squares (an unused clock column adds 1 to the trace)."""
     nmat = np.einsum("kni,knj->kij", h, h)
+    if free_unused:
+        _pin_unused(nmat)
     try:
         return np.sqrt(np.trace(np.linalg.inv(nmat), axis1=1, axis2=2))
     except np.linalg.LinAlgError:
@@ -270,7 +317,7 @@ def doppler_velocity(dop_hz: Arr | None, sats: SatState, e: Arr, pos: Arr,
 
 
 def _doppler_batch(dop_hz: Arr | None, sats: list[SatState], e: Arr, pos: Arr,
-                   mask: npt.NDArray[np.bool_]) -> tuple[Arr, Arr]:
+                   mask: npt.NDArray[np.bool_], lam_m: Arr | None = None) -> tuple[Arr, Arr]:
     """doppler_velocity() of k epochs: Doppler (k, n) Hz, LOS (k, n, 3), positions (k, 3), masks (k, n);
     velocities (k, 3) and drifts (k,), NaN where fewer than 4 Dopplers."""
     k, n = mask.shape
@@ -284,7 +331,7 @@ def _doppler_batch(dop_hz: Arr | None, sats: list[SatState], e: Arr, pos: Arr,
         return vel, drift
     vs = np.stack([s.vel_m_s for s in sats]).reshape(k, n, 3)
     sdrift = np.stack([s.drift_s_s for s in sats]).reshape(k, n)
-    rate_obs = -LAMBDA_L1_M * dop_hz
+    rate_obs = -(LAMBDA_L1_M if lam_m is None else lam_m) * dop_hz
     # range-rate model incl. Sagnac rate (RTKLIB resdop())
     sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, :, 1] * pos[:, 0:1] - vs[:, :, 0] * pos[:, 1:2])
     y = rate_obs - (np.add.reduce(e * vs, axis=2) + sag - CLIGHT_M_S * sdrift)

@@ -18,6 +18,7 @@ import numpy.typing as npt
 from onboard.gnsstime import GpsTime
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.rtkpos import NavData, epoch_receivers, epoch_spp, rtk_init, rtk_pos
+from onboard.rtk.slots import slot_layout
 from onboard.rtk.types import LLI_SLIP, Q_FIX, Q_FLOAT, Q_NONE, BasePositionRejected, ObsEpoch, Solution
 
 log = logging.getLogger(__name__)
@@ -53,7 +54,7 @@ def base_spp_offset_m(base: Sequence[ObsEpoch], nav: NavData, base_pos_ecef_m: A
     if not gps:
         return None
     sample = gps[:: max(1, len(gps) // BASE_CHECK_EPOCHS)][:BASE_CHECK_EPOCHS]
-    spps = epoch_spp(sample, epoch_receivers(sample, nav.store), nav, options)
+    spps = epoch_spp(sample, epoch_receivers(sample, nav.store), nav, replace(options, systems="G"))  # GPS suffices
     pos = np.array([s.pos_ecef_m for s in spps if s.ok])
     if pos.size == 0:
         return None
@@ -155,10 +156,12 @@ def run_filter(rover: Sequence[ObsEpoch], paired_base: Sequence[ObsEpoch | None]
         paired_base = [None if b is None else base_rev[id(b)] for b in paired_base]
     # slot arrays and satellite positions/clocks of every epoch in one batch (and the base's modelled ranges
     # from its known position): they depend on the data alone, not on the filter
-    rcv_r = epoch_receivers(list(rover), nav.store)
+    layout = slot_layout(st.options.systems)
+    broadcast = getattr(nav, "broadcast", None)
+    rcv_r = epoch_receivers(list(rover), nav.store, None, layout, broadcast)
     spps = epoch_spp(list(rover), rcv_r, nav, st.options)
     bases = list({id(b): b for b in paired_base if b is not None}.values())
-    rcv_b = dict(zip((id(b) for b in bases), epoch_receivers(bases, nav.store, base_pos_ecef_m)))
+    rcv_b = dict(zip((id(b) for b in bases), epoch_receivers(bases, nav.store, base_pos_ecef_m, layout, broadcast)))
     sols: list[Solution | None] = [None] * len(rover)
     stats = RunStats(epochs=len(rover))
     for i in order:

@@ -29,12 +29,21 @@ from onboard.gnsstime import GpsTime
 from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
 from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states_batch
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
+from onboard.rtk.gnss import SYSTEMS_BY_LETTER
 from onboard.rtk.linsolve import LinAlgError, solve
 from onboard.rtk.mlambda import LambdaError, LambdaResult, mlambda
 from onboard.rtk.models import CodeScatter, iono_mapping, median_of_few, phase_variance_m2, saastamoinen_m
 from onboard.rtk.navstore import BroadcastNavigation
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.pntpos import SppSolution, _norm, pntpos, pntpos_batch, sat_az_el
+from onboard.rtk.slots import (
+    SlotLayout,
+    lambda_ratio_to_gps,
+    satellite_states_layout,
+    slot_arrays,
+    slot_layout,
+    wavelengths,
+)
 from onboard.rtk.standstill import StandstillMonitor
 from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP, Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, ObsEpoch, Solution
 
@@ -53,8 +62,11 @@ RATIO_CAP = 999.9
 _NO_TIME_NS = np.iinfo(np.int64).min
 _PRNS = np.arange(1, NSAT + 1, dtype=np.int16)
 _PRNS.flags.writeable = False  # shared by every epoch's SatState
-_ROWS = np.arange(3 * NSAT)  # row indices of the DD system (phase + code + Doppler rows at most)
+_ROWS = np.arange(3 * 200)  # row indices of the DD system (phase + code + Doppler rows of every slot at most)
 _ROWS.flags.writeable = False
+_LAM_GPS = np.full(NSAT, LAMBDA_L1_M)
+_LAM_GPS.flags.writeable = False
+GPS_LAYOUT = slot_layout("G")
 
 SPP_SIGMA_PER_GDOP_M = 1.5
 """σ (m per axis) of a single-point solution per unit of GDOP: a user range error of 1.5 m, u-blox L1 code in
@@ -127,14 +139,17 @@ class Nav:
 
 @dataclass
 class _Receiver:
-    """Per-epoch zero-difference data of one receiver on the 32 GPS slots (NaN where absent)."""
+    """Per-epoch zero-difference data of one receiver on the engine's slots (32 GPS ones, or those of
+    RtkState.layout; NaN where absent)."""
 
     pr_m: Arr
     cp_cyc: Arr
     dop_hz: Arr
     lli: npt.NDArray[np.uint8]
-    sats: SatState  # aligned with the 32 slots
+    sats: SatState  # aligned with the slots
     has: npt.NDArray[np.bool_]
+    lam: Arr = field(default_factory=lambda: _LAM_GPS)
+    """Carrier wavelength per slot (m): the unit of its phase (GLONASS: its frequency channel's)."""
     memo: dict[tuple[object, ...], tuple[Arr, ...]] = field(default_factory=dict)
     """What was already computed for this epoch, by (what, its inputs): geometry by receiver position bytes (the
     base epoch serves several rover epochs from the same known position, and the rover's is asked for again at
@@ -264,6 +279,15 @@ class RtkState:
     """Filter state (RTKLIB rtk_t): estimates, covariance, per-satellite counters. Mutated by rtk_pos()."""
 
     options: RtkOptions
+    layout: SlotLayout = GPS_LAYOUT
+    """The satellite slots (onboard.rtk.slots) of options.systems: every per-slot array below has layout.n
+    entries (32, PRN − 1, for GPS alone)."""
+    ns: int = NSAT
+    """layout.n: the number of slots."""
+    nxi: int = NXI
+    """NX0 + ns: the size of the state without ionosphere states and the index of the first one."""
+    fixable: npt.NDArray[np.bool_] | None = None
+    """Slots whose ambiguities may be fixed (RtkOptions.fix_systems), None for all."""
     x: Arr = field(default_factory=lambda: np.zeros(NXI))
     p: Arr = field(default_factory=lambda: np.zeros((NXI, NXI)))
     initialized: bool = False
@@ -328,6 +352,19 @@ def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkStat
             raise ValueError(f"take-off position {init_pos_ecef_m!r}: must be three finite ECEF coordinates in "
                              "metres")
     st = RtkState(options=options, standstill=StandstillMonitor(window_s=options.standstill_window_s))
+    layout = slot_layout(options.systems)
+    if layout.n != NSAT or not layout.gps_only:
+        n = layout.n
+        st.layout, st.ns, st.nxi = layout, n, NX0 + n
+        st.x, st.p = np.zeros(NX0 + n), np.zeros((NX0 + n, NX0 + n))
+        for name in ("lock", "outage", "half_cycle", "prev_cp_r", "prev_dop_r", "prev_phase_r", "last_t_r_ns",
+                     "prev_zb", "held_prns", "known_amb", "validated_int", "pending_slip"):
+            old = getattr(st, name)
+            setattr(st, name, np.full(n, old[0], old.dtype))
+        st.code_scatter = CodeScatter(mean_m=np.full(n, np.nan), count=np.zeros(n))
+    fixable = np.isin(layout.gnss_id, [SYSTEMS_BY_LETTER[c].gnss_id for c in options.fix_systems])
+    if not fixable.all():
+        st.fixable = fixable
     st.static = options.static_start
     st.init_pos_ecef_m = None if init_pos_ecef_m is None else np.asarray(init_pos_ecef_m, float)
     return st
@@ -354,7 +391,8 @@ def _slot_arrays(epochs: list[ObsEpoch]) -> tuple[Arr, Arr, Arr, npt.NDArray[np.
     return pr, cp, dop, lli
 
 
-def epoch_receivers(epochs: list[ObsEpoch], store: EphemerisStore, pos_ecef_m: Arr | None = None
+def epoch_receivers(epochs: list[ObsEpoch], store: EphemerisStore, pos_ecef_m: Arr | None = None,
+                    layout: SlotLayout = GPS_LAYOUT, broadcast: BroadcastNavigation | None = None
                     ) -> list[_Receiver]:
     """What _slots gives for each epoch (slot arrays, satellite states), for rtk_pos's `receivers` when the
     epochs are known ahead (post-processing): the scatter and satposs of every epoch in one batch.
@@ -364,10 +402,13 @@ def epoch_receivers(epochs: list[ObsEpoch], store: EphemerisStore, pos_ecef_m: A
     own (rtk_pos may blank a Doppler of its rover epoch)."""
     if not epochs:
         return []
-    pr, cp, dop, lli = _slot_arrays(epochs)
-    sats = satellite_states_batch(store, _PRNS, [e.time.total_ns for e in epochs], pr)
-    has = np.isfinite(pr) & np.array([s.ok for s in sats])
-    out = [_Receiver(pr[k], cp[k], dop[k], lli[k], sats[k], has[k]) for k in range(len(epochs))]
+    if layout.gps_only:
+        pr, cp, dop, lli = _slot_arrays(epochs)
+        sats = satellite_states_batch(store, _PRNS, [e.time.total_ns for e in epochs], pr)
+        has = np.isfinite(pr) & np.array([s.ok for s in sats])
+        out = [_Receiver(pr[k], cp[k], dop[k], lli[k], sats[k], has[k]) for k in range(len(epochs))]
+    else:
+        out = _layout_receivers(epochs, store, layout, broadcast)
     if pos_ecef_m is not None:
         _model_range_rows(out, np.asarray(pos_ecef_m, float))
     return out
@@ -382,24 +423,53 @@ def epoch_spp(epochs: list[ObsEpoch], rcvs: list[_Receiver], nav: NavData, o: Rt
     50 m)."""
     if not epochs:
         return []
-    prs = np.array([r.pr_m for r in rcvs])
+    layout = slot_layout(o.systems)
+    if layout.gps_only:
+        prs = np.array([r.pr_m for r in rcvs])
+        group = lam = None
+        ng = 1
+    else:  # a slot without usable data (a GLONASS one without its channel) is left out
+        prs = np.array([np.where(r.has, r.pr_m, np.nan) for r in rcvs])
+        group, ng = layout.group, len(layout.systems)
+        lam = rcvs[0].lam if all(r.lam is rcvs[0].lam or np.array_equal(r.lam, rcvs[0].lam, equal_nan=True)
+                                 for r in rcvs) else None
+        if lam is None:  # the channels changed along the epochs: one batch per wavelength set
+            return [epoch_spp([e], [r], nav, o)[0] for e, r in zip(epochs, rcvs, strict=True)]
     dops = np.array([r.dop_hz for r in rcvs])
     sats = [r.sats for r in rcvs]
     tows = np.array([e.time.tow_s for e in epochs])
     x0 = None
     for k in range(min(len(epochs), 10)):  # a start point: the first epoch with a cold-start solution
         first = pntpos_batch(prs[k:k + 1], sats[k:k + 1], tows[k:k + 1], o.elmask_rad, dops[k:k + 1], nav.iono,
-                             outlier_m=o.spp_outlier_m, max_gdop=o.spp_max_gdop)[0]
+                             outlier_m=o.spp_outlier_m, max_gdop=o.spp_max_gdop, clock_group=group, lam_m=lam)[0]
         if first.ok:
-            x0 = np.tile(np.append(first.pos_ecef_m, first.clock_bias_m), (len(epochs), 1))
+            x0 = np.tile(np.append(first.pos_ecef_m, [first.clock_bias_m] * ng), (len(epochs), 1))
             break
     return pntpos_batch(prs, sats, tows, o.elmask_rad, dops, nav.iono, x0=x0, outlier_m=o.spp_outlier_m,
-                        max_gdop=o.spp_max_gdop)
+                        max_gdop=o.spp_max_gdop, clock_group=group, lam_m=lam)
 
 
-def _slots(obs: ObsEpoch, store: EphemerisStore) -> _Receiver:
-    """Scatter a GPS epoch onto 32 PRN slots and compute satellite states at its own time tag (satposs): the
+def _layout_receivers(epochs: list[ObsEpoch], store: EphemerisStore, layout: SlotLayout,
+                      broadcast: BroadcastNavigation | None) -> list[_Receiver]:
+    """epoch_receivers on a multi-constellation layout: slot arrays, satellite states, the slots' wavelengths
+    (a GLONASS slot without a known frequency channel has no usable data)."""
+    pr, cp, dop, lli = slot_arrays(layout, epochs)
+    sats = satellite_states_layout(layout, store, broadcast, [e.time.total_ns for e in epochs], pr)
+    out = []
+    for k, e in enumerate(epochs):
+        lam = wavelengths(layout, [e], broadcast)
+        lam.flags.writeable = False
+        has = np.isfinite(pr[k]) & sats[k].ok & np.isfinite(lam)
+        out.append(_Receiver(pr[k], cp[k], dop[k], lli[k], sats[k], has, lam))
+    return out
+
+
+def _slots(obs: ObsEpoch, store: EphemerisStore, layout: SlotLayout = GPS_LAYOUT,
+           broadcast: BroadcastNavigation | None = None) -> _Receiver:
+    """Scatter an epoch onto the slots and compute satellite states at its own time tag (satposs): the
     real-time path's epoch_receivers of one epoch."""
+    if not layout.gps_only:
+        return _layout_receivers([obs], store, layout, broadcast)[0]
     pr, cp, dop, lli = (a[0] for a in _slot_arrays([obs]))
     # straight onto the 32 slots: a batch of one leaves slots without a pseudorange zero and not ok
     sats = satellite_states_batch(store, _PRNS, [obs.time.total_ns], pr.reshape(1, NSAT))[0]
@@ -467,7 +537,7 @@ def _sd_obs_m(rov: _Receiver, bas: _Receiver) -> tuple[Arr, Arr]:
     key = ("sd_obs", id(bas))  # one base epoch per rover epoch, alive while it is processed
     hit = rov.memo.get(key)
     if hit is None:
-        hit = (LAMBDA_L1_M * (rov.cp_cyc - bas.cp_cyc), rov.pr_m - bas.pr_m)
+        hit = (rov.lam * (rov.cp_cyc - bas.cp_cyc), rov.pr_m - bas.pr_m)
         for a in hit:
             a.flags.writeable = False
         rov.memo[key] = hit
@@ -491,7 +561,7 @@ def _solution(t: GpsTime, pos: Arr, vel: Arr, q: int, ns: int, cov: Arr, covv: A
 def _in_use(st: RtkState, first: int = NX0) -> npt.NDArray[np.bool_]:
     """Per PRN slot, whether its state in the block starting at `first` (ambiguities at NX0, ionosphere at
     NXI) is in use: a state out of use has zero variance. A view-derived array, not a copy to keep."""
-    return st.p.diagonal()[first:first + NSAT] > 0
+    return st.p.diagonal()[first:first + st.ns] > 0
 
 
 def _reset_amb(st: RtkState, k: npt.NDArray[np.int64]) -> None:
@@ -568,7 +638,7 @@ def _udstate(st: RtkState, dt: float, spp_pos: Arr, spp_vel: Arr, base_pos: Arr 
     # geodetic code, which can follow the drift it stands for (see RtkOptions.iono_sigma_m_per_km)
     per_km = None if st.iono_on and not _geodetic_code(st) else base_pos
     nx = st.p.shape[0]
-    amb_var = st.p.ravel()[NX0 * (nx + 1) : NXI * (nx + 1) : nx + 1]  # the ambiguities' variances, a view
+    amb_var = st.p.ravel()[NX0 * (nx + 1) : st.nxi * (nx + 1) : nx + 1]  # the ambiguities' variances, a view
     amb_var[amb_var > 0] += bias_process_noise_cyc2_s(o, st.x[:3], per_km) * abs(dt)
 
 
@@ -657,13 +727,16 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
     o = st.options
     slip = ((rov.lli & LLI_SLIP) != 0) & common
     # Doppler-predicted phase on the rover, from each satellite's last phase (across short gaps)
-    bridged = np.zeros(NSAT, bool)  # phase continuity checked against the Doppler
+    bridged = np.zeros(st.ns, bool)  # phase continuity checked against the Doppler
     if st.prev_time_r is not None:
         seen = st.last_t_r_ns != _NO_TIME_NS
         dt_all = np.where(seen, (t_r.total_ns - np.where(seen, st.last_t_r_ns, 0)) / 1e9, np.nan)
         if np.count_nonzero(np.isfinite(dt_all)):
             dop_avg = np.where(np.isfinite(st.prev_dop_r), 0.5 * (rov.dop_hz + st.prev_dop_r), rov.dop_hz)
             d = (rov.cp_cyc - st.prev_cp_r) + dop_avg * dt_all  # RINEX: phase follows range, Doppler = −rate
+            if not st.layout.gps_only:
+                # in GPS L1 cycles: the receiver clock, removed below, is common in metres, not in cycles
+                d = d * lambda_ratio_to_gps(rov.lam)
             d[~(np.abs(dt_all) <= SLIP_TEST_MAX_GAP_S)] = np.nan
             ok = np.isfinite(d) & common
             if np.count_nonzero(ok) >= 2:
@@ -745,8 +818,10 @@ def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver
     cp = base.cp_cyc.copy()
     # from the age where carrying starts, so the correction does not jump when it starts (a jump of rate ×
     # min age released a good hold on the M8P RAWX base); the drift before that stays, as for raw data
-    cp[ok] += slope * (age_s - o.base_extrapolate_min_age_s)
-    return _Receiver(base.pr_m, cp, base.dop_hz, base.lli, base.sats, base.has)
+    step = slope * (age_s - o.base_extrapolate_min_age_s)
+    # the history is in GPS L1 cycles (see _udbias_epoch): each slot's own
+    cp[ok] += step if st.layout.gps_only else step / lambda_ratio_to_gps(base.lam)[ok]
+    return _Receiver(base.pr_m, cp, base.dop_hz, base.lli, base.sats, base.has, base.lam)
 
 
 def _correction_rate(o: RtkOptions, hist: list[tuple[GpsTime, Arr]], base_cp_cyc: Arr) -> tuple[Arr, ...]:
@@ -823,23 +898,24 @@ def _udbias(st: RtkState, rov: _Receiver, base: _Receiver, rng_r: Arr, rng_b: Ar
     st.outage[valid_phase] = 0
     new = valid_phase & ~_in_use(st)
     if np.count_nonzero(new):
+        lam = rov.lam
         if st.init_pos_ecef_m is not None and st.fix_count == 0 and st.p[0, 0] <= (2 * o.init_pos_sigma_m) ** 2:
-            sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b)) / LAMBDA_L1_M
+            sd = (lam * (rov.cp_cyc - base.cp_cyc) - (rng_r - rng_b)) / lam
             # phase − modelled range keeps the receivers' clock difference (0.5 ms = 150 km on hil_sim), which
             # phase − code removes: take it out (the median over satellites of code − range, common to all, so
             # the double differences keep the surveyed precision), or a satellite re-initialised from code
             # after a slip never fits the others again
             clk = (rov.pr_m - base.pr_m) - (rng_r - rng_b)
             if np.any(new & np.isfinite(clk)):
-                sd = sd - median_of_few(clk[new & np.isfinite(clk)]) / LAMBDA_L1_M
-            var = (KNOWN_AMB_SIGMA_CYC + o.init_pos_sigma_m / LAMBDA_L1_M) ** 2
+                sd = sd - median_of_few(clk[new & np.isfinite(clk)]) / lam
+            var = (KNOWN_AMB_SIGMA_CYC + o.init_pos_sigma_m / lam) ** 2
             st.known_amb[new] = True
         else:
-            sd = (LAMBDA_L1_M * (rov.cp_cyc - base.cp_cyc) - (rov.pr_m - base.pr_m)) / LAMBDA_L1_M
+            sd = (lam * (rov.cp_cyc - base.cp_cyc) - (rov.pr_m - base.pr_m)) / lam
             var = o.initial_bias_sigma_cyc**2
         k = new.nonzero()[0]
         st.x[NX0 + k] = sd[k]
-        st.p[NX0 + k, NX0 + k] = var
+        st.p[NX0 + k, NX0 + k] = var[k] if np.ndim(var) else var
     if count_lock:
         st.lock[valid_phase] += 1
         st.lock[~valid_phase] = 0
@@ -879,10 +955,14 @@ def code_variance_scale(st: RtkState, rov: _Receiver, base: _Receiver, phase_ok:
     return float(min(max(cs.ratio / o.code_scatter_reference, o.code_variance_min_scale), 1.0))
 
 
-def _slant_iono_m(st: RtkState, x: Arr, el: Arr) -> tuple[Arr, Arr]:
-    """(slant SD ionospheric delay (m) per slot at state `x`, the mapping function): 0 where no state."""
+def _slant_iono_m(st: RtkState, x: Arr, el: Arr, lam: Arr | None = None) -> tuple[Arr, Arr]:
+    """(slant SD ionospheric delay (m) per slot at state `x`, the mapping function): 0 where no state. The
+    states are the delays at GPS L1: a slot on another carrier (wavelength `lam`, m) scales them by
+    (f_L1 / f)², which the mapping returned includes."""
     mf = iono_mapping(el)
-    return mf * x[NXI:NX], mf
+    if lam is not None and not st.layout.gps_only:
+        mf = mf * lambda_ratio_to_gps(lam) ** 2
+    return mf * x[st.nxi:st.nxi + st.ns], mf
 
 
 def _geodetic_code(st: RtkState) -> bool:
@@ -891,26 +971,31 @@ def _geodetic_code(st: RtkState) -> bool:
     return st.code_scatter.epochs >= st.options.code_scatter_min_epochs and st.code_var_scale < GEODETIC_CODE_SCALE
 
 
-def _drop_iono(st: RtkState, drop: npt.NDArray[np.bool_], el: Arr) -> None:
+def _drop_iono(st: RtkState, drop: npt.NDArray[np.bool_], el: Arr, lam: Arr | None = None) -> None:
     """Remove the ionosphere states of the `drop` slots, folding each into its ambiguity where both exist
     (N' = N − m(el)·I/λ, the phase then carries the delay as without the states), so that the ambiguities keep
     the ionosphere's estimate and uncertainty instead of losing them."""
-    k = (drop & _in_use(st, NXI)).nonzero()[0]
+    nxi = st.nxi
+    k = (drop & _in_use(st, nxi)).nonzero()[0]
     if k.size == 0:
         return
     fold = k[(st.p[NX0 + k, NX0 + k] > 0) & np.isfinite(el[k])]
     if fold.size:
         a = np.eye(st.x.size)
-        a[NX0 + fold, NXI + fold] = -iono_mapping(el[fold]) / LAMBDA_L1_M
+        if lam is None or st.layout.gps_only:
+            a[NX0 + fold, nxi + fold] = -iono_mapping(el[fold]) / LAMBDA_L1_M
+        else:
+            a[NX0 + fold, nxi + fold] = -_slant_iono_m(st, st.x, el, lam)[1][fold] / lam[fold]
         st.x = a @ st.x
         st.p = a @ st.p @ a.T
-    j = NXI + k
+    j = nxi + k
     st.x[j] = 0.0
     st.p[j, :] = 0.0
     st.p[:, j] = 0.0
 
 
-def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float, el: Arr) -> None:
+def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float, el: Arr,
+           lam: Arr | None = None) -> None:
     """Time update of the SD ionosphere states (RTKLIB udion): on long baselines only, started at 0 with a
     prior σ growing with the baseline for every satellite `seen` (its code used), a random walk likewise,
     dropped after max_outage_epochs without phase. They exist between iono_min_baseline_km and
@@ -925,20 +1010,21 @@ def _udion(st: RtkState, seen: npt.NDArray[np.bool_], base_pos: Arr, dt: float, 
     on = o.iono_sigma_m_per_km > 0.0 and lo <= bl_km <= hi
     if not on:
         if st.iono_on:
-            _drop_iono(st, np.ones(NSAT, bool), el)
-            st.x, st.p = st.x[:NXI].copy(), st.p[:NXI, :NXI].copy()
+            _drop_iono(st, np.ones(st.ns, bool), el, lam)
+            st.x, st.p = st.x[:st.nxi].copy(), st.p[:st.nxi, :st.nxi].copy()
         st.iono_on = False
         return
     if not st.iono_on:
-        x, p = np.zeros(NX), np.zeros((NX, NX))
-        x[:NXI], p[:NXI, :NXI] = st.x, st.p
+        nx, nxi = st.nxi + st.ns, st.nxi
+        x, p = np.zeros(nx), np.zeros((nx, nx))
+        x[:nxi], p[:nxi, :nxi] = st.x, st.p
         st.x, st.p = x, p
     st.iono_on = True
-    j = NXI + np.arange(NSAT)
-    active = _in_use(st, NXI)
+    j = st.nxi + np.arange(st.ns)
+    active = _in_use(st, st.nxi)
     lost = active & (st.outage > o.max_outage_epochs)
     if lost.any():
-        _drop_iono(st, lost, el)
+        _drop_iono(st, lost, el, lam)
         active &= ~lost
     if active.any() and o.iono_process_noise_m_per_km > 0.0:
         st.p[j[active], j[active]] += (o.iono_process_noise_m_per_km * bl_km) ** 2 * abs(dt)
@@ -964,6 +1050,20 @@ def _dd_ambiguities(x: Arr, p: Arr, idx: npt.NDArray[np.int64], ref: int) -> tup
     qa = (p_o.take(jo, 1) - p[jr].take(jo)) - (p_o[:, jr] - p[jr, jr])[:, None]
     qba = p[:3].take(jo, 1) - p[:3, jr][:, None]
     qia = p[NXI:NX].take(jo, 1) - p[NXI:NX, jr][:, None] if p.shape[0] == NX else None
+    return a, qa, qba, qia
+
+
+def _dd_ambiguities_multi(x: Arr, p: Arr, others: npt.NDArray[np.int64], refs: npt.NDArray[np.int64], nsat: int
+                          ) -> tuple[Arr, Arr, Arr, Arr | None]:
+    """_dd_ambiguities with a reference per row (`refs`, one per constellation): rows `others` − `refs`; `nsat`
+    the number of slots (the ionosphere block, when present, follows the ambiguities)."""
+    jo, jr = NX0 + others, NX0 + refs
+    a = x.take(jo) - x.take(jr)
+    p_o, p_r = p.take(jo, 0), p.take(jr, 0)
+    qa = (p_o.take(jo, 1) - p_r.take(jo, 1)) - (p_o.take(jr, 1) - p_r.take(jr, 1))
+    qba = p[:3].take(jo, 1) - p[:3].take(jr, 1)
+    nxi = NX0 + nsat
+    qia = p[nxi:nxi + nsat].take(jo, 1) - p[nxi:nxi + nsat].take(jr, 1) if p.shape[0] == nxi + nsat else None
     return a, qa, qba, qia
 
 
@@ -1008,6 +1108,23 @@ def _reference_slot(idx: npt.NDArray[np.int64], el: Arr) -> int:
     return int(idx[el[idx].argmax()])
 
 
+def _dd_pairs(st: RtkState, idx: npt.NDArray[np.int64], el: Arr) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Double-difference pairs among slots `idx`: within each constellation (DD group) its highest satellite
+    (_reference_slot) is the reference of the others, as RTKLIB's per-system references. (the other slots in
+    slot order, the reference of each); a constellation with one satellite gives none."""
+    if st.layout.gps_only:
+        ref = _reference_slot(idx, el)
+        others = idx[idx != ref]
+        return others, np.full(others.size, ref, np.int64)
+    g = st.layout.group[idx]
+    refs = np.empty_like(idx)
+    for gv in np.unique(g).tolist():
+        m = g == gv
+        refs[m] = _reference_slot(idx[m], el)
+    keep = idx != refs
+    return idx[keep], refs[keep]
+
+
 def _sd_terms(st: RtkState, ctx: EpochContext, x: Arr) -> tuple[Arr, Arr, Arr, tuple[Arr, Arr] | None]:
     """Per slot at state `x`: modelled range difference rover − base (m), rover LOS, SD phase variance (m²,
     with this epoch's base-age variance) and the slant ionosphere with its mapping (_slant_iono_m, or None)."""
@@ -1015,31 +1132,30 @@ def _sd_terms(st: RtkState, ctx: EpochContext, x: Arr) -> tuple[Arr, Arr, Arr, t
     var_sd = _var_sd_m2(st.options, ctx.rov, ctx.el)
     if ctx.base_age_var_m2 > 0.0:
         var_sd = var_sd + ctx.base_age_var_m2
-    return rng_r - ctx.rng_b, e, var_sd, _slant_iono_m(st, x, ctx.el) if st.iono_on else None
+    return rng_r - ctx.rng_b, e, var_sd, _slant_iono_m(st, x, ctx.el, ctx.rov.lam) if st.iono_on else None
 
 
-def _phase_z(x: Arr, sd_phase: Arr, drng: Arr, ion: tuple[Arr, Arr] | None) -> Arr:
-    """Zero-difference-like phase residual per slot (m): SD phase − modelled range difference − λ·ambiguity."""
-    z = sd_phase - drng - LAMBDA_L1_M * x[NX0:NXI]
+def _phase_z(x: Arr, sd_phase: Arr, drng: Arr, ion: tuple[Arr, Arr] | None, lam: Arr = _LAM_GPS) -> Arr:
+    """Zero-difference-like phase residual per slot (m): SD phase − modelled range difference − λ·ambiguity
+    (`lam` the slots' wavelengths, m)."""
+    z = sd_phase - drng - lam * x[NX0:NX0 + lam.shape[0]]
     return z if ion is None else z + ion[0]  # the ionosphere advances the phase
 
 
 def _phase_fit(st: RtkState, ctx: EpochContext, x: Arr, use: npt.NDArray[np.bool_]
-               ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.bool_], int]:
+               ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.bool_], npt.NDArray[np.int64]]:
     """The phase rows of _ddres(x, use, no code, jacobian=False) and their _valid_residuals test, without the
     DD system around them (R, H): (the rows' non-reference slots, each row's |v| ≤ validation_sigma_factor·σ,
-    the reference slot; −1 with fewer than two phases). σ² = the reference's + the slot's SD variance, R's
-    diagonal summed alike."""
+    each row's reference slot). σ² = the reference's + the slot's SD variance, R's diagonal summed alike."""
     idx = use.nonzero()[0]
     if idx.size < 2:
-        return idx[:0], np.zeros(0, bool), -1
+        return idx[:0], np.zeros(0, bool), idx[:0]
     drng, _, var, ion = _sd_terms(st, ctx, x)
     assert ctx.bas is not None
-    z = _phase_z(x, _sd_obs_m(ctx.rov, ctx.bas)[0], drng, ion)
-    ref = _reference_slot(idx, ctx.el)
-    others = idx[idx != ref]
-    v = z[others] - z[ref]
-    return others, np.abs(v) <= st.options.validation_sigma_factor * np.sqrt(var[ref] + var[others]), ref
+    z = _phase_z(x, _sd_obs_m(ctx.rov, ctx.bas)[0], drng, ion, ctx.rov.lam)
+    others, refs = _dd_pairs(st, idx, ctx.el)
+    v = z[others] - z[refs]
+    return others, np.abs(v) <= st.options.validation_sigma_factor * np.sqrt(var[refs] + var[others]), refs
 
 
 def _ddres(st: RtkState, ctx: EpochContext, x: Arr, phase_ok: npt.NDArray[np.bool_], code_ok: npt.NDArray[np.bool_],
@@ -1059,27 +1175,31 @@ def _ddres(st: RtkState, ctx: EpochContext, x: Arr, phase_ok: npt.NDArray[np.boo
         idx = ok.nonzero()[0]
         if idx.size < 2:
             continue
-        ref = _reference_slot(idx, el)
+        others, refs = _dd_pairs(st, idx, el)
+        if others.size == 0:
+            continue
         if kind == 0:
-            ref_phase = ref
-            z = _phase_z(x, sd_phase, drng, ion)
+            ref_phase = int(refs[0])
+            z = _phase_z(x, sd_phase, drng, ion, rov.lam)
             var = var_sd
         else:
             z = sd_code - drng
             if ion is not None:
                 z = z - ion[0]  # and delays the code
             var = var_sd * o.code_phase_ratio**2 * st.code_var_scale * ctx.static_code_factor
-        groups.append((kind, ref, idx[idx != ref], z, var))
+        groups.append((kind, refs, others, z, var))
     if with_doppler:
         idx = (code_ok & np.isfinite(rov.dop_hz)).nonzero()[0]
         if idx.size >= 2:
+            # one reference across constellations: the receiver clock drift is common to all in m/s
             ref = _reference_slot(idx, el)
             vs = rov.sats.vel_m_s
             sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, 1] * x[0] - vs[:, 0] * x[1])
             rate_model = np.einsum("ij,ij->i", e, vs - x[3:6]) + sag - CLIGHT_M_S * rov.sats.drift_s_s
-            z = -LAMBDA_L1_M * rov.dop_hz - rate_model
+            z = -rov.lam * rov.dop_hz - rate_model
             s2 = (o.doppler_sigma_m_s / np.sin(np.maximum(el, DOPPLER_MIN_ELEVATION_RAD))) ** 2
-            groups.append((2, ref, idx[idx != ref], z, s2))
+            others = idx[idx != ref]
+            groups.append((2, np.full(others.size, ref, np.int64), others, z, s2))
     if not groups:
         return _DD(np.zeros(0), np.zeros((0, x.size)), np.zeros((0, 0)), np.zeros(0, np.int8), np.zeros(0, np.int64), -1), e
     nrow = sum(g[2].size for g in groups)
@@ -1090,23 +1210,28 @@ def _ddres(st: RtkState, ctx: EpochContext, x: Arr, phase_ok: npt.NDArray[np.boo
     slots = np.empty(nrow, np.int64)
     var_other: list[Arr] = []
     k = 0
-    for kind, ref, others, z, var in groups:
+    lam, nxi = rov.lam, st.nxi
+    for kind, refs, others, z, var in groups:
         m = others.size
         rows = slice(k, k + m)
-        v[rows] = z[others] - z[ref]
+        at = _ROWS[k : k + m]
+        v[rows] = z[others] - z[refs]
         if jacobian:
             # position (phase, code) or velocity (Doppler) columns: LOS difference ref − other
             cols = slice(3, 6) if kind == 2 else slice(0, 3)
-            h[rows, cols] = e[ref] - e[others]
+            h[rows, cols] = e[refs] - e[others]
             if kind == 0:
-                h[_ROWS[k : k + m], NX0 + others] = LAMBDA_L1_M
-                h[rows, NX0 + ref] = -LAMBDA_L1_M
+                h[at, NX0 + others] = lam[others]
+                h[at, NX0 + refs] = -lam[refs]
             if ion is not None and kind < 2:
                 sign = -1.0 if kind == 0 else 1.0
-                h[_ROWS[k : k + m], NXI + others] = sign * ion[1][others]
-                h[rows, NXI + ref] = -sign * ion[1][ref]
-        # covariance of rows sharing the reference: var_ref everywhere, var_other + var_ref on the diagonal
-        r[rows, rows] = var[ref]
+                h[at, nxi + others] = sign * ion[1][others]
+                h[at, nxi + refs] = -sign * ion[1][refs]
+        # covariance of rows sharing a reference: var_ref everywhere, var_other + var_ref on the diagonal
+        if refs[0] == refs[-1] and (refs == refs[0]).all():
+            r[rows, rows] = var[refs[0]]
+        else:  # one reference per constellation: rows of different ones are uncorrelated
+            r[rows, rows] = np.where(refs[:, None] == refs[None, :], var[refs][:, None], 0.0)
         var_other.append(var[others])
         kinds[rows] = kind
         slots[rows] = others
@@ -1197,7 +1322,8 @@ class _Fix:
     cov: Arr
     ratio: float
     slots: npt.NDArray[np.int64]
-    ref: int
+    ref: npt.NDArray[np.int64]
+    """The reference slot of each of `slots` (one per constellation)."""
     ints: Arr
     nb: int
     settled: bool = False
@@ -1206,30 +1332,42 @@ class _Fix:
     """The ionosphere states (m) conditioned on the integers, when they are in use."""
 
 
-def _slot_integers(ref: int, others: npt.NDArray[np.int64], ints: Arr) -> Arr:
-    """Per-slot integers of a DD integer set (cycles): 0 at `ref`, the DD integers at `others`, NaN elsewhere."""
-    c = np.full(NSAT, np.nan)
+def _slot_integers(ref: int | npt.NDArray[np.int64], others: npt.NDArray[np.int64], ints: Arr,
+                   nsat: int = NSAT) -> Arr:
+    """Per-slot integers of a DD integer set (cycles): 0 at the reference(s) `ref`, the DD integers at
+    `others`, NaN elsewhere (`nsat` slots)."""
+    c = np.full(nsat, np.nan)
     c[ref] = 0.0
     c[others] = np.rint(ints)
     return c
 
 
-def _same_integers(a: Arr, b: Arr, min_common: int) -> bool:
+def _same_integers(a: Arr, b: Arr, min_common: int, group: npt.NDArray[np.int8] | None = None) -> bool:
     """True when per-slot integer sets `a` and `b` (see _slot_integers) share at least `min_common` satellites
     and are equal on all of them, up to the choice of reference (a constant)."""
     common = np.isfinite(a) & np.isfinite(b)
     if common.sum() < min_common:
         return False
     d = a[common] - b[common]
-    return bool(np.all(d == d[0]))
+    if group is None:
+        return bool(np.all(d == d[0]))
+    # up to one constant per constellation (each has its own reference)
+    _, first, inverse = np.unique(group[common], return_index=True, return_inverse=True)
+    return bool(np.all(d == d[first][inverse]))
 
 
-def _agrees_with_validated(st: RtkState, ref: int, others: npt.NDArray[np.int64], ints: Arr, min_common: int) -> bool:
+def _agrees_with_validated(st: RtkState, ref: int | npt.NDArray[np.int64], others: npt.NDArray[np.int64], ints: Arr,
+                           min_common: int) -> bool:
     """True when at least `min_common` satellites of a candidate set belong to the last validated (held) set
     and the candidate's integers equal that set's on all of them: a re-fix of integers already validated and
     tracked without a slip since (e.g. after a hold released for one satellite's misfit, which that satellite's
     reset removed), extended at most by satellites that joined since, as a held set would be."""
-    return _same_integers(_slot_integers(ref, others, ints), st.validated_int, min_common)
+    return _same_integers(_slot_integers(ref, others, ints, st.ns), st.validated_int, min_common, _groups(st))
+
+
+def _groups(st: RtkState) -> npt.NDArray[np.int8] | None:
+    """The slots' DD groups (constellations), None for GPS alone (one group)."""
+    return None if st.layout.gps_only else st.layout.group
 
 
 def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_]) -> _Fix | None:
@@ -1242,22 +1380,26 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
     best_ratio = 0.0
     seen_candidate = False
     settled = False
-    full_set: tuple[int, npt.NDArray[np.int64], LambdaResult] | None = None
-    """The full candidate set's (reference, others, search result): its integers are read only when a partial
+    full_set: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], LambdaResult] | None = None
+    """The full candidate set's (references, others, search result): its integers are read only when a partial
     survivor must be compared with them (LambdaResult.fixed is computed on first use)."""
-    dropped: tuple[int, tuple[Arr, Arr, Arr, Arr | None], int] | None = None
-    """The last try's reference, DD ambiguities (a, Qa, Qba, Qia) and position among its others of the slot
+    dropped: tuple[tuple[int, ...], tuple[Arr, Arr, Arr, Arr | None], int] | None = None
+    """The last try's references, DD ambiguities (a, Qa, Qba, Qia) and position among its others of the slot
     dropped since."""
     for _drop in range(o.max_partial_drop + 1 if o.partial_ar else 1):
-        if idx.size < o.min_fix_sats:
+        if idx.size < 2:
             break
-        ref = _reference_slot(idx, el)
-        others = idx[idx != ref]
-        if dropped is not None and dropped[0] == ref:
-            # a retry keeps the reference (the highest satellite, never the one dropped): a subset of the last
+        others, ref = _dd_pairs(st, idx, el)
+        if others.size + 1 < o.min_fix_sats:
+            break
+        ref_key = tuple(np.unique(ref).tolist())
+        if dropped is not None and dropped[0] == ref_key:
+            # a retry keeps the references (the highest satellites, never the one dropped): a subset of the last
             a, qa, qba, qia = _dd_ambiguities_without(dropped[1], dropped[2])
+        elif st.layout.gps_only:
+            a, qa, qba, qia = _dd_ambiguities(x, p, idx, int(ref[0]))
         else:
-            a, qa, qba, qia = _dd_ambiguities(x, p, idx, ref)
+            a, qa, qba, qia = _dd_ambiguities_multi(x, p, others, ref, st.ns)
         try:
             res = mlambda(a, qa, ratio_cap=RATIO_CAP)
         except LambdaError:
@@ -1276,7 +1418,8 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
                 st.stuck_since = None
         # a fix resting on the bare minimum of double differences (no held set to lean on) must be
         # nearly certain: a stricter success rate and twice the ratio
-        strict = (idx.size <= o.min_fix_sats or _drop >= o.strict_partial_drop_sats) and not np.count_nonzero(st.held_prns)
+        strict = (others.size + 1 <= o.min_fix_sats or _drop >= o.strict_partial_drop_sats) \
+            and not np.count_nonzero(st.held_prns)
         need_ratio = o.ratio_threshold * (2.0 if strict else 1.0)
         need_sr = max(o.min_success_rate, o.min_success_rate_minimal_set) if strict else o.min_success_rate
         accept = False
@@ -1293,7 +1436,7 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
             # success rate, over confirm_fix_span_s), a partial one the wall-time spans.
             seen_candidate = True
             full = _drop == 0
-            key = (ref, tuple(others.tolist()), tuple(np.rint(res.fixed[:, 0]).astype(int).tolist()))
+            key = (ref_key, tuple(others.tolist()), tuple(np.rint(res.fixed[:, 0]).astype(int).tolist()))
             if st.pending_fix is None or st.pending_fix.key != key:
                 st.pending_fix = PendingFix(key, t, 0, t, 0.0)
             _, since, wins, last, progress = st.pending_fix
@@ -1317,8 +1460,9 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
             rival = False
             if not full and o.partial_agrees_with_full and full_set is not None:
                 full_ref, full_others, full_res = full_set
-                rival = not _same_integers(_slot_integers(ref, others, res.fixed[:, 0]),
-                                           _slot_integers(full_ref, full_others, full_res.fixed[:, 0]), 2)
+                rival = not _same_integers(_slot_integers(ref, others, res.fixed[:, 0], st.ns),
+                                           _slot_integers(full_ref, full_others, full_res.fixed[:, 0], st.ns), 2,
+                                           _groups(st))
             far = o.max_first_fix_baseline_km > 0.0 and ctx.baseline_m > 1000.0 * o.max_first_fix_baseline_km
             if rival or far:
                 # no first fix on such data (see the options): only a set already trusted
@@ -1342,13 +1486,13 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
             st.last_ratio = ratio
             iono = None
             if st.iono_on and qia is not None:
-                iono = x[NXI:NX] - qia @ solve(qa, a - ints)
+                iono = x[st.nxi:st.nxi + st.ns] - qia @ solve(qa, a - ints)
             return _Fix(pos, cov, ratio, others, ref, ints, others.size, settled, iono)
         # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
         # whose ambiguity is still code-level, else mostly the lowest one), not blindly the lowest satellite:
         # one fresh ambiguity would otherwise sink the ratio of a set determined long ago
         k_drop = int(qa.diagonal().argmax())
-        dropped = (ref, (a, qa, qba, qia), k_drop)
+        dropped = (ref_key, (a, qa, qba, qia), k_drop)
         idx = idx[idx != others[k_drop]]
     st.last_ratio = best_ratio
     if not seen_candidate:
@@ -1362,7 +1506,7 @@ def _fixed_ambiguity_state(x: Arr, fix: _Fix) -> Arr:
     xf[:3] = fix.pos
     xf[NX0 + fix.slots] = xf[NX0 + fix.ref] + fix.ints
     if fix.iono is not None:
-        xf[NXI:NX] = fix.iono
+        xf[NX0 + fix.iono.size:] = fix.iono
     return xf
 
 
@@ -1377,7 +1521,7 @@ def _holdamb(st: RtkState, fix: _Fix, el: Arr) -> None:
         return
     h = np.zeros((n, st.x.size))
     h[np.arange(n), NX0 + slots] = 1.0
-    h[:, NX0 + fix.ref] = -1.0
+    h[np.arange(n), NX0 + fix.ref[keep]] = -1.0
     v = ints - h @ st.x
     r = np.eye(n) * o.hold_sigma_cyc**2
     st.x, st.p = _kf_update(st.x, st.p, v, h, r)
@@ -1431,6 +1575,11 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
     return _epoch_solution(st, ctx, fix)
 
 
+def _broadcast(nav: NavData) -> BroadcastNavigation | None:
+    """The other constellations' ephemerides of `nav` (Nav.broadcast), None without."""
+    return getattr(nav, "broadcast", None)
+
+
 def _no_solution(t: GpsTime) -> Solution:
     """The epoch without any position (Q_NONE): NaN position, velocity and covariances, no satellite."""
     nan3, nan33 = np.full(3, np.nan), np.full((3, 3), np.nan)
@@ -1443,12 +1592,14 @@ def _start_epoch(st: RtkState, rover: ObsEpoch, nav: NavData, rov: _Receiver | N
     """Satellite states on the rover's slots (satposs) and its single-point solution (pntpos); the epoch's
     context, or None without a single-point solution."""
     o = st.options
-    rov = _slots(rover, nav.store) if rov is None else rov
+    rov = _slots(rover, nav.store, st.layout, _broadcast(nav)) if rov is None else rov
     if spp is None or not st.initialized:
         # the filter starts on this epoch's own solution from a cold start (precomputed ones start elsewhere)
-        spp = pntpos(rov.pr_m, rov.sats, rover.time.tow_s, o.elmask_rad, rov.dop_hz, nav.iono,
-                     x0_ecef_m=st.x[:3] if st.initialized else None, outlier_m=o.spp_outlier_m,
-                     max_gdop=o.spp_max_gdop, clock0_m=st.clock_bias_m)
+        multi = not st.layout.gps_only
+        spp = pntpos(np.where(rov.has, rov.pr_m, np.nan) if multi else rov.pr_m, rov.sats, rover.time.tow_s,
+                     o.elmask_rad, rov.dop_hz, nav.iono, x0_ecef_m=st.x[:3] if st.initialized else None,
+                     outlier_m=o.spp_outlier_m, max_gdop=o.spp_max_gdop, clock0_m=st.clock_bias_m,
+                     clock_group=st.layout.group if multi else None, lam_m=rov.lam if multi else None)
     if not spp.ok:
         log.debug("%s: no single-point solution (%s)", rover.time, spp.message)
         return None
@@ -1495,7 +1646,7 @@ def _select_base(st: RtkState, ctx: EpochContext, base: ObsEpoch, nav: NavData, 
     if st.base_cache is not None and st.base_cache[0] == base.time:
         ctx.bas = st.base_cache[1]
     else:
-        ctx.bas = _slots(base, nav.store) if bas is None else bas
+        ctx.bas = _slots(base, nav.store, st.layout, _broadcast(nav)) if bas is None else bas
         st.base_cache = (base.time, ctx.bas)
     ctx.base_pos = base_pos = np.asarray(base_pos_ecef_m, float)
     ctx.baseline_m = _norm(st.x[:3] - base_pos) if st.initialized else 0.0
@@ -1512,7 +1663,7 @@ def _select_satellites(st: RtkState, ctx: EpochContext) -> None:
     ctx.rng_b = _model_range_m(bas, ctx.base_pos)[0]
     rng_r, ctx.los_r, _, el = _model_range_m(rov, st.x[:3])
     ctx.rng_r, ctx.el = rng_r, el
-    ctx.trop_r = rng_r - _range_with_trop_m(rov, st.x[:3], np.zeros(NSAT))[0]
+    ctx.trop_r = rng_r - _range_with_trop_m(rov, st.x[:3], np.zeros(st.ns))[0]
     common = rov.has & bas.has & (el >= o.elmask_rad) & ctx.spp.used
     half = ((rov.lli & LLI_HALF_CYCLE) != 0) | ((bas.lli & LLI_HALF_CYCLE) != 0)
     # phase with an unresolved half cycle may jump by ½ cycle when the receiver resolves it: not used at all
@@ -1526,7 +1677,8 @@ def _udbias_epoch(st: RtkState, ctx: EpochContext, t_b: GpsTime) -> None:
     o = st.options
     rov, bas, phase_ok = ctx.rov, ctx.bas, ctx.phase_ok
     assert bas is not None
-    base_zb_cyc = (LAMBDA_L1_M * bas.cp_cyc - ctx.rng_b) / LAMBDA_L1_M
+    # in GPS L1 cycles (the base clock, common in metres, is removed from them; see _extrapolated_base)
+    base_zb_cyc = (bas.lam * bas.cp_cyc - ctx.rng_b) / LAMBDA_L1_M
     slip = _detect_slips(st, rov, bas, base_zb_cyc, ctx.time, t_b, phase_ok)
     if np.count_nonzero(st.pending_slip):  # rover slips seen while the base was missing
         gone = (st.pending_slip & ~phase_ok & _in_use(st)).nonzero()[0]
@@ -1543,7 +1695,7 @@ def _udbias_epoch(st: RtkState, ctx: EpochContext, t_b: GpsTime) -> None:
     ctx.base_age_var_m2 = (o.base_age_sigma_m_s * ctx.age_s) ** 2 if carried is not bas else 0.0
     ctx.bas = bas = carried
     _udbias(st, rov, bas, ctx.rng_r, ctx.rng_b, phase_ok, slip, t_r=ctx.time)
-    _udion(st, ctx.common, ctx.base_pos, ctx.dt_s, ctx.el)
+    _udion(st, ctx.common, ctx.base_pos, ctx.dt_s, ctx.el, rov.lam)
     st.code_var_scale = code_variance_scale(st, rov, bas, phase_ok, slip, ctx.el, ctx.dt_s)
     if o.standstill or st.static:
         slipped = _watch_standstill(st, ctx, phase_ok & ~slip & ~ctx.half)
@@ -1603,7 +1755,7 @@ def _float_update(st: RtkState, ctx: EpochContext) -> None:
                 st.slips += int(reset.size)
                 ctx.use_phase = use_phase = phase_ok & code_ok
                 st.fix_count = 0
-                _udbias(st, rov, bas, ctx.rng_r, ctx.rng_b, use_phase, np.zeros(NSAT, bool), count_lock=False)
+                _udbias(st, rov, bas, ctx.rng_r, ctx.rng_b, use_phase, np.zeros(st.ns, bool), count_lock=False)
                 continue
             log.debug("%s: phase outlier PRN %d (%.2f m) -> ambiguity reset", ctx.time, slot + 1, dd.v[worst])
             _reset_amb(st, np.array([slot]))
@@ -1631,12 +1783,11 @@ def _check_hold(st: RtkState, ctx: EpochContext) -> None:
     # it guards a held set (the fault exclusion and the release act only on one), so without one it is not
     # computed (a residual pass per epoch of an unfixed rover)
     use_phase = ctx.use_phase
-    bad_phase = rows_post = np.zeros(0, np.int64)
-    ref_post = -1
+    bad_phase = rows_post = refs_post = bad_refs = np.zeros(0, np.int64)
     if st.held_prns.any():
         # phase rows alone: only they are judged, each against its own σ (the code rows changed none of them)
-        rows_post, ok_post, ref_post = _phase_fit(st, ctx, st.x, use_phase)
-        bad_phase = rows_post[~ok_post]
+        rows_post, ok_post, refs_post = _phase_fit(st, ctx, st.x, use_phase)
+        bad_phase, bad_refs = rows_post[~ok_post], refs_post[~ok_post]
     if bad_phase.size:  # only ever found under a hold (above)
         # one satellite slipping under a hold spreads its error over every row through the position: find
         # whether leaving out a single satellite makes the rest fit (fault exclusion) before releasing all
@@ -1658,10 +1809,11 @@ def _check_hold(st: RtkState, ctx: EpochContext) -> None:
             st.validated_int[:] = np.nan
         amb = NX0 + _in_use(st).nonzero()[0]
         st.p[amb, amb] += RELEASE_AMB_SIGMA_CYC**2
-        if bad_phase.size >= MIN_DD_REFERENCE_SLIP and bad_phase.size == rows_post.size and ref_post >= 0:
-            # every DD off at once is one satellite, the reference, slipping without LLI: reset it alone
-            # (the others stay; see docs/rtk-defaults.md)
-            bad_phase = np.array([ref_post])
+        if bad_phase.size >= MIN_DD_REFERENCE_SLIP and (bad_refs == bad_refs[0]).all() \
+                and bad_phase.size == np.count_nonzero(refs_post == bad_refs[0]):
+            # every DD of a constellation off at once is one satellite, its reference, slipping without LLI:
+            # reset it alone (the others stay; see docs/rtk-defaults.md)
+            bad_phase = bad_refs[:1]
         if bad_phase.size >= 1:
             st.slips += int(bad_phase.size)
             _reset_amb(st, bad_phase)
@@ -1674,10 +1826,12 @@ def _resolve(st: RtkState, ctx: EpochContext) -> _Fix | None:
     a rejected fix gets one more try on a reduced set (FIX_TRIES)."""
     o = st.options
     el, use_phase = ctx.el, ctx.use_phase
-    amb_var = st.p.diagonal()[NX0:NX0 + NSAT]
+    amb_var = st.p.diagonal()[NX0:st.nxi]
     # ambiguities seeded from a surveyed take-off point are known, not guessed from the code: no lock wait
     locked = (st.lock > o.min_lock_epochs) | st.known_amb
     cand = use_phase & (el >= math.radians(o.ar_elmask_deg)) & ~ctx.half & locked & (amb_var > 0)
+    if st.fixable is not None:
+        cand &= st.fixable  # constellations left float (RtkOptions.fix_systems)
     fix = _resamb_lambda(st, ctx, cand)
     for _try in range(FIX_TRIES):
         if fix is None:
@@ -1689,7 +1843,7 @@ def _resolve(st: RtkState, ctx: EpochContext) -> _Fix | None:
         except LinAlgError:
             maha = np.inf
         xf = _fixed_ambiguity_state(st.x, fix)
-        use_fix = np.zeros(NSAT, bool)
+        use_fix = np.zeros(st.ns, bool)
         use_fix[fix.slots] = True
         use_fix[fix.ref] = True
         fix_rows, valid, _ = _phase_fit(st, ctx, xf, use_fix)
@@ -1748,5 +1902,5 @@ def _epoch_solution(st: RtkState, ctx: EpochContext, fix: _Fix | None) -> Soluti
     if o.ar_mode == "fix-and-hold" and st.fix_count >= o.min_hold_epochs:
         _holdamb(st, fix, ctx.el)
     elif o.ar_mode == "instantaneous":
-        _reset_amb(st, np.arange(NSAT))
+        _reset_amb(st, np.arange(st.ns))
     return sol

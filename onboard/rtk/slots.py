@@ -1,0 +1,180 @@
+"""The RTK engine's satellite slots for a set of constellations, and satellite states on them (pure).
+
+The engine keeps one state per slot (its single-difference ambiguity, its ionosphere); a slot is one satellite
+of one constellation. GPS PRN 1–32 come first (slot = PRN − 1, the GPS-only engine's layout, unchanged), then
+GLONASS slots 1–24, Galileo 1–36, BeiDou 1–63 and QZSS 1–10, for the constellations used
+(RtkOptions.systems). Each constellation is one double-difference group: its satellites are differenced
+against its own reference, so that no inter-system bias enters (the rover and base of a set need not be of
+one receiver type).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from onboard.gnsstime import GpsTime
+from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, l1_wavelength_m
+from onboard.rtk.ephemeris import EphemerisStore, SatState, eph_clock_s, satellite_states_batch
+from onboard.rtk.glonass import glonass_clock_s
+from onboard.rtk.gnss import SYSTEMS_BY_LETTER
+from onboard.rtk.navstore import BroadcastNavigation, satellite_state
+from onboard.rtk.types import FCN_NONE, GNSS_GLONASS, GNSS_GPS, GlonassEphemeris, ObsEpoch
+
+SYSTEM_ORDER = "GRECJ"
+"""Order of the constellations' slot blocks (GPS first: its slots are those of the GPS-only engine)."""
+
+Arr = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class SlotLayout:
+    """Slots of the constellations `systems` (RINEX letters in SYSTEM_ORDER order).
+
+    Arrays (n,), one entry per slot: `gnss_id` (u-blox gnssId), `sv_id` (svId within it), `group` the
+    double-difference group (index of its constellation in `systems`), `lam_m` the carrier wavelength (m;
+    NaN for GLONASS, whose wavelength follows its frequency channel: see wavelengths). `gps_only`: the layout
+    of the GPS L1 engine (32 slots, PRN − 1)."""
+
+    systems: str
+    gnss_id: npt.NDArray[np.int8]
+    sv_id: npt.NDArray[np.int16]
+    group: npt.NDArray[np.int8]
+    lam_m: Arr
+    first_slot: dict[int, int]
+    """gnssId → the slot of its svId sv_min."""
+
+    @property
+    def n(self) -> int:
+        """Number of slots."""
+        return int(self.sv_id.shape[0])
+
+    @property
+    def gps_only(self) -> bool:
+        return self.systems == "G"
+
+    def slots_of(self, gnss_id: npt.NDArray[np.int8], sv_id: npt.NDArray[np.int16]) -> npt.NDArray[np.int64]:
+        """Slot of each (gnssId, svId) entry, −1 where the layout has none (another system, a number out of range)."""
+        out = np.full(gnss_id.shape[0], -1, np.int64)
+        for g, first in self.first_slot.items():
+            sysd = SYSTEMS_BY_LETTER[_LETTER[g]]
+            m = (gnss_id == g) & (sv_id >= sysd.sv_min) & (sv_id <= sysd.sv_max)
+            out[m] = first + sv_id[m].astype(np.int64) - sysd.sv_min
+        return out
+
+    def letter(self, slot: int) -> str:
+        """RINEX id of a slot ("G05", "R07")."""
+        return f"{_LETTER[int(self.gnss_id[slot])]}{int(self.sv_id[slot]):02d}"
+
+
+_LETTER = {s.gnss_id: s.letter for s in SYSTEMS_BY_LETTER.values()}
+
+
+@functools.lru_cache(maxsize=16)
+def slot_layout(systems: str) -> SlotLayout:
+    """The layout of constellations `systems` (any order of RINEX letters; GPS first in the slots)."""
+    letters = "".join(c for c in SYSTEM_ORDER if c in systems)
+    if not letters:
+        raise ValueError(f"no constellation in {systems!r}")
+    gid, sv, grp, lam = [], [], [], []
+    first: dict[int, int] = {}
+    for k, c in enumerate(letters):
+        s = SYSTEMS_BY_LETTER[c]
+        first[s.gnss_id] = len(sv)
+        nums = list(range(s.sv_min, s.sv_max + 1))
+        gid += [s.gnss_id] * len(nums)
+        sv += nums
+        grp += [k] * len(nums)
+        w = l1_wavelength_m(s.gnss_id)
+        lam += [np.nan if w is None else w] * len(nums)
+    arrays = (np.array(gid, np.int8), np.array(sv, np.int16), np.array(grp, np.int8), np.array(lam, float))
+    for a in arrays:
+        a.flags.writeable = False
+    return SlotLayout(letters, *arrays, first)
+
+
+def wavelengths(layout: SlotLayout, epochs: list[ObsEpoch], nav: BroadcastNavigation | None) -> Arr:
+    """Carrier wavelength (m) per slot for these epochs: the layout's, GLONASS from each satellite's frequency
+    channel (the observations' glo_fcn, else the broadcast ephemeris'); NaN for a GLONASS slot whose channel
+    is unknown (its phase cannot be used)."""
+    lam = layout.lam_m.copy()
+    if GNSS_GLONASS not in layout.first_slot:
+        return lam
+    channel: dict[int, int] = nav.glonass_channels() if nav is not None else {}
+    for e in epochs:
+        if e.glo_fcn.shape[0] != len(e):
+            continue
+        m = (e.gnss_id == GNSS_GLONASS) & (e.glo_fcn != FCN_NONE)
+        channel.update(zip(e.sv_id[m].tolist(), e.glo_fcn[m].tolist(), strict=True))
+    first = layout.first_slot[GNSS_GLONASS]
+    for sv, k in channel.items():
+        w = l1_wavelength_m(GNSS_GLONASS, k)
+        if w is not None and 1 <= sv <= 24:
+            lam[first + sv - 1] = w
+    return lam
+
+
+def slot_arrays(layout: SlotLayout, epochs: list[ObsEpoch]) -> tuple[Arr, Arr, Arr, npt.NDArray[np.uint8]]:
+    """The epochs' pseudoranges (m), phases (cycles), Dopplers (Hz) (NaN where absent) and LLI bits (0 where
+    absent) on the layout's slots, one row per epoch."""
+    shape = (len(epochs), layout.n)
+    pr, cp, dop = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
+    lli = np.zeros(shape, np.uint8)
+    for k, e in enumerate(epochs):
+        s = layout.slots_of(e.gnss_id, e.sv_id)
+        m = s >= 0
+        s = s[m]
+        pr[k, s], cp[k, s], dop[k, s], lli[k, s] = e.pr_m[m], e.cp_cyc[m], e.dop_hz[m], e.lli[m]
+    return pr, cp, dop, lli
+
+
+def satellite_states_layout(layout: SlotLayout, store: EphemerisStore, nav: BroadcastNavigation | None,
+                            t_rx_ns: list[int], pr_m: Arr) -> list[SatState]:
+    """Satellite states (at transmission: t_rx − pr/c − satellite clock, as RTKLIB satposs) on every slot of E
+    epochs: receiver times `t_rx_ns` (E,) in ns since the GPS epoch, pseudoranges `pr_m` (E, n). GPS from the
+    vectorised GPS store (the GPS-only engine's numbers), the other constellations from `nav` one satellite
+    at a time; not ok where no healthy ephemeris is held."""
+    n_ep, n = pr_m.shape
+    prns = layout.sv_id
+    g0 = layout.first_slot.get(GNSS_GPS)
+    gps = None
+    if g0 is not None:
+        gps = satellite_states_batch(store, prns[g0:g0 + 32], t_rx_ns, pr_m[:, g0:g0 + 32])
+        if layout.gps_only:
+            return gps
+    pos = np.zeros((n_ep, n, 3))
+    vel = np.zeros((n_ep, n, 3))
+    clk = np.zeros((n_ep, n))
+    drift = np.zeros((n_ep, n))
+    var = np.zeros((n_ep, n))
+    ok = np.zeros((n_ep, n), bool)
+    if gps is not None:
+        for k, s in enumerate(gps):
+            pos[k, g0:g0 + 32], vel[k, g0:g0 + 32], clk[k, g0:g0 + 32] = s.pos_m, s.vel_m_s, s.clock_s
+            drift[k, g0:g0 + 32], var[k, g0:g0 + 32], ok[k, g0:g0 + 32] = s.drift_s_s, s.var_m2, s.ok
+    if nav is not None and len(nav):
+        other = layout.gnss_id != GNSS_GPS
+        for k in range(n_ep):
+            t_rx = GpsTime.from_total_ns(int(t_rx_ns[k]))
+            for j in np.flatnonzero(other & np.isfinite(pr_m[k])).tolist():
+                t0 = t_rx.add_s(-float(pr_m[k, j]) / CLIGHT_M_S)
+                eph = nav.select(int(layout.gnss_id[j]), int(prns[j]), t0)
+                if eph is None:
+                    continue
+                # the satellite clock at t_rx − pr/c sets the transmission time (one step is < 1 ns off)
+                dts = glonass_clock_s(eph, t0) if isinstance(eph, GlonassEphemeris) else eph_clock_s(eph, t0)
+                s = satellite_state(eph, t0.add_s(-dts))
+                if not s.healthy:
+                    continue
+                pos[k, j], vel[k, j], clk[k, j], drift[k, j], var[k, j] = s.pos_m, s.vel_m_s, s.clock_s, \
+                    s.drift_s_s, s.var_m2
+                ok[k, j] = True
+    return [SatState(prns, pos[k], vel[k], clk[k], drift[k], var[k], ok[k]) for k in range(n_ep)]
+
+
+def lambda_ratio_to_gps(lam_m: Arr) -> Arr:
+    """λ / λ(GPS L1) per slot: turns a slot's cycles into GPS-L1-equivalent cycles (1.0 exactly for GPS)."""
+    return lam_m / LAMBDA_L1_M
