@@ -345,7 +345,7 @@ def test_phase_fit_equals_the_phase_rows_of_the_dd_system_to_the_bit(monkeypatch
     def both(st, ctx, x, use):  # type: ignore[no-untyped-def]
         rows, ok, ref = lean(st, ctx, x, use)
         dd, _ = rtkpos._ddres(st, ctx, x, use, np.zeros(NSAT, bool), False, jacobian=False)
-        assert rows.tobytes() == dd.slot.tobytes() and (dd.kind == 0).all() and ref == dd.ref_phase
+        assert rows.tobytes() == dd.slot.tobytes() and (dd.kind == 0).all() and (ref == dd.ref_phase).all()
         assert ok.tobytes() == rtkpos._valid_residuals(dd, st.options.validation_sigma_factor).tobytes()
         calls[0] += 1
         return rows, ok, ref
