@@ -3,13 +3,26 @@
 Two threads beside the recorder's own, so the engine can never delay or block recording:
 
     radio thread:   radio ByteStream → radio journal (`<flight>/radio/`, the recorder's `Journal`: bytes are
-                    on their way to disk before anything parses them) → framer → RTCM3 (1002/1004/1074/1077,
-                    1005/1006, 1019) or a UBX relay (RXM-RAW/RAWX, SFRB(X), AID-EPH) → latest base epochs,
-                    base position, ephemerides; reopens a vanished radio with backoff
-    engine thread:  rover items from a bounded queue (`submit`, non-blocking: a full queue drops and counts)
-                    → `rtk_pos` with the latest base epoch at or before the rover epoch (waiting at most
-                    `base_wait_s` for the matching one, the radio's latency) → `<flight>/solution.pos`
-                    → `snapshot()` (Q, ratio, satellites, age of corrections, baseline, time to first fix)
+                    on their way to disk before anything parses them) → framer → RTCM3 (1002/1004, MSM4-7 of
+                    GPS, GLONASS, Galileo, BeiDou, QZSS, 1005/1006, 1019/1020/1042/1044/1045/1046, 1230) or a
+                    UBX relay (RXM-RAW/RAWX, SFRB(X), AID-EPH) → latest base epochs (one per time, reassembled
+                    from its messages), base position, ephemerides; reopens a vanished radio with backoff
+    engine thread:  rover items from a bounded queue (`submit` / `submit_frame`, non-blocking: a full queue
+                    drops and counts) → `rtk_pos` with the latest whole base epoch at or before the rover epoch
+                    (waiting at most `base_wait_s` for the matching one, the radio's latency) →
+                    `<flight>/solution.pos` → `snapshot()` (Q, ratio, satellites, systems, age of corrections,
+                    baseline, time to first fix)
+
+Constellations: the engine's `systems` are decided at the rover's first epoch from the raw message its receiver
+sends (`RtkServiceOptions.receiver_systems`, from `receiver.gnss` in the composition root: an M8T's RXM-RAWX
+every system it is set to track, a LEA-6T's RXM-RAW GPS). GPS LNAV goes to the engine's EphemerisStore, every
+other constellation's ephemerides (rover RXM-SFRBX, base RTCM) to `Nav.broadcast`. A base epoch one of whose
+constellation messages was lost on the radio is never differenced with: the engine takes one base epoch at one
+time, so each rover epoch gets the latest epoch holding every engine constellation the base sends
+(`onboard.receiver.base_epochs.pairing_base_epoch`), older but whole, carried forward by the engine. On the
+M8P Galway static rover and its base stream (about a quarter of the GPS and of the GLONASS messages lost;
+the engine over all 1205 epochs, ephemerides known from the start) GPS+GLONASS fixed 1194 epochs this way, 949
+when paired with the newest epoch holding GPS (GLONASS missing from a third of them), 1160 on GPS alone.
 
 Radio gaps: while the newest base epoch is at most `max_base_age_s` old (default 30 s, settings key
 `rtk.max_base_age_s`, RTKLIB's maxtdiff) the engine keeps differencing the rover with it, carried forward
@@ -36,7 +49,7 @@ from __future__ import annotations
 import logging
 import queue
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -48,21 +61,26 @@ from onboard.errors import LinkLost
 from onboard.gnsstime import GpsTime
 from onboard.hw.ports import ByteStream, Clock, SystemClock
 from onboard.logger.journal import RADIO_DIR, SOLUTION_NAME, Journal, JournalOptions
-from onboard.receiver.base_epochs import RtcmCollector
+from onboard.receiver.base_epochs import BaseEpoch, RtcmCollector, pairing_base_epoch
 from onboard.receiver.framing import Frame, Protocol, StreamFramer
 from onboard.receiver.rtcm import BasePosition
+from onboard.receiver.rtcm_nav import RTCM_NAV_MESSAGES, RtcmNavError, decode_nav_message
 from onboard.recorder.feature import FlightContext, RecorderFeature
 from onboard.recorder.status import RTK_STATUS_NAME
 from onboard.rtk.ephemeris import EphemerisStore
+from onboard.rtk.gnss import SYSTEMS_BY_LETTER, system
+from onboard.rtk.navstore import AnyEphemeris, BroadcastNavigation
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.rtkpos import Nav, RtkState, rtk_init, rtk_pos
-from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, Ephemeris, ObsEpoch, Solution
+from onboard.rtk.types import GNSS_GPS, Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, Ephemeris, ObsEpoch, Solution
 
 log = logging.getLogger(__name__)
 
 Arr = npt.NDArray[np.float64]
 GAP_NO_WAIT_S = 2.0
 """Base data this much (s) later than its own interval are in a radio gap: the engine stops waiting for them."""
+RXM_RAW, RXM_RAWX, RXM_SFRBX = (0x02, 0x10), (0x02, 0x15), (0x02, 0x13)
+RAW_MESSAGE_NAMES = {RXM_RAW: "RXM-RAW", RXM_RAWX: "RXM-RAWX"}
 
 
 @dataclass(frozen=True)
@@ -94,6 +112,12 @@ class RtkServiceOptions:
     lock_rules: Any = None
     """`onboard.receiver.decode.LockTrackerOptions` for the rover's RXM-RAWX phase validity and slips (None:
     RTKLIB's Gen8 thresholds, the same rules `onboard rtk` applies to a journal)."""
+    receiver_systems: Mapping[str, str] = field(default_factory=dict)
+    """The engine's `systems` by the rover's raw observation message ("RXM-RAWX": u-blox 8, "RXM-RAW": u-blox 6),
+    which the composition root derives from `receiver.gnss` (`onboard.receiver.profiles.rtk_systems`) unless
+    `[rtk.engine] systems` is set. The engine starts on those of the first raw message the rover sends (which
+    receiver is connected is known only then: `receiver.model = "auto"`, an M8 fallen back to RXM-RAW); a
+    message not listed, or no frame seen (items submitted directly): `engine.systems`."""
 
 
 @dataclass
@@ -115,6 +139,11 @@ class RtkStatus:
     q: int = Q_NONE
     ratio: float = 0.0
     ns: int = 0
+    systems: str | None = None
+    """The engine's constellations (RINEX letters), once the first rover epoch decided them."""
+    base_systems: str | None = None
+    """The constellations of the base epoch the last solution was differenced with (RINEX letters)."""
+    base_ephemerides: int = 0
     age_s: float | None = None
     baseline_m: float | None = None
     max_first_fix_baseline_km: float | None = None
@@ -143,29 +172,41 @@ class BaseStream:
 
     RTCM3 frames go through the post-processing collector (`onboard.receiver.base_epochs.RtcmCollector`: the
     same merge, order and week rules as `onboard rtk` on the radio journal; GPS week from the rover's first
-    epoch, then from the stream); UBX frames (a raw relay) through the UBX decoder with RTKLIB's lock rules,
-    their GPS part into the same collector. `epochs` keeps the newest `buffer_epochs`.
+    epoch, then from the stream): every constellation's MSM, one epoch reassembled from its messages
+    (`EpochAssembler`); 1019 and the other constellations' ephemerides (1020, 1042, 1044, 1045, 1046:
+    `onboard.receiver.rtcm_nav`). UBX frames (a raw relay) through the UBX decoder with RTKLIB's lock rules:
+    RXM-RAWX of every system as whole epochs, GPS subframes / AID-EPH and the other systems' RXM-SFRBX
+    (`onboard.rtk.navdecode`). `epochs` keeps the newest `buffer_epochs`.
     """
 
     def __init__(self, buffer_epochs: int = 30) -> None:
         from onboard.receiver.decode import DecodeStats, LockTracker
+        from onboard.receiver.sfrbx import DEFAULT_LEAP_S
         from onboard.rtk.lnav import LnavAssembler
+        from onboard.rtk.navdecode import NavMessageDecoder
 
         self.framer = StreamFramer()
         self.collector = RtcmCollector(None, max_epochs=buffer_epochs)
         self.ubx_stats = DecodeStats()
         self.tracker = LockTracker()
         self.lnav = LnavAssembler()
+        self.nav_decoder = NavMessageDecoder(DEFAULT_LEAP_S)
+        self.leap_s = DEFAULT_LEAP_S
+        """GPST − UTC (s) for GLONASS times: the rover's, once it reports it (the service sets it)."""
+        self.ephemerides: list[AnyEphemeris] = []
+        """Every ephemeris received (RTCM 1019/1020/1042/1044/1045/1046, or a UBX relay's), in arrival order."""
+        self.nav_errors = 0
         self.frames = 0
 
     @property
     def epochs(self) -> list[ObsEpoch]:
-        """The newest base epochs, in time order."""
-        return self.collector.out.epochs
+        """The newest whole base epochs (every system; closed: their last message arrived, or the next
+        epoch's first), in time order."""
+        return [e.obs for e in self.collector.out.gnss_epochs]
 
     @property
     def epoch_count(self) -> int:
-        """Base epochs received since the start."""
+        """Base epochs with GPS observations received since the start."""
         return self.collector.epoch_count
 
     @property
@@ -173,14 +214,43 @@ class BaseStream:
         """The last base position (1005/1006) received."""
         return self.collector.out.base_position
 
-    @property
-    def ephemerides(self) -> list[Ephemeris]:
-        """Every ephemeris received (1019, or LNAV subframes / AID-EPH of a UBX relay), in arrival order."""
-        return self.collector.out.ephemerides
+    def candidates(self) -> list[BaseEpoch]:
+        """The buffered base epochs, in time order, and last the one still open (waiting for its last message)."""
+        pending = self.collector.assembler.pending
+        closed = self.collector.out.gnss_epochs
+        return closed if pending is None else [*closed, pending]
+
+    def pair(self, t: GpsTime, tolerance_s: float, systems: frozenset[int]) -> ObsEpoch | None:
+        """The base epoch for rover time `t` (`pairing_base_epoch`: the latest holding every one of `systems`,
+        u-blox gnssIds, that the base sends) restricted to `systems`; None when none is buffered."""
+        ep = pairing_base_epoch(self.candidates(), t, systems, tolerance_s)
+        if ep is None:
+            return None
+        if systems == {GNSS_GPS}:
+            return ep.obs.gps_only()
+        return ep.obs.select(np.isin(ep.obs.gnss_id, sorted(systems)))
+
+    def waiting(self, t: GpsTime, tolerance_s: float, systems: frozenset[int], part_wait_over: bool) -> bool:
+        """Whether a base epoch for rover time `t` may still arrive: the open epoch lacks some of `systems` the
+        base sends (`part_wait_over`: its first message came `base_wait_s` ago, the rest is lost), or the next
+        epoch is due by `t` and the radio is not in a gap."""
+        eps = self.candidates()
+        if not eps:
+            return True
+        newest = eps[-1]
+        if not part_wait_over and not newest.complete and newest.time <= t.add_s(tolerance_s):
+            sent = frozenset().union(*(e.systems for e in eps)) & systems
+            if not sent <= newest.systems:
+                return True
+        # the base may send at a lower rate than the rover: wait only if its next epoch is due by t
+        interval_s = newest.time.diff_s(eps[-2].time) if len(eps) >= 2 else 0.0
+        if newest.time.diff_s(t) + interval_s > tolerance_s:
+            return False
+        return t.diff_s(newest.time) <= interval_s + GAP_NO_WAIT_S  # beyond: a radio gap, no waiting
 
     def feed(self, data: bytes, reference: GpsTime | None) -> int:
-        """Decode what `data` completes; returns the number of new base epochs. `reference` (the latest rover
-        epoch time, None before the first) gives the collector its week reference once."""
+        """Decode what `data` completes; returns the number of new base epochs with GPS. `reference` (the latest
+        rover epoch time, None before the first) gives the collector its week reference once."""
         if reference is not None:
             self.collector.set_reference(reference)
         before = self.collector.epoch_count
@@ -193,26 +263,47 @@ class BaseStream:
 
         self.frames += 1
         if frame.protocol is Protocol.RTCM3:
-            self.collector.add(frame)
+            got = self.collector.add(frame)
+            if isinstance(got, Ephemeris):
+                self.ephemerides.append(got)
+            elif frame.msg_id in RTCM_NAV_MESSAGES and self.collector.reference is not None:
+                try:
+                    eph = decode_nav_message(frame, self.collector.reference, self.leap_s)
+                except RtcmNavError as exc:
+                    self.nav_errors += 1
+                    log.debug("base %s", exc)
+                    return
+                if eph is not None:
+                    self.ephemerides.append(eph)
             return
         if frame.protocol is not Protocol.UBX:
             return
+        if (frame.msg_class, frame.msg_id) == RXM_SFRBX:
+            self._relay_sfrbx(frame)
         item: Any = decode_frame(frame, self.ubx_stats)
         if isinstance(item, SubframeWords):
             item = ephemeris_from_subframe(self.lnav, item, self.ubx_stats.reference_week)
         if isinstance(item, ObsEpoch):
-            # the engine is GPS L1 (RTCM epochs are GPS already): a relay's other systems are left out here
-            self.collector.add_epoch(self.tracker.update(item).gps_only())
+            self.collector.add_whole_epoch(self.tracker.update(item))
         elif isinstance(item, Ephemeris):
             self.ephemerides.append(item)
 
-    def latest_at(self, t: GpsTime, tolerance_s: float) -> ObsEpoch | None:
-        """Latest base epoch with time ≤ t + tolerance (None when none is buffered)."""
-        limit = t.add_s(tolerance_s)
-        for ep in reversed(self.epochs):
-            if ep.time <= limit:
-                return ep
-        return None
+    def _relay_sfrbx(self, frame: Frame) -> None:
+        """A relay's RXM-SFRBX of another system than GPS (GPS: decode_frame's LNAV path) → ephemerides."""
+        from onboard.receiver.decode import DecodeError
+        from onboard.receiver.sfrbx import decode_sfrbx
+
+        reference = self.collector.reference
+        try:
+            m = decode_sfrbx(frame.payload)
+        except DecodeError:
+            return
+        if m.gnss_id == GNSS_GPS or reference is None:
+            return
+        self.nav_decoder.leap_s = self.leap_s
+        eph = self.nav_decoder.add(m.gnss_id, m.sv_id, m.sig_id, m.freq_id, m.words, reference)
+        if eph is not None:
+            self.ephemerides.append(eph)
 
 
 class RtkService:
@@ -241,6 +332,10 @@ class RtkService:
         self.flight_dir: Path | None = None
         self.solutions_written = 0
         self._last_base_time: GpsTime | None = None
+        self._raw_message: str | None = None  # the rover's raw observation message, once seen (submit_frame)
+        self._pending_key: int | None = None  # the open base epoch (its time, ns) and when it opened
+        self._pending_since_ns = 0
+        self._systems_ids = frozenset({GNSS_GPS})
 
     # -- lifecycle ----------------------------------------------------------------------------------------
     def start(self, flight_dir: Path) -> None:
@@ -251,7 +346,7 @@ class RtkService:
         new_file = not (self.flight_dir / SOLUTION_NAME).exists()
         self._pos_file = open(self.flight_dir / SOLUTION_NAME, "a", encoding="ascii")  # noqa: SIM115
         if new_file:
-            info = ["program   : directgeo onboard real-time RTK (GPS L1)", "pos mode  : kinematic",
+            info = ["program   : directgeo onboard real-time RTK (L1)", "pos mode  : kinematic",
                     f"elev mask : {np.rad2deg(self.engine_options.elmask_rad):.1f} deg",
                     f"amb res   : {self.engine_options.ar_mode}", ""]
             for line in pos_header_lines(info=info):
@@ -298,6 +393,35 @@ class RtkService:
                 self._status.dropped_epochs += 1
             return False
 
+    def submit_frame(self, frame: Frame) -> None:
+        """Hand over one rover frame (from the recorder's loop: never blocks): which raw observation message the
+        rover sends (RXM-RAWX or RXM-RAW: the engine's systems, see `RtkServiceOptions.receiver_systems`) and the
+        RXM-SFRBX of the systems other than GPS (GPS subframes come decoded, through `submit`)."""
+        key = (frame.msg_class, frame.msg_id)
+        if frame.protocol is not Protocol.UBX:
+            return
+        if key in RAW_MESSAGE_NAMES:
+            name = RAW_MESSAGE_NAMES[key]
+            if name != self._raw_message:
+                try:
+                    self._queue.put_nowait(_RawMessage(name))
+                    self._raw_message = name
+                except queue.Full:
+                    pass  # the next raw frame tells it again
+        elif key == RXM_SFRBX:
+            from onboard.receiver.decode import DecodeError
+            from onboard.receiver.sfrbx import decode_sfrbx
+
+            try:
+                words = decode_sfrbx(frame.payload)
+            except DecodeError:
+                return
+            if words.gnss_id != GNSS_GPS:
+                try:
+                    self._queue.put_nowait(words)
+                except queue.Full:
+                    pass  # broadcast again within 30 s (GLONASS) to 12.5 min (LNAV-like frames)
+
     def snapshot(self) -> dict[str, Any]:
         """The current RTK status as a JSON-able dict."""
         return self._status.to_json()
@@ -335,8 +459,13 @@ class RtkService:
                 continue
             st.radio_bytes += len(data)
             with self._cond:
-                new = self._base.feed(data, self._reference)
-                if new:
+                frames = self._base.frames
+                self._base.feed(data, self._reference)
+                pending = self._base.collector.assembler.pending
+                key = None if pending is None else pending.time.total_ns
+                if key != self._pending_key:
+                    self._pending_key, self._pending_since_ns = key, self.clock.monotonic_ns()
+                if self._base.frames != frames:
                     self._cond.notify_all()
             st.base_frames = self._base.frames
             st.base_epochs = self._base.epoch_count
@@ -347,6 +476,14 @@ class RtkService:
         st.radio_open = False
 
     # -- engine thread --------------------------------------------------------------------------------------
+    def _choose_systems(self, raw_message: str | None) -> None:
+        """The engine's systems for the rover's raw message (RtkServiceOptions.receiver_systems), at its start."""
+        systems = self.options.receiver_systems.get(raw_message or "", self.options.engine.systems)
+        self.engine_options = replace(self.engine_options, systems=systems)
+        self._systems_ids = frozenset(SYSTEMS_BY_LETTER[c].gnss_id for c in systems)
+        self._status.systems = systems
+        log.info("real-time RTK: rover sends %s: systems %s", raw_message or "observations", systems)
+
     def _new_state(self) -> RtkState:
         """The engine state at the start: from the surveyed take-off point (static) when one is set."""
         takeoff = self.options.takeoff_position_ecef_m
@@ -361,13 +498,17 @@ class RtkService:
             SubframeWords,
             ephemeris_from_subframe,
         )
+        from onboard.receiver.sfrbx import DEFAULT_LEAP_S, SfrbxWords
         from onboard.rtk.lnav import LnavAssembler
+        from onboard.rtk.navdecode import NavMessageDecoder
 
-        state = self._new_state()
+        state: RtkState | None = None  # started at the first rover epoch, on the systems of its receiver
+        raw_message: str | None = None
         store = EphemerisStore()
-        nav = Nav(store)
+        nav = Nav(store, None, BroadcastNavigation())
         tracker = LockTracker(self.options.lock_rules or LockTrackerOptions())
         lnav = LnavAssembler()
+        nav_decoder = NavMessageDecoder(DEFAULT_LEAP_S)
         n_base_eph = 0
         outage_epochs = 0
         first_time: GpsTime | None = None
@@ -376,8 +517,14 @@ class RtkService:
                 item = self._queue.get(timeout=0.2)
             except queue.Empty:
                 continue
+            if isinstance(item, _RawMessage):
+                if state is not None and item.name != raw_message:
+                    log.warning("rover now sends %s: the engine keeps its systems %s", item.name,
+                                self.engine_options.systems)
+                raw_message = item.name
+                continue
             if isinstance(item, Ephemeris):
-                store.add(item)
+                _add_ephemeris(nav, item)
                 continue
             if isinstance(item, SubframeWords):
                 week = self._reference.week if self._reference is not None else None
@@ -385,17 +532,32 @@ class RtkService:
                 if eph is not None:
                     store.add(eph)
                 continue
+            if isinstance(item, SfrbxWords):
+                if self._reference is not None:
+                    eph_other = nav_decoder.add(item.gnss_id, item.sv_id, item.sig_id, item.freq_id, item.words,
+                                                self._reference)
+                    if eph_other is not None:
+                        _add_ephemeris(nav, eph_other)
+                continue
             rover = tracker.update(item)
             self._reference = rover.time
+            if rover.leap_s is not None and rover.leap_s != nav_decoder.leap_s:
+                nav_decoder.leap_s = rover.leap_s
+                with self._cond:
+                    self._base.leap_s = rover.leap_s
+            if state is None:
+                self._choose_systems(raw_message)
+                state = self._new_state()
             if first_time is None:
                 first_time = rover.time
             base, base_pos = self._wait_base(rover.time)
             with self._cond:
                 ephs = self._base.ephemerides[n_base_eph:]
                 n_base_eph = len(self._base.ephemerides)
-            for eph in ephs:
-                store.add(eph)
-            if len(store) == 0:
+            for base_eph in ephs:
+                _add_ephemeris(nav, base_eph)
+            self._status.base_ephemerides = n_base_eph
+            if len(store) == 0 and not len(nav.broadcast or ()):
                 continue
             if base is None and state.initialized:
                 outage_epochs += 1
@@ -453,25 +615,23 @@ class RtkService:
         return True
 
     def _wait_base(self, t: GpsTime) -> tuple[ObsEpoch | None, Arr | None]:
-        """The base epoch for rover time `t`: wait up to `base_wait_s` for one at ≥ t − tolerance to arrive."""
+        """The base epoch for rover time `t` (`BaseStream.pair`: the latest whole one for the engine's systems):
+        wait up to `base_wait_s` for the one at ≥ t − tolerance to arrive, and for the rest of an epoch whose
+        first message arrived less than `base_wait_s` ago."""
         tol = self.engine_options.pair_tolerance_s
-        deadline = self.clock.monotonic_ns() + round(self.options.base_wait_s * 1e9)
+        wait_ns = round(self.options.base_wait_s * 1e9)
+        deadline = self.clock.monotonic_ns() + wait_ns
+        systems = self._systems_ids
         with self._cond:
             while True:
-                eps = self._base.epochs
-                newest = eps[-1] if eps else None
-                if newest is not None:
-                    # the base may send at a lower rate than the rover: wait only if its next epoch is due by t
-                    interval_s = newest.time.diff_s(eps[-2].time) if len(eps) >= 2 else 0.0
-                    if newest.time.diff_s(t) + interval_s > tol:
-                        break
-                    if t.diff_s(newest.time) > interval_s + GAP_NO_WAIT_S:
-                        break  # a radio gap: waiting for each rover epoch would only make the engine lag
-                left = (deadline - self.clock.monotonic_ns()) / 1e9
+                now = self.clock.monotonic_ns()
+                if not self._base.waiting(t, tol, systems, now - self._pending_since_ns >= wait_ns):
+                    break
+                left = (deadline - now) / 1e9
                 if left <= 0 or self._stop.is_set():
                     break
                 self._cond.wait(min(left, 0.1))
-            base = self._base.latest_at(t, tol)
+            base = self._base.pair(t, tol, systems)
             pos = self._base.position
         if self.options.base_pos_ecef_m is not None:
             base_pos: Arr | None = np.array(self.options.base_pos_ecef_m, float)
@@ -489,6 +649,8 @@ class RtkService:
         st = self._status
         st.epochs += 1
         st.q, st.ratio, st.ns = int(sol.q), float(sol.ratio), int(sol.ns)
+        st.base_systems = None if base is None else "".join(
+            sorted((system(g).letter for g in base.systems()), key="GRECJ".find))
         # the age of the newest base epoch, also once it is too old to be used (the operator sees the gap)
         st.age_s = float(sol.age_s) if base is not None else (
             None if self._last_base_time is None else round(sol.time.diff_s(self._last_base_time), 3))
@@ -513,6 +675,21 @@ class RtkService:
             log.error("solution file: %s", exc)
 
 
+@dataclass(frozen=True)
+class _RawMessage:
+    """Queue marker: the rover sends this raw observation message ("RXM-RAWX" or "RXM-RAW")."""
+
+    name: str
+
+
+def _add_ephemeris(nav: Nav, eph: AnyEphemeris) -> None:
+    """GPS LNAV into the engine's EphemerisStore, every other constellation's into `nav.broadcast`."""
+    if isinstance(eph, Ephemeris) and eph.gnss_id == GNSS_GPS:
+        nav.store.add(eph)
+    elif nav.broadcast is not None:
+        nav.broadcast.add(eph)
+
+
 class RtkFeature(RecorderFeature):
     """Real-time RTK as a recorder feature: `RtkService` started when the flight opens (radio journal and
     solution.pos in the flight directory), fed every decoded item, stopped when the flight closes; its
@@ -534,6 +711,9 @@ class RtkFeature(RecorderFeature):
             self.rtk.on_event = lambda record: flight.post(append, record)  # events.jsonl, on the recorder's loop
         self.rtk.start(flight.flight_dir)
         self._started = True
+
+    def on_frame(self, frame: Frame) -> None:
+        self.rtk.submit_frame(frame)
 
     def on_decoded(self, item: Any) -> None:
         self.rtk.submit(item)

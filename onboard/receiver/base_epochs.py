@@ -17,7 +17,7 @@ base epoch that has it (`latest_base_epoch`) instead of a rover epoch meeting ha
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -141,6 +141,11 @@ class EpochAssembler:
         """Close the open epoch, if any (end of the stream): as incomplete."""
         return [self._close(complete=False)] if self._open is not None else []
 
+    @property
+    def pending(self) -> BaseEpoch | None:
+        """The epoch still open (its last message not yet arrived), as it stands (incomplete); None if none."""
+        return None if self._open is None else BaseEpoch(self._open[0], tuple(self._open[1]), False)
+
     def _close(self, complete: bool) -> BaseEpoch:
         assert self._open is not None
         obs, numbers = self._open
@@ -148,6 +153,28 @@ class EpochAssembler:
         for g in obs.systems():
             self._last_closed[g] = obs.time
         return BaseEpoch(obs, tuple(numbers), complete)
+
+
+def pairing_base_epoch(epochs: Sequence[BaseEpoch], t: GpsTime, systems: frozenset[int],
+                       tolerance_s: float = 0.0) -> BaseEpoch | None:
+    """The base epoch a single-base-epoch engine pairs with rover time `t`: the latest one not after `t` +
+    `tolerance_s` that holds every system of `systems` (the engine's, u-blox gnssIds) which any of `epochs`
+    holds; None if there is none (or the epochs hold none of `systems`).
+
+    A half epoch (one system's message lost on the radio) is passed over for the whole one before it: the engine
+    evaluates all of a base epoch at its one time, so a GPS part of the epoch before cannot stand in for the
+    lost one; the older epoch is carried forward by the engine's correction rates (`max_age_s`). A system that
+    none of `epochs` holds (a base that does not send Galileo, or whose GLONASS messages have all been lost for
+    as long as `epochs` reach back) is not waited for.
+    """
+    sent = frozenset().union(*(e.systems for e in epochs)) & systems
+    if not sent:
+        return None
+    limit = t.add_s(tolerance_s)
+    for ep in reversed(epochs):
+        if ep.time <= limit and sent <= ep.systems:
+            return ep
+    return None
 
 
 def latest_base_epoch(epochs: list[BaseEpoch], t: GpsTime, gnss_id: int, max_age_s: float,
@@ -228,6 +255,14 @@ class RtcmCollector:
     def flush(self) -> None:
         """End of the stream: close the epochs still waiting for a message (incomplete)."""
         self._closed(self.assembler.flush())
+
+    def add_whole_epoch(self, epoch: ObsEpoch) -> bool:
+        """One epoch of every system at once (a raw UBX relay's RXM-RAWX): its GPS part by `add_epoch`'s rules,
+        the epoch itself into `out.gnss_epochs` as complete; True if its GPS part is a new epoch."""
+        new = self.add_epoch(epoch.gps_only())
+        if len(epoch):
+            self._closed([BaseEpoch(epoch, (), True)])
+        return new
 
     def _closed(self, epochs: list[BaseEpoch]) -> None:
         out = self.out

@@ -161,6 +161,29 @@ class ReceiverOptions:
         return tuple(g.strip() for g in self.gnss.split(",") if g.strip())
 
 
+RTK_LETTERS: Mapping[str, str] = MappingProxyType({"GPS": "G", "GLONASS": "R", "Galileo": "E", "BeiDou": "C",
+                                                   "QZSS": "J"})
+"""`ReceiverOptions.gnss` names → RINEX letters of the constellations the RTK engine uses (SBAS, IMES: none)."""
+RAW_MESSAGES = ("RXM-RAW", "RXM-RAWX")
+
+
+def rtk_systems(raw_message: str, gnss: str) -> str:
+    """The constellations (RINEX letters in "GRECJ" order, `RtkOptions.systems`) a rover's RTK can use, by the raw
+    observation message its receiver sends: "RXM-RAW" (u-blox 6 LEA-6T, or an M8 fallen back to it) GPS only,
+    "G", whatever `gnss` says; "RXM-RAWX" (u-blox 8, the M8T) the systems of its `gnss` setting
+    (`ReceiverOptions.gnss`, e.g. "GPS,GLONASS,Galileo,QZSS" → "GREJ"). ValueError for another message or an
+    RXM-RAWX setting without any of them."""
+    if raw_message == "RXM-RAW":
+        return "G"
+    if raw_message != "RXM-RAWX":
+        raise ValueError(f"raw_message must be one of {RAW_MESSAGES}, got {raw_message!r}")
+    named = {RTK_LETTERS[g] for g in (n.strip() for n in gnss.split(",")) if g in RTK_LETTERS}
+    letters = "".join(c for c in "GRECJ" if c in named)
+    if not letters:
+        raise ValueError(f"gnss {gnss!r} names none of {', '.join(RTK_LETTERS)}: nothing for RTK")
+    return letters
+
+
 @dataclass(frozen=True, slots=True)
 class ProfileEntry:
     """One CFG message of a profile.

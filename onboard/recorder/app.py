@@ -89,8 +89,21 @@ def rtk_feature(settings: Settings, deps: RecorderDeps, base_stream: str,
     options = options or RtkServiceOptions(engine=rtk_engine_options(settings),
                                            max_base_age_s=settings.rtk_max_base_age_s,
                                            preflight_base_timeout_s=settings.rtk_preflight_base_timeout_s,
-                                           takeoff_position_ecef_m=takeoff_position_ecef_m(settings))
+                                           takeoff_position_ecef_m=takeoff_position_ecef_m(settings),
+                                           receiver_systems=rtk_receiver_systems(settings))
     return RtkFeature(options, open_base or open_base_stream(base_stream), deps.clock)
+
+
+def rtk_receiver_systems(settings: Settings) -> dict[str, str]:
+    """The real-time engine's constellations by the rover's raw message (`RtkServiceOptions.receiver_systems`):
+    an RXM-RAWX receiver (M8T) those of `receiver.gnss`, an RXM-RAW one (LEA-6T) GPS; empty (the engine's
+    `[rtk.engine] systems` for any receiver) when that key is set."""
+    from onboard.receiver.profiles import RAW_MESSAGES, rtk_systems
+
+    if "systems" in settings.rtk_engine:
+        return {}
+    gnss = receiver_options(settings).gnss
+    return {raw: rtk_systems(raw, gnss) for raw in RAW_MESSAGES}
 
 
 def autopilot_feature(settings: Settings, clock: Clock | None = None,

@@ -21,7 +21,9 @@ from onboard.hw.serial_port import SerialByteStream
 from onboard.logger.journal import iter_journal_bytes
 from onboard.postpro.inputs import read_base_observations
 from onboard.realtime.service import RADIO_DIR, SOLUTION_NAME, BaseStream, RtkService, RtkServiceOptions
-from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE
+from onboard.receiver.decode import DecodeStats, decode_frame
+from onboard.receiver.framing import iter_frames
+from onboard.rtk.types import GNSS_GPS, Q_FIX, Q_FLOAT, Q_SINGLE
 from tests.conftest import shared_file
 from tests.daemon.helpers import wait_until
 
@@ -62,15 +64,18 @@ def test_base_stream_decodes_rtcm_and_needs_a_rover_time_for_the_week(world) -> 
     # receiver time tags (clock offset included), to the ms of DF004
     tags = [world.observe("base", t0.add_s(k)).time.tow_ns // 1_000_000 for k in range(1, 12)]
     assert [e.time.tow_ns // 1_000_000 for e in bs.epochs] == tags
-    assert bs.latest_at(t0.add_s(5.5), 0.025) is bs.epochs[4]
+    gps = frozenset({GNSS_GPS})
+    assert bs.pair(t0.add_s(5.5), 0.025, gps).time == bs.epochs[4].time
     bs.feed(frames[0], t0)  # the same 1019s with a week reference: decoded
     assert len(bs.ephemerides) == frames[0].count(b"\xd3\x00\x3d")  # 1019: 61-byte payload
-    assert bs.latest_at(t0, 0.025) is None
+    assert bs.pair(t0, 0.025, gps) is None
 
 
 def _run_service(world, tmp_path: Path, gaps, options: RtkServiceOptions | None = None,
                  seconds: int = DURATION_S, announced_ecef_m: tuple[float, ...] | None = None,
-                 events: list | None = None) -> tuple[RtkService, list, Path]:
+                 events: list | None = None, encode=None) -> tuple[RtkService, list, Path, dict]:
+    """`encode` (ObsEpoch → UBX bytes, e.g. hil_sim's rxm_raw): the rover epochs go in as frames, as the recorder
+    hands them over (`submit_frame`, then the decoded item to `submit`); None: the epochs themselves."""
     frames = _base_frames(world, seconds, announced_ecef_m)
     master, slave = os.openpty()
     tty.setraw(slave)
@@ -82,6 +87,18 @@ def _run_service(world, tmp_path: Path, gaps, options: RtkServiceOptions | None 
     flight.mkdir()
     svc.start(flight)
     t0 = world.scenario.start
+    stats = DecodeStats()
+
+    def submit_rover(epoch) -> None:  # type: ignore[no-untyped-def]
+        if encode is None:
+            svc.submit(epoch)
+            return
+        for frame in iter_frames(encode(epoch)):
+            svc.submit_frame(frame)
+            item = decode_frame(frame, stats)
+            if item is not None:
+                svc.submit(item)
+
     for eph in world.ephemerides():
         svc.submit(eph)
     sent = bytearray()
@@ -93,7 +110,7 @@ def _run_service(world, tmp_path: Path, gaps, options: RtkServiceOptions | None 
                 os.write(master, frames[k])
                 sent += frames[k]
             wait_until(lambda: svc._queue.qsize() < 8, 10, "engine to keep up")
-            svc.submit(world.observe("rover", t0.add_s(k)))
+            submit_rover(world.observe("rover", t0.add_s(k)))
             if any(a <= k < b for a, b in gaps):
                 wait_until(lambda: svc.snapshot()["epochs"] == k + 1, 10, "gap epoch solved")  # noqa: B023
                 ages[k] = svc.snapshot()["age_s"]
@@ -133,6 +150,28 @@ def test_radio_gaps_degrade_without_wrong_fixes_and_fix_again_after(world, tmp_p
     again = read_base_observations(flight / RADIO_DIR, t0)
     assert again.kind == "rtcm3" and len(again.epochs) == DURATION_S - sum(b - a for a, b in GAPS_S)
     np.testing.assert_allclose(again.antenna_pos_ecef_m, world.base_ecef_m, atol=1e-3)
+
+
+def test_an_rxm_raw_rover_stays_gps_only_whatever_receiver_gnss_says(world, tmp_path) -> None:
+    """The LEA-6T path: with the systems the shipped configuration derives (GREJ for an RXM-RAWX receiver), a
+    rover sending RXM-RAW runs the GPS engine, with the same options as without any derivation; it fixes."""
+    from hil_sim.ubx_encode import rxm_raw
+    from onboard.recorder.app import rtk_receiver_systems
+    from onboard.recorder.settings import default_config_path, load_settings
+
+    derived = rtk_receiver_systems(load_settings(default_config_path(), environ={}))
+    assert derived["RXM-RAWX"] == "GREJ"
+    runs = []
+    for name, receiver_systems in (("derived", derived), ("plain", {})):
+        (tmp_path / name).mkdir()
+        svc, *_ = _run_service(world, tmp_path / name, [], RtkServiceOptions(
+            base_wait_s=0.3, receiver_systems=receiver_systems), seconds=60, encode=rxm_raw)
+        assert svc.snapshot()["systems"] == "G" and svc.engine_options.systems == "G"
+        runs.append(svc.engine_options)
+    assert runs[0] == runs[1]
+    track = read_pos(tmp_path / "derived" / "flight" / SOLUTION_NAME)
+    err = np.array([np.linalg.norm(p - world.truth(t)["antenna_ecef_m"]) for t, p in zip(track.time, track.pos_ecef_m)])
+    assert len(track.q) == 60 and np.sum(track.q == Q_FIX) >= 30 and not np.any((track.q == Q_FIX) & (err > 0.10))
 
 
 def test_a_surveyed_take_off_point_fixes_the_first_epoch(world, tmp_path) -> None:
