@@ -223,3 +223,33 @@ def test_real_m8p_rover_and_rtcm_base_use_glonass_and_fix(tmp_path) -> None:
     assert snap["base_position_check"].startswith("ok"), summary
     assert more >= 0.9 * fixed.sum(), summary  # GLONASS satellites in the solutions
     assert np.median(err_m) < 0.02 and err_m.max() < 0.10, summary
+
+
+def test_base_stream_takes_every_constellations_ephemerides_and_epochs_from_rtcm() -> None:
+    """A real NTRIP capture (MSM7 of GPS, GLONASS, Galileo, BeiDou with 1019/1020/1042/1046) in radio-sized
+    pieces: every ephemeris decoded, the non-GPS ones for Nav.broadcast, and whole four-system epochs paired."""
+    from onboard.realtime.service import _add_ephemeris
+    from onboard.rtk.ephemeris import EphemerisStore
+    from onboard.rtk.navstore import BroadcastNavigation, sat_key
+    from onboard.rtk.rtkpos import Nav
+    from onboard.rtk.types import GNSS_BEIDOU, GNSS_GALILEO
+
+    data = shared_file("rtcm/pygnssutils_ntrip_encode_none.bin").read_bytes()
+    bs = BaseStream()
+    bs.leap_s = 18
+    reference = GpsTime(2328, 79_200 * 10**9)  # the week and toe of its 1019 (tests/gnss_nav/test_rtcm_nav.py)
+    for k in range(0, len(data), 700):
+        bs.feed(data[k:k + 700], reference)
+    by_system = collections.Counter(sat_key(e)[0] for e in bs.ephemerides)
+    assert by_system == {GNSS_GPS: 33, GNSS_GLONASS: 33, GNSS_GALILEO: 33, GNSS_BEIDOU: 33} and bs.nav_errors == 0
+    nav = Nav(EphemerisStore(), None, BroadcastNavigation())
+    for eph in bs.ephemerides:
+        _add_ephemeris(nav, eph)
+    assert nav.broadcast is not None
+    distinct = collections.Counter(sat_key(e)[0] == GNSS_GPS for e in set(bs.ephemerides))  # a base repeats them
+    assert len(nav.store) == distinct[True] and len(nav.broadcast) == distinct[False] > 0, distinct  # GPS: store
+    four = frozenset({GNSS_GPS, GNSS_GLONASS, GNSS_GALILEO, GNSS_BEIDOU})
+    assert {e.systems for e in bs.candidates()} == {four}
+    last = bs.candidates()[-1].time
+    paired = bs.pair(last, TOLERANCE_S, four | {5})  # QZSS: the engine's, not sent by this base
+    assert paired is not None and paired.time == last and paired.systems() == four
