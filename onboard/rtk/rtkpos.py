@@ -658,8 +658,8 @@ def _watch_standstill(st: RtkState, ctx: EpochContext, valid: npt.NDArray[np.boo
                                 exclude_one=st.static and not ctx.moving)
     slipped = st.standstill.slipped_slot
     if slipped >= 0:
-        log.info("%s: PRN %d slipped while standing (%.2f m over %.0f s without it): its ambiguity restarts", t,
-                 slipped + 1, float(np.linalg.norm(disp.d_m)) if disp is not None else float("nan"),
+        log.info("%s: %s slipped while standing (%.2f m over %.0f s without it): its ambiguity restarts", t,
+                 st.layout.letter(slipped), float(np.linalg.norm(disp.d_m)) if disp is not None else float("nan"),
                  disp.span_s if disp is not None else 0.0)
         _reset_amb(st, np.array([slipped]))
         st.slips += 1
@@ -1306,7 +1306,10 @@ def _exclude_one_phase(st: RtkState, ctx: EpochContext, suspects: npt.NDArray[np
     # a slip the hold absorbed for an epoch or two (a high-leverage satellite, the Doppler test blind in a
     # manoeuvre) biases the prior: leaving out an innocent satellite may then "fit" too, but leaves the
     # slipped one in, with a larger χ² than the true exclusion
-    if len(found) > 1 and found[0][0] * o.fault_exclusion_margin > found[1][0]:
+    if len(found) > 1 and found[0][0] * o.fault_exclusion_margin > found[1][0] \
+            and not (suspects.size == 1 and found[0][1] == int(suspects[0])):
+        # not clearly the best, unless it is the one satellite whose own residual failed: then the data
+        # point at it twice (its misfit, and the best fit without it)
         return -1, (x_prior, p_prior)
     return found[0][1], found[0][2]
 
@@ -1757,7 +1760,7 @@ def _float_update(st: RtkState, ctx: EpochContext) -> None:
                 st.fix_count = 0
                 _udbias(st, rov, bas, ctx.rng_r, ctx.rng_b, use_phase, np.zeros(st.ns, bool), count_lock=False)
                 continue
-            log.debug("%s: phase outlier PRN %d (%.2f m) -> ambiguity reset", ctx.time, slot + 1, dd.v[worst])
+            log.debug("%s: phase outlier %s (%.2f m) -> ambiguity reset", ctx.time, st.layout.letter(slot), dd.v[worst])
             _reset_amb(st, np.array([slot]))
             use_phase[slot] = False
             st.slips += 1
@@ -1793,7 +1796,8 @@ def _check_hold(st: RtkState, ctx: EpochContext) -> None:
         # whether leaving out a single satellite makes the rest fit (fault exclusion) before releasing all
         culprit, fitted = _exclude_one_phase(st, ctx, bad_phase)
         if culprit >= 0:
-            log.info("%s: PRN %d no longer fits the held set: its ambiguity alone restarts", ctx.time, culprit + 1)
+            log.info("%s: %s no longer fits the held set: its ambiguity alone restarts", ctx.time,
+                     st.layout.letter(culprit))
             st.x, st.p = fitted
             st.slips += 1
             _reset_amb(st, np.array([culprit]))
