@@ -74,9 +74,10 @@ def _starts_with(path: Path, magic: bytes) -> bool:
         return False  # the reader says why it cannot read the file
 
 
-def read_observations(path: str | Path) -> ObsInput:
-    """RINEX observation file (GPS satellites only), UBX log, or a flight's journal directory (its segments
-    in recording order, e.g. the rover's own flight folder) → ObsInput. Raises InputError when unusable."""
+def read_observations(path: str | Path, systems: str = "G") -> ObsInput:
+    """RINEX observation file (the satellites of `systems`, RINEX letters), UBX log (every system it holds), or a
+    flight's journal directory (its segments in recording order, e.g. the rover's own flight folder) → ObsInput.
+    Raises InputError when unusable."""
     path = Path(path)
     if path.is_dir():
         return _read_ubx(path)
@@ -85,9 +86,9 @@ def read_observations(path: str | Path) -> ObsInput:
     if is_rinex(path):
         from onboard.formats.rinex_obs import read_rinex_obs
 
-        # GPS alone: the engine is GPS L1, and parsing the other systems' fields was a quarter of the reading
+        # only the systems used: parsing the other systems' fields was a quarter of a GPS run's reading
         # (M8P rover + RAWX base 0.065 -> 0.049 s CPU, with the GLW1 CORS base 0.091 -> 0.070 s)
-        rnx = read_rinex_obs(path, systems="G")
+        rnx = read_rinex_obs(path, systems=systems)
         return ObsInput(rnx.epochs, [], rnx.header.antenna_position_ecef_m(), "rinex")
     return _read_ubx(path)
 
@@ -107,19 +108,37 @@ def _read_ubx(path: Path) -> ObsInput:
     return ObsInput(col.epochs, col.ephemerides, pos, "ubx")
 
 
-def read_navigation(paths: Sequence[str | Path], extra: Sequence[Ephemeris] = ()) -> Nav:
-    """Ephemerides (and Klobuchar coefficients) from RINEX nav files plus ephemerides decoded elsewhere."""
-    from onboard.formats.rinex_nav import read_rinex_nav
+def read_navigation(paths: Sequence[str | Path], extra: Sequence[Ephemeris] = (), systems: str = "G") -> Nav:
+    """Ephemerides (and Klobuchar coefficients) from RINEX nav files plus ephemerides decoded elsewhere.
 
-    store = EphemerisStore(extra)
+    GPS ephemerides go to `Nav.store`; those of the other systems named in `systems` (RINEX letters: R GLONASS,
+    E Galileo, C BeiDou, J QZSS) to `Nav.broadcast` (None when `systems` names no other system)."""
+    from onboard.formats.rinex_nav import read_rinex_nav
+    from onboard.rtk.types import GNSS_GPS
+
+    others = set(systems) - {"G"}
+    gps = [isinstance(e, Ephemeris) and e.gnss_id == GNSS_GPS for e in extra]
+    store = EphemerisStore(e for e, g in zip(extra, gps) if g)
+    broadcast = None
+    if others:  # the other systems' modules load only when asked for (start-up time of a GPS run)
+        from onboard.rtk.gnss import system
+        from onboard.rtk.navstore import BroadcastNavigation, sat_key
+
+        broadcast = BroadcastNavigation(e for e, g in zip(extra, gps)
+                                        if not g and system(sat_key(e)[0]).letter in others)
     iono = None
     for p in paths:
         nav = read_rinex_nav(p)
         for eph in nav.ephemerides:
             store.add(eph)
+        if broadcast is not None:
+            for letter, ephs in (("R", nav.glonass), ("E", nav.galileo), ("C", nav.beidou), ("J", nav.qzss)):
+                if letter in others:
+                    for other in ephs:
+                        broadcast.add(other)
         if nav.iono_alpha is not None and nav.iono_beta is not None:
             iono = (nav.iono_alpha, nav.iono_beta)
-    return Nav(store, iono)
+    return Nav(store, iono, broadcast)
 
 
 def read_base_observations(path: str | Path, reference: GpsTime | None) -> ObsInput:
@@ -209,25 +228,26 @@ class RtkRunInputs:
 
 def load_rtk_inputs(rover_path: str | Path, base_path: str | Path, nav_paths: Sequence[str | Path],
                     base_pos_ecef_m: Sequence[float] | None = None, *, base_pos_hint: str = "--base-pos X,Y,Z",
-                    nav_hint: str = "--nav FILE (RINEX navigation)") -> RtkRunInputs:
+                    nav_hint: str = "--nav FILE (RINEX navigation)", systems: str = "G") -> RtkRunInputs:
     """Read rover, base and navigation files for a post-processing run and check they can make one.
 
     The base may be RINEX, a UBX log, an RTCM3 stream or a journal folder; `base_pos_ecef_m` overrides its header
-    or stream position. Raises `InputError` (unusable files, no base position, no GPS observations, no common
+    or stream position; `systems` (RINEX letters) are the constellations read from RINEX observations and whose
+    navigation data is loaded (epochs without GPS satellites are dropped, as for GPS alone). Raises `InputError` (unusable files, no base position, no GPS observations, no common
     epochs) or `DataRefused` (no ephemeris valid at the observations' time: a navigation file of another day).
     The hints name, in the caller's words, how to give a base position and a navigation file.
     """
     from onboard.rtk.ephemeris import MAX_EPH_AGE_S
     from onboard.validate import ecef_position_m
 
-    rover = read_observations(rover_path)
+    rover = read_observations(rover_path, systems)
     base_file = Path(base_path)
     if base_file.is_file() and is_rinex(base_file):
-        base = read_observations(base_file)  # without loading the RTCM3 decoders (start-up time)
+        base = read_observations(base_file, systems)  # without loading the RTCM3 decoders (start-up time)
     else:
         # the base may also be an RTCM3 stream or a journal folder (e.g. the rover's radio/ journal)
         base = read_base_observations(base_file, rover.epochs[0].time if rover.epochs else None)
-    nav = read_navigation(nav_paths, rover.ephemerides + base.ephemerides)
+    nav = read_navigation(nav_paths, rover.ephemerides + base.ephemerides, systems)
     if len(nav.store) == 0:
         raise InputError(f"no GPS ephemeris: give {nav_hint} or logs with RXM-SFRB(X)/AID-EPH")
     if base_pos_ecef_m is not None:
