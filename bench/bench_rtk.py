@@ -40,11 +40,14 @@ lossy RTCM base instead: 79.6 % / 88.5 %. M8P walk (RAWX base, 1005 position): d
 2.4.3 1.6 % (README 18 %: not reproduced). The lead's epoch-by-epoch driver pairs each rover epoch with the
 nearest base epoch and differs from postpos on the lossy RTCM base (9.7 % vs 79.6 %); elsewhere it matches.
 
-demo5 with more systems (measured 2026-12-03): M8P static, RAWX base, GPS+GLONASS 98.3 %, first fix 20 s,
-0 of 1184 fixed epochs > 10 cm (issue 16's figure; the lossy RTCM base: 89.2 %, 36 s, 0 wrong); M8P walk
-GPS+GLONASS 53.6 %, 61 s, 45 (3D) / 38 (horizontal) of 401 checked > 10 cm from the M8P's fixes (issue 16
-quotes 53.1 %, 78 s, 8 / 1 of 408: not reproduced); GEONET 3034 GPS+Galileo+QZSS 81.1 %, 22 s, 45 of 288
-> 10 cm, all vertical (issue 16: 89.4 %, 22 s, 2 vertical of 319: not reproduced).
+demo5 with more systems (measured 2026-12-03). The bindings' default receiver dynamics differ (pyrtklib 2.4.3
+off, pyrtklib5 demo5 on) and `configure` keeps them unless --rtklib-dynamics is given; issue 16's demo5 figures
+are with dynamics off. With off: M8P static, RAWX base, GPS+GLONASS 98.3 %, first fix 20 s, 0 of 1184 fixed
+epochs > 10 cm (the same with on; the lossy RTCM base: 89.0 %, 34 s, 0 wrong); GEONET 3034 GPS+Galileo+QZSS
+89.4 %, 22 s, 2 (vertical) of 319 > 10 cm (issue 16's figures exactly; with on: 81.1 %, 22 s, 45 of 288);
+M8P walk GPS+GLONASS 58.1 %, 76 s, 6 (3D) / 0 (horizontal) of 406 checked > 10 cm from the M8P's fixes (with on:
+53.6 %, 61 s, 45 / 38 of 401; issue 16 quotes 53.1 %, 78 s, 8 / 1 of 408: with the base RINEX from `onboard
+convert`, 882 epochs instead of convbin's 763, 54.7 %, 76 s, 9 / 0 of 409 — close, not exact).
 """
 
 from __future__ import annotations
@@ -182,20 +185,21 @@ def postpos_main(argv: list[str]) -> int:
     """Child mode: `--postpos LIB OUT [--base-pos X,Y,Z] [--systems GR] [--combined] FILES...` runs RTKLIB
     postpos() on RINEX files (forward, or combined forward/backward)."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from rtklib_driver import _plain, configure
+    from rtklib_driver import _plain, configure, dynamics_flag
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--postpos", nargs=2, metavar=("LIB", "OUT"))
     ap.add_argument("--base-pos")
     ap.add_argument("--systems", default="G")
     ap.add_argument("--combined", action="store_true")
+    ap.add_argument("--dynamics", choices=("on", "off"))
     ap.add_argument("files", nargs="+")
     args = ap.parse_args(argv)
     lib, out = args.postpos
     mod = importlib.import_module(lib)
     with tempfile.TemporaryDirectory() as tmpdir:
         files = [_plain(f, Path(tmpdir)) for f in args.files]
-        popt = configure(mod, systems=args.systems)
+        popt = configure(mod, systems=args.systems, dynamics=dynamics_flag(args.dynamics))
         popt.soltype = 2 if args.combined else 0
         if args.base_pos:
             # the ECEF form of "reference position given" differs: 2.4.3 POSOPT_POS, demo5 POSOPT_POS_XYZ
@@ -250,30 +254,33 @@ MULTI_ENGINES = ("demo5", "ours")
 """Engines run with more than GPS: the drivers are GPS-only, 2.4.3 is not the peer any more."""
 
 
-def engine_commands(ds: Dataset, systems: str, out: Path, engines: tuple[str, ...] = ENGINES) -> dict[str, list[str]]:
-    """The command line of each engine in `engines` on `ds` with `systems` (output .pos files under `out`)."""
+def engine_commands(ds: Dataset, systems: str, out: Path, engines: tuple[str, ...] = ENGINES,
+                    rtklib_args: tuple[str, ...] = ()) -> dict[str, list[str]]:
+    """The command line of each engine in `engines` on `ds` with `systems` (output .pos files under `out`;
+    `rtklib_args` added to the RTKLIB ones, e.g. ("--dynamics=off",))."""
     files = [str(ds.rover), str(ds.base), *map(str, ds.navs)]
     bp = [f"--base-pos={ds.base_pos}"] if ds.base_pos else []
     me = str(Path(__file__).resolve())
-    sy = [f"--systems={systems}"]
+    sy = [f"--systems={systems}", *rtklib_args]
     nav_args = [a for n in ds.navs for a in ("--nav", str(n))]
     cmds = {
         "rtklib-2.4.3": [PY, me, "--postpos", "pyrtklib", str(out / "243.pos"), *bp, *sy, *files],
         "demo5": [PY, me, "--postpos", "pyrtklib5", str(out / "demo5.pos"), *bp, *sy, *files],
-        "2.4.3-driver": [PY, "bench/rtklib_driver.py", "--lib", "pyrtklib", *files, *bp, "-o",
+        "2.4.3-driver": [PY, "bench/rtklib_driver.py", "--lib", "pyrtklib", *files, *bp, *rtklib_args, "-o",
                          str(out / "drv243.pos")],
-        "demo5-driver": [PY, "bench/rtklib_driver.py", "--lib", "pyrtklib5", *files, *bp, "-o",
+        "demo5-driver": [PY, "bench/rtklib_driver.py", "--lib", "pyrtklib5", *files, *bp, *rtklib_args, "-o",
                          str(out / "drvdemo5.pos")],
-        "ours": [PY, "-m", "onboard", "rtk", "--rover", str(ds.rover), "--base", str(ds.base), *nav_args, *bp, *sy,
+        "ours": [PY, "-m", "onboard", "rtk", "--rover", str(ds.rover), "--base", str(ds.base), *nav_args, *bp,
+                 f"--systems={systems}",
                  "--no-progress", "-o", str(out / "ours.pos")],
     }
     allowed = ENGINES if systems == "G" else MULTI_ENGINES
     return {k: v for k, v in cmds.items() if k in engines and k in allowed}
 
 
-def pseudo_ref_command(ds: Dataset, out: Path) -> list[str]:
+def pseudo_ref_command(ds: Dataset, out: Path, rtklib_args: tuple[str, ...] = ()) -> list[str]:
     """demo5 combined forward/backward with the widest system set: the pseudo-reference's solution."""
-    cmd = engine_commands(ds, ds.systems[-1], out, ("demo5",))["demo5"]
+    cmd = engine_commands(ds, ds.systems[-1], out, ("demo5",), rtklib_args)["demo5"]
     cmd[cmd.index(str(out / "demo5.pos"))] = str(out / "demo5-combined.pos")
     return [*cmd[:5], "--combined", *cmd[5:]]
 
@@ -410,11 +417,11 @@ def compile_project() -> None:
 
 
 def run_set(ds: Dataset, systems: str, engines: tuple[str, ...],
-            pseudo: Callable[[np.ndarray], np.ndarray] | None) -> list[list[str]]:
+            pseudo: Callable[[np.ndarray], np.ndarray] | None, rtklib_args: tuple[str, ...] = ()) -> list[list[str]]:
     """Run the engines on one (set, systems); returns the table rows."""
     with tempfile.TemporaryDirectory() as tmpdir:
         results: dict[str, tuple[dict[str, float], float]] = {}
-        for name, cmd in engine_commands(ds, systems, Path(tmpdir), engines).items():
+        for name, cmd in engine_commands(ds, systems, Path(tmpdir), engines, rtklib_args).items():
             cpu, _wall, rc = run_child(cmd)
             sol = read_solutions(_out_file(cmd)) if rc == 0 else np.zeros((0, 6))
             results[name] = (score(sol, ds.ref, pseudo), cpu)
@@ -435,10 +442,11 @@ def run_set(ds: Dataset, systems: str, engines: tuple[str, ...],
     return rows
 
 
-def pseudo_reference(ds: Dataset) -> tuple[Callable[[np.ndarray], np.ndarray], int]:
+def pseudo_reference(ds: Dataset, rtklib_args: tuple[str, ...] = ()) -> tuple[Callable[[np.ndarray], np.ndarray],
+                                                                             int]:
     """demo5 combined fixed solution with the widest system set: the callable and its fixed epochs."""
     with tempfile.TemporaryDirectory() as tmpdir:
-        cmd = pseudo_ref_command(ds, Path(tmpdir))
+        cmd = pseudo_ref_command(ds, Path(tmpdir), rtklib_args)
         _cpu, _wall, rc = run_child(cmd)
         sol = read_solutions(_out_file(cmd)) if rc == 0 else np.zeros((0, 6))
     return solution_ref(sol), int(np.sum(sol[:, 5] == 1))
@@ -453,6 +461,9 @@ def main() -> int:
     ap.add_argument("--systems", nargs="*", help="only these system sets (e.g. G GR)")
     ap.add_argument("--engines", nargs="*", choices=ENGINES, help=f"only these engines (default all: {ENGINES})")
     ap.add_argument("--no-engine-alone", action="store_true", help="skip the in-process timing of our filter")
+    ap.add_argument("--rtklib-dynamics", choices=("on", "off"),
+                    help="RTKLIB receiver dynamics (pos1-dynamics) of every RTKLIB run (default: each binding's own, "
+                         "2.4.3 off, demo5 on; issue 16's demo5 figures are with off)")
     ap.add_argument("--markdown", type=Path, metavar="PATH", help="also write the table as markdown (atomically)")
     args = ap.parse_args()
     if not GNSS.is_dir():
@@ -462,8 +473,11 @@ def main() -> int:
     engines = tuple(args.engines) if args.engines else tuple(e for e in ENGINES if not (args.quick and e ==
                                                                                        "demo5-driver"))
     chosen = [d for d in DATASETS if (not args.quick or d.quick) and (not args.only or any(s in d.name for s in args.only))]
-    print("L1, kinematic, fix-and-hold, ratio 3, 15 deg mask, broadcast iono, Saastamoinen; GLONASS AR on "
-          "(demo5 glomodear=1); CPU = whole process (RUSAGE_CHILDREN)")
+    rtklib_args = (f"--dynamics={args.rtklib_dynamics}",) if args.rtklib_dynamics else ()
+    options_line = ("L1, kinematic, fix-and-hold, ratio 3, 15 deg mask, broadcast iono, Saastamoinen; GLONASS AR on "
+                    f"(demo5 glomodear=1); RTKLIB dynamics {args.rtklib_dynamics or 'binding default (2.4.3 off, demo5 on)'}"
+                    "; CPU = whole process (RUSAGE_CHILDREN)")
+    print(options_line)
     print(f"wrong: fixed epochs > {100 * WRONG_M:.0f} cm from the reference (3D, horizontal), > {100 * NEAR_M:.0f} cm "
           "3D; pseudo: against demo5's combined forward/backward fixed solution, widest system set")
     rows: list[list[str]] = []
@@ -473,12 +487,12 @@ def main() -> int:
         sets = [s for s in ds.systems if (not args.quick or s == "G") and (not args.systems or s in args.systems)]
         pseudo = None
         if ds.pseudo_ref and sets:
-            pseudo, n_fixed = pseudo_reference(ds)
+            pseudo, n_fixed = pseudo_reference(ds, rtklib_args)
             notes.append(f"{ds.name}: pseudo-reference = demo5 combined {systems_label(ds.systems[-1])}, "
                          f"{n_fixed} fixed epochs")
         print(f"\n== {ds.name}\n   README (RTKLIB rnx2rtkp, GPS): {ds.readme}", flush=True)
         for systems in sets:
-            new = run_set(ds, systems, engines, pseudo)
+            new = run_set(ds, systems, engines, pseudo, rtklib_args)
             print(text_table(new), flush=True)
             rows += new
             if systems == "G" and ds.rtcm_stream is not None and "ours" in engines:
@@ -501,7 +515,7 @@ def main() -> int:
     if args.markdown:
         from onboard.formats.atomic import write_atomic
 
-        md = markdown_table([h for h, _, _ in COLUMNS], rows) + "".join(f"\n- {n}" for n in notes) + "\n"
+        md = options_line + "\n\n" + markdown_table([h for h, _, _ in COLUMNS], rows) + "".join(f"\n- {n}" for n in notes) + "\n"
         write_atomic(args.markdown, md)
         print(f"written {args.markdown}")
     return 0

@@ -43,10 +43,14 @@ def navsys_mask(mod, systems: str) -> int:  # type: ignore[no-untyped-def]
     return mask
 
 
-def configure(mod, elmask_deg: float = 15.0, ratio: float = 3.0, systems: str = "G"):  # type: ignore[no-untyped-def]
+def configure(mod, elmask_deg: float = 15.0, ratio: float = 3.0, systems: str = "G",  # type: ignore[no-untyped-def]
+              dynamics: bool | None = None):
     """RTKLIB processing options matching the benchmark's common settings; GLONASS, when used, with its
-    ambiguities fixed (glomodear=1, both receivers of one type)."""
+    ambiguities fixed (glomodear=1, both receivers of one type). `dynamics` None keeps the binding's default
+    receiver dynamics (pyrtklib 2.4.3: off, pyrtklib5 demo5: on), else sets it (RTKLIB pos1-dynamics)."""
     popt = mod.prcopt_default
+    if dynamics is not None:
+        popt.dynamics = int(dynamics)
     popt.mode = mod.PMODE_KINEMA
     popt.nf = 1
     popt.navsys = navsys_mask(mod, systems)
@@ -59,6 +63,11 @@ def configure(mod, elmask_deg: float = 15.0, ratio: float = 3.0, systems: str = 
     return popt
 
 
+def dynamics_flag(text: str | None) -> bool | None:
+    """--dynamics on/off/absent → True/False/None."""
+    return None if text is None else text == "on"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--lib", default="pyrtklib", choices=("pyrtklib", "pyrtklib5"))
@@ -68,6 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--base-pos", help="X,Y,Z ECEF m (default: base RINEX header)")
     parser.add_argument("--elmask", type=float, default=15.0)
     parser.add_argument("--systems", default="G", help="RINEX system letters (default G)")
+    parser.add_argument("--dynamics", choices=("on", "off"), help="receiver dynamics (default: the binding's)")
     parser.add_argument("-o", "--output", required=True)
     args = parser.parse_args(argv)
     mod = importlib.import_module(args.lib)
@@ -89,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
         mod.sortobs(obs_r)
         mod.sortobs(obs_b)
         mod.uniqnav(nav)
-    popt = configure(mod, args.elmask, systems=args.systems)
+    popt = configure(mod, args.elmask, systems=args.systems, dynamics=dynamics_flag(args.dynamics))
     if args.base_pos:
         rb = [float(v) for v in args.base_pos.split(",")]
     else:
