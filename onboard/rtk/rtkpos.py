@@ -455,10 +455,11 @@ def _layout_receivers(epochs: list[ObsEpoch], store: EphemerisStore, layout: Slo
     (a GLONASS slot without a known frequency channel has no usable data)."""
     pr, cp, dop, lli = slot_arrays(layout, epochs)
     sats = satellite_states_layout(layout, store, broadcast, [e.time.total_ns for e in epochs], pr)
+    # a satellite's frequency channel does not change over a session: one wavelength array for all epochs
+    lam = wavelengths(layout, epochs, broadcast)
+    lam.flags.writeable = False
     out = []
-    for k, e in enumerate(epochs):
-        lam = wavelengths(layout, [e], broadcast)
-        lam.flags.writeable = False
+    for k in range(len(epochs)):
         has = np.isfinite(pr[k]) & sats[k].ok & np.isfinite(lam)
         out.append(_Receiver(pr[k], cp[k], dop[k], lli[k], sats[k], has, lam))
     return out
