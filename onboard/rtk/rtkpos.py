@@ -1334,6 +1334,9 @@ class _Fix:
     """The same integer set has won the ratio test at every epoch for settled_fix_span_s (see the option)."""
     iono: Arr | None = None
     """The ionosphere states (m) conditioned on the integers, when they are in use."""
+    revalidated: bool = False
+    """No set is held and this one re-fixes the last validated integers on at least min_fix_sats satellites
+    tracked without a slip since (see _agrees_with_validated)."""
 
 
 def _slot_integers(ref: int | npt.NDArray[np.int64], others: npt.NDArray[np.int64], ints: Arr,
@@ -1491,7 +1494,8 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
             iono = None
             if st.iono_on and qia is not None:
                 iono = x[st.nxi:st.nxi + st.ns] - qia @ solve(qa, a - ints)
-            return _Fix(pos, cov, ratio, others, ref, ints, others.size, settled, iono)
+            revalidated = not st.held_prns.any() and _agrees_with_validated(st, ref, others, ints, o.min_fix_sats)
+            return _Fix(pos, cov, ratio, others, ref, ints, others.size, settled, iono, revalidated)
         # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
         # whose ambiguity is still code-level, else mostly the lowest one), not blindly the lowest satellite:
         # one fresh ambiguity would otherwise sink the ratio of a set determined long ago
@@ -1852,7 +1856,10 @@ def _resolve(st: RtkState, ctx: EpochContext) -> _Fix | None:
         use_fix[fix.slots] = True
         use_fix[fix.ref] = True
         fix_rows, valid, _ = _phase_fit(st, ctx, xf, use_fix)
-        if (maha <= _CHI2_3DOF_999 or fix.settled) and np.count_nonzero(valid) == valid.size:
+        # a re-fix of validated integers need not lie near the float: after a released hold the float of a
+        # static rover knows its position to millimetres and carries the centimetre multipath the hold kept out
+        if (maha <= _CHI2_3DOF_999 or fix.settled or (fix.revalidated and o.revalidated_skips_float_check)) \
+                and np.count_nonzero(valid) == valid.size:
             break
         log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", ctx.time, maha, bool(valid.all()))
         # a second look at this epoch: without the one satellite whose phase does not fit the fixed solution
