@@ -25,6 +25,32 @@ DEFAULT_START = GpsTime(1590, 392_400 * 1_000_000_000)
 
 
 @dataclass(frozen=True)
+class MultiWorld:
+    """A multi-constellation sky: shipped navigation files (data/NOTICE.md), the systems they hold, a start
+    time on their day and a site where those systems are in view."""
+
+    nav_paths: tuple[Path, ...]
+    systems: str
+    start: GpsTime
+    site_lat_deg: float
+    site_lon_deg: float
+    site_h_m: float
+
+
+MULTI_WORLDS: dict[str, MultiWorld] = {
+    "gr-2012": MultiWorld(
+        tuple(DATA_DIR / "broadcast-nav-20121031" / f"brdc3050.12{x}" for x in "ngq"), "GR",
+        GpsTime(1712, (259_200 + 2 * 3600) * 1_000_000_000), 35.68, 139.77, 40.0),
+    "gej-2021": MultiWorld(
+        (DATA_DIR / "geonet-3034-sept-20210922" / "SEPT2650.21P.gz",), "GEJ",
+        GpsTime(2176, (259_200 + 6 * 3600 + 1800) * 1_000_000_000), 35.342, 139.522, 60.0),
+}
+"""2012-10-31 02:00 GPST (GPS + GLONASS FDMA, RTKLIB test data, BSD-2) over Tokyo (QZS-1's file is read too but
+it broadcast itself unhealthy all that day: systems "GRJ" simulates no QZSS there); 2021-09-22 06:30 GPST
+(GPS + Galileo + 4 QZSS, cssrlib-data, MIT) over Fujisawa, where those files were recorded."""
+
+
+@dataclass(frozen=True)
 class ErrorModel:
     """Error budget of the simulated observables (all 1σ; `*_zenith_*` values are scaled by 1/sin(el)).
 
@@ -112,6 +138,8 @@ class ReceiverModel:
     clock_jump_threshold_s: float = 0.5e-3
     elevation_mask_deg: float = 5.0
     max_sats: int = 16
+    ifb_type: str = "ublox-m8"
+    """GLONASS inter-frequency bias type (hil_sim.constellations.IFB_TYPES): "ublox-m8" or "other"."""
 
     @classmethod
     def lea6t(cls, **overrides: object) -> ReceiverModel:
@@ -124,6 +152,11 @@ class ReceiverModel:
     def m8t(cls, **overrides: object) -> ReceiverModel:
         """NEO/LEA-M8T (RXM-RAWX): free-running clock, tags …992 ms, an occasional 1-ms step."""
         return dataclasses.replace(cls(), **overrides)  # type: ignore[arg-type]
+
+    def tracks(self, gnss_id: int) -> bool:
+        """Whether this receiver tracks the system: the LEA-6T GPS only, the M8T every simulated one (CFG-GNSS
+        chooses among them in the receiver emulator)."""
+        return self.kind != "lea6t" or gnss_id == 0
 
     @classmethod
     def for_kind(cls, kind: str, **overrides: object) -> ReceiverModel:
@@ -199,6 +232,8 @@ class Scenario:
     site_h_m: float = 500.0
     base_offset_enu_m: tuple[float, float, float] = (800.0, -600.0, 2.0)
     nav_path: Path = DEFAULT_NAV_PATH
+    extra_nav_paths: tuple[Path, ...] = ()
+    systems: str = "G"
     errors: ErrorModel = field(default_factory=ErrorModel)
     flight: FlightPlan = field(default_factory=FlightPlan)
     camera: CameraPlan = field(default_factory=CameraPlan)
@@ -217,7 +252,27 @@ class Scenario:
         values.update(overrides)
         if "nav_path" in values:
             values["nav_path"] = Path(str(values["nav_path"]))
+        if "extra_nav_paths" in values:
+            values["extra_nav_paths"] = tuple(Path(str(p)) for p in values["extra_nav_paths"])  # type: ignore[attr-defined]
         return cls(**values)  # type: ignore[arg-type]
+
+    @classmethod
+    def multi(cls, world: str = "gr-2012", model: str = "m8t", systems: str | None = None,
+              **overrides: object) -> Scenario:
+        """The standard flight in a multi-constellation world (MULTI_WORLDS): its navigation files, day, hour
+        and site; `systems` a subset of the world's (default: all it has); fields overridable."""
+        if world not in MULTI_WORLDS:
+            raise ValueError(f"unknown world {world!r} (expected one of {sorted(MULTI_WORLDS)})")
+        w = MULTI_WORLDS[world]
+        values: dict[str, object] = {
+            "nav_path": w.nav_paths[0], "extra_nav_paths": w.nav_paths[1:], "systems": systems or w.systems,
+            "start": w.start, "site_lat_deg": w.site_lat_deg, "site_lon_deg": w.site_lon_deg,
+            "site_h_m": w.site_h_m}
+        if model == "m8t":  # 32 tracking channels: a multi-constellation sky fills more than 16
+            values["rover_receiver"] = ReceiverModel.m8t(max_sats=32)
+            values["base_receiver"] = ReceiverModel.m8t(clock_bias0_s=0.21e-3, clock_drift_s_s=0.12e-6, max_sats=32)
+        values.update(overrides)
+        return cls.default(model, **values)
 
     @staticmethod
     def base_offset_for(baseline_m: float, azimuth_deg: float = 127.0, up_m: float = 2.0) -> tuple[float, float, float]:
