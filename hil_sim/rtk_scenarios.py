@@ -30,6 +30,23 @@ STALE_S = 30.0
 """Base data older than this may not be fixed (issue 3): such epochs are excluded from the airborne ratio."""
 
 
+HARSH_RADIO_LOSS = (0.50, 0.56)
+"""Gilbert loss model of the base stream, (P(second lost | previous received), P(lost | previous lost)): the
+Galway M8P base's RTCM3 MSM7 1077 epochs (base-20181004-1452, 1 Hz: 53 % of seconds missing, nearly
+memoryless; bench/error_stats.py --harsh). A radio worse than most: the base's serial port was overloaded."""
+
+
+def radio_drops(n_s: int, p_loss_after_ok: float, p_loss_after_loss: float, seed: int) -> np.ndarray:
+    """Which of `n_s` seconds the radio loses (bool), a two-state Markov chain started in the received state."""
+    draw = np.random.default_rng([seed & 0xFFFFFFFF, 0x52AD10]).random(n_s)
+    lost = np.zeros(n_s, bool)
+    prev = False
+    for k in range(n_s):
+        prev = bool(draw[k] < (p_loss_after_loss if prev else p_loss_after_ok))
+        lost[k] = prev
+    return lost
+
+
 @dataclass(frozen=True)
 class SimCase:
     """One scenario of the matrix (times in s after the scenario start)."""

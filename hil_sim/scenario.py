@@ -122,6 +122,57 @@ class ErrorModel:
 
 
 @dataclass(frozen=True)
+class RoverEnvironment:
+    """A hard place for the rover's antenna (e.g. walking under trees): blockage, slips and C/N0-driven noise.
+
+    Replaces, for the rover only, the ErrorModel's slip rates, half-cycle time, C/N0 model and the 1/sin(el)
+    noise law; the base stays in the open sky. Blockage: a two-state (tracked/blocked) process per satellite
+    on the 1-s grid with the unavailability `unavailability` per elevation band `el_bands_deg` (lower edges,
+    the last band to 90°) × the relative factor of its 45° azimuth sector (`az_factor`, 8 values from north,
+    clockwise), mean outage `outage_mean_s`; each reacquisition is a new arc (new ambiguity, lock time reset,
+    LLI). Slips: independent LLI slips `lli_slips_per_h` per satellite, receiver-wide events (every satellite
+    slips at once) `common_slip_events_per_h`, slips without LLI `unflagged_slips_per_h` (±1…3 cycles).
+    Noise: code (white and multipath, split as in the ErrorModel) of total σ `code_sigma_ref_m` and white
+    phase `phase_sigma_ref_m` at `cn0_ref_dbhz`, scaled by 10^((ref − C/N0)/20) (thermal noise ∝ 1/√(C/N0),
+    what the measured code RMS per C/N0 bin follows); GLONASS code × `glonass_code_factor` (its C/A chip is
+    twice as long). C/N0 = `cn0_horizon_dbhz` + (`cn0_zenith_dbhz` − horizon)·sin(el) + N(0, `cn0_sigma_dbhz`).
+    `HARSH` holds the values fitted to the real M8P walk (hil_sim.obs_stats.fit_environment;
+    docs/hil-sim-error-model.md).
+    """
+
+    el_bands_deg: tuple[float, ...] = (10.0, 20.0, 30.0, 45.0, 60.0)
+    unavailability: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    az_factor: tuple[float, ...] = (1.0,) * 8
+    outage_mean_s: float = 3.0
+    lli_slips_per_h: float = 0.0
+    common_slip_events_per_h: float = 0.0
+    unflagged_slips_per_h: float = 0.0
+    half_cycle_resolve_s: float = 2.0
+    cn0_horizon_dbhz: float = 35.0
+    cn0_zenith_dbhz: float = 50.0
+    cn0_sigma_dbhz: float = 1.0
+    cn0_ref_dbhz: float = 45.0
+    code_sigma_ref_m: float = 0.5
+    phase_sigma_ref_m: float = 0.001
+    glonass_code_factor: float = 1.0
+
+
+HARSH = RoverEnvironment(
+    el_bands_deg=(10.0, 20.0, 30.0, 45.0, 60.0), unavailability=(0.100, 0.066, 0.010, 0.009, 0.007),
+    az_factor=(0.30, 0.57, 0.92, 3.47, 0.40, 1.33, 0.28, 0.72), outage_mean_s=2.7, lli_slips_per_h=38.1,
+    common_slip_events_per_h=4.6, unflagged_slips_per_h=2.6, half_cycle_resolve_s=2.9, cn0_horizon_dbhz=34.6,
+    cn0_zenith_dbhz=51.1, cn0_sigma_dbhz=3.5, cn0_ref_dbhz=45.0, code_sigma_ref_m=0.93, phase_sigma_ref_m=0.0018,
+    glonass_code_factor=2.43,
+)
+"""The u-blox M8P walking a river trail under trees (Galway 2018, set 20181004-1532, GPS + GLONASS, 10° mask):
+`hil_sim.obs_stats.fit_environment` of its RINEX (bench/error_stats.py --harsh prints the fit and the
+simulated statistics beside the real ones). Phase σ: not measurable there (no truth for a moving antenna): the
+static M8P's 1 mm zenith (C/N0 ≈ 50 dB-Hz) carried to 45 dB-Hz by the same 10^(Δ/20) law. Code σ: 0.93 m
+in, because the estimator (a quadratic removed per arc takes some multipath with it) returns 0.79 m, the
+walk's figure, for it on the simulated flight."""
+
+
+@dataclass(frozen=True)
 class ReceiverModel:
     """A u-blox receiver's clock and tracking behaviour.
 
@@ -237,6 +288,8 @@ class Scenario:
     errors: ErrorModel = field(default_factory=ErrorModel)
     flight: FlightPlan = field(default_factory=FlightPlan)
     camera: CameraPlan = field(default_factory=CameraPlan)
+    rover_environment: RoverEnvironment | None = None
+    """None: the rover sees the open sky of the ErrorModel; else its hard environment (e.g. HARSH)."""
     rover_receiver: ReceiverModel = field(default_factory=ReceiverModel.m8t)
     base_receiver: ReceiverModel = field(default_factory=lambda: ReceiverModel.m8t(
         clock_bias0_s=0.21e-3, clock_drift_s_s=0.12e-6))

@@ -92,7 +92,7 @@ from hil_sim.constellations import (
     select_broadcast,
 )
 from hil_sim.flight import Trajectory
-from hil_sim.scenario import ReceiverModel, Scenario
+from hil_sim.scenario import ReceiverModel, RoverEnvironment, Scenario
 from onboard.errors import InputError
 from onboard.gnsstime import NS_PER_S, GpsTime, leap_seconds_at_utc
 from onboard.rtk.consts import CLIGHT_M_S, FREQ_L1_HZ, OMEGA_E_RAD_S
@@ -124,7 +124,7 @@ MOVING_SPEED_M_S = 0.5
 """Rover speed above which its code multipath follows the moving-antenna process (ErrorModel.mp_tau_moving_s)."""
 
 # Purposes of the random streams (part of every seed so streams never overlap).
-_P_ORBIT, _P_SATCLK, _P_IONO, _P_TROPO, _P_GRAD, _P_MP, _P_CLOCK, _P_TRACK, _P_EPOCH, _P_IFB = range(1, 11)
+_P_ORBIT, _P_SATCLK, _P_IONO, _P_TROPO, _P_GRAD, _P_MP, _P_CLOCK, _P_TRACK, _P_EPOCH, _P_IFB, _P_BLOCK = range(1, 12)
 
 
 def _sat_position(eph: AnyEphemeris, t: GpsTime) -> Vec:
@@ -346,6 +346,7 @@ class World:
         self._mp_phase: dict[str, Vec] = {}
         self._clock: dict[str, _Clock] = {}
         self._tracks: dict[str, list[_Track | None]] = {}
+        self._blocked: dict[str, npt.NDArray[np.bool_]] = {}
         self._model = models
         # the moving rover's code multipath: its own process (new reflection geometry at every metre)
         self._mp_code_moving = _gauss_markov(_rng(seed, _P_MP, 0, 2), nf, n_cols, FAST_DT_S, em.mp_tau_moving_s)
@@ -492,10 +493,11 @@ class World:
         scale = (FREQ_L1_HZ / self._freq_hz[col]) ** 2
         return tropo, iono * scale, tropo_model, iono_model * scale
 
-    def _elevation_grid(self, receiver: str) -> Vec:
-        """Elevation (rad) of every column (NaN without ephemeris) at the slow grid's instants, for `receiver`."""
+    def _elevation_grid(self, receiver: str) -> tuple[Vec, Vec]:
+        """Elevation and azimuth (rad) of every column (NaN without ephemeris) at the slow grid's instants."""
         g = self._slow
         el = np.full((g.n, self._n_cols), np.nan)
+        az = np.full((g.n, self._n_cols), np.nan)
         for k in range(g.n):
             t = g.time(k)
             rcv = self._position_clamped(receiver, t)
@@ -504,7 +506,29 @@ class World:
             for col in self.cols:
                 enu = r @ (_sat_position(self._eph[col], t.add_s(-0.075)) - rcv)
                 el[k, col] = math.atan2(enu[2], math.hypot(enu[0], enu[1]))
-        return el
+                az[k, col] = math.atan2(enu[0], enu[1]) % (2 * math.pi)
+        return el, az
+
+    def _blockage(self, r_idx: int, col: int, el: Vec, az: Vec, env: RoverEnvironment) -> npt.NDArray[np.bool_]:
+        """Blocked flag of one satellite on the fast grid: a two-state chain whose unavailability follows the
+        environment's elevation bands × azimuth factors (RoverEnvironment), mean outage `outage_mean_s`."""
+        f = self._fast
+        x = np.arange(f.n) * f.dt_s / self._slow.dt_s
+        el_f = np.interp(x, np.arange(self._slow.n), el)
+        az_f = az[np.minimum(np.floor(x).astype(int), self._slow.n - 1)]
+        band = np.searchsorted(np.asarray(env.el_bands_deg), np.degrees(el_f), side="right") - 1
+        u = np.where(band >= 0, np.asarray(env.unavailability)[np.maximum(band, 0)], 0.0)
+        sector = (np.nan_to_num(np.degrees(az_f)) // (360.0 / len(env.az_factor))).astype(int) % len(env.az_factor)
+        u = np.clip(u * np.asarray(env.az_factor)[sector], 0.0, 0.95)
+        p_unblock = min(1.0, f.dt_s / env.outage_mean_s)
+        p_block = np.minimum(1.0, p_unblock * u / np.maximum(1.0 - u, 1e-9))
+        draw = _rng(self.scenario.seed, _P_BLOCK, r_idx, col + 1).random(f.n)
+        blocked = np.zeros(f.n, bool)
+        state = False
+        for k in range(f.n):
+            state = draw[k] >= p_unblock if state else draw[k] < p_block[k]
+            blocked[k] = state
+        return blocked
 
     def _position_clamped(self, receiver: str, t: GpsTime) -> Vec:
         return self.receiver_position_ecef_m(receiver, t)
@@ -513,7 +537,17 @@ class World:
         """Acquisitions, slips and ambiguities of every satellite at `receiver` over the simulated span."""
         em = self.scenario.errors
         mask = math.radians(self._model[receiver].elevation_mask_deg)
-        el = self._elevation_grid(receiver)
+        el, az = self._elevation_grid(receiver)
+        env = self.scenario.rover_environment if receiver == "rover" else None
+        lli_rate = env.lli_slips_per_h if env else em.slip_lli_rate_per_h
+        und_rate = env.unflagged_slips_per_h if env else em.slip_undetected_rate_per_h
+        common_ns: list[int] = []
+        if env is not None:
+            rc = _rng(self.scenario.seed, _P_BLOCK, r_idx, 0)
+            span = (self._slow.n - 1) * self._slow.dt_ns
+            n_common = rc.poisson(env.common_slip_events_per_h * span / 3.6e12)
+            common_ns = sorted(int(x) for x in self._slow.t0_ns + rc.uniform(0, span, n_common))
+            self._blocked[receiver] = np.zeros((self._fast.n, self._n_cols), bool)
         if receiver == "rover":
             self._el_grid_rover = el
         else:
@@ -532,11 +566,18 @@ class World:
                     frac = -e[k - 1] / (e[k] - e[k - 1])
                     resets.append((g.t0_ns + round((k - 1 + frac) * g.dt_ns), False))
             span_h = span_ns / 3.6e12
-            n_lli = rng.poisson(em.slip_lli_rate_per_h * span_h)
-            n_und = rng.poisson(em.slip_undetected_rate_per_h * span_h)
+            n_lli = rng.poisson(lli_rate * span_h)
+            n_und = rng.poisson(und_rate * span_h)
             lli_t = sorted(int(x) for x in g.t0_ns + rng.uniform(0, span_ns, n_lli))
             und_t = sorted(int(x) for x in g.t0_ns + rng.uniform(0, span_ns, n_und))
             resets += [(t, True) for t in lli_t]
+            if env is not None:  # receiver-wide slips and the reacquisitions after each blockage
+                blocked = self._blockage(r_idx, col, el[:, col], az[:, col], env)
+                self._blocked[receiver][:, col] = blocked
+                ends = np.flatnonzero(blocked[:-1] & ~blocked[1:]) + 1
+                resets += [(t, True) for t in common_ns]
+                # reacquired half a step before the first unblocked sample: the first epoch seen again is the new arc
+                resets += [(self._fast.t0_ns + int(k) * self._fast.dt_ns - self._fast.dt_ns // 2, True) for k in ends]
             resets.sort()
             mag = rng.integers(1, max(1, em.slip_undetected_max_cyc) + 1, n_und)
             sign = rng.choice(np.array([-1, 1]), n_und)
@@ -551,6 +592,11 @@ class World:
     def _tracked(self, receiver: str, col: int, t: GpsTime) -> bool:
         el = self._el_grid_rover if receiver == "rover" else self._el_grid_base
         mask = math.radians(self._model[receiver].elevation_mask_deg)
+        blocked = self._blocked.get(receiver)
+        if blocked is not None:
+            i, f = self._fast.locate(t)
+            if blocked[i + (f >= 0.5), col]:
+                return False
         return bool(self._slow.interp(el[:, col], t) >= mask)
 
     def _simulate(self, receiver: str, t_nom: GpsTime, update_state: bool = True) -> tuple[ObsEpoch, dict[str, Any]]:
@@ -621,13 +667,29 @@ class World:
 
         moving = receiver == "rover" and float(np.linalg.norm(rcv_vel)) > MOVING_SPEED_M_S
         mp_src = self._mp_code_moving if moving else self._mp_code[receiver]
-        mp_code = em.mp_code_sigma_zenith_m / sin_el * self._fast.interp(mp_src, t)[col]
+        env = sc.rover_environment if receiver == "rover" else None
         mp_phase = em.mp_phase_sigma_zenith_m / sin_el * self._fast.interp(self._mp_phase[receiver], t)[col]
-        eps_code = em.code_sigma_zenith_m / sin_el * noise[0, col]
-        eps_phase = em.phase_sigma_zenith_m / sin_el * noise[1, col]
         eps_dop = em.doppler_sigma_zenith_hz / sin_el * noise[2, col]
-        cn0 = em.cn0_horizon_dbhz + (em.cn0_zenith_dbhz - em.cn0_horizon_dbhz) * np.sin(np.maximum(el, 0.0))
-        cn0 = cn0 + em.cn0_sigma_dbhz * noise[3, col]
+        if env is None:
+            mp_code = em.mp_code_sigma_zenith_m / sin_el * self._fast.interp(mp_src, t)[col]
+            eps_code = em.code_sigma_zenith_m / sin_el * noise[0, col]
+            eps_phase = em.phase_sigma_zenith_m / sin_el * noise[1, col]
+            cn0 = em.cn0_horizon_dbhz + (em.cn0_zenith_dbhz - em.cn0_horizon_dbhz) * np.sin(np.maximum(el, 0.0))
+            cn0 = cn0 + em.cn0_sigma_dbhz * noise[3, col]
+            pr_std = np.hypot(em.code_sigma_zenith_m, em.mp_code_sigma_zenith_m) / sin_el
+            half_ns = round(em.half_cycle_resolve_s * NS_PER_S)
+        else:  # C/N0 drives the noise (RoverEnvironment)
+            cn0_model = env.cn0_horizon_dbhz + (env.cn0_zenith_dbhz - env.cn0_horizon_dbhz) * np.sin(np.maximum(el, 0.0))
+            scale = 10.0 ** ((env.cn0_ref_dbhz - cn0_model) / 20.0)
+            code_scale = scale * np.where(gnss_arr == GNSS_GLONASS, env.glonass_code_factor, 1.0)
+            tot = math.hypot(em.code_sigma_zenith_m, em.mp_code_sigma_zenith_m)
+            w_frac, m_frac = (em.code_sigma_zenith_m / tot, em.mp_code_sigma_zenith_m / tot) if tot else (0.0, 0.0)
+            mp_code = env.code_sigma_ref_m * m_frac * code_scale * self._fast.interp(mp_src, t)[col]
+            eps_code = env.code_sigma_ref_m * w_frac * code_scale * noise[0, col]
+            eps_phase = env.phase_sigma_ref_m * scale * noise[1, col]
+            cn0 = cn0_model + env.cn0_sigma_dbhz * noise[3, col]
+            pr_std = env.code_sigma_ref_m * code_scale
+            half_ns = round(env.half_cycle_resolve_s * NS_PER_S)
 
         b = timing.clock_bias_s
         clocks_m = CLIGHT_M_S * (b - dts)
@@ -636,7 +698,6 @@ class World:
         lock_ms = np.zeros(n)
         lli = np.zeros(n, dtype=np.uint8)
         half_sub = np.zeros(n, dtype=np.uint8)
-        half_ns = round(em.half_cycle_resolve_s * NS_PER_S)
         tracks = self._tracks[receiver]
         for i, c in enumerate(col):
             tr = tracks[int(c)]
@@ -661,7 +722,6 @@ class World:
         pr = rho + clocks_m + tropo + iono + mp_code + eps_code + code_ifb
         cp = (rho + clocks_m + tropo - iono + mp_phase + eps_phase + phase_ifb) / lam + amb + half
         dop = -(rho_dot + CLIGHT_M_S * (timing.clock_drift_s_s - dts_dot) + atmo_rate) / lam + eps_dop
-        pr_std = np.hypot(em.code_sigma_zenith_m, em.mp_code_sigma_zenith_m) / sin_el
         cp_std = pll_thermal_sigma_cyc(cn0)
         clock_reset = timing.jumps != prev_jumps
         if update_state:
