@@ -58,6 +58,19 @@ time t (GPS time):
   pseudorange (by c·1 ms = 299 792.458 m) and the phase (by exactly 1 575 420 cycles, an integer, no slip)
   all jump together, as on real u-blox RXM-RAW/RAWX; the RAWX `clock_reset` flag marks the epoch after it.
 
+Other constellations (`Scenario.systems`, e.g. "GREJ"; worlds in hil_sim.scenario.MULTI_WORLDS): the same
+equations per satellite on its own carrier (hil_sim.constellations: Galileo E1/QZSS L1 1575.42 MHz, BeiDou B1I,
+GLONASS 1602 + 0.5625·k MHz with k from its ephemeris; λ, Doppler and the ionosphere ×(f_L1/f)² follow), the
+satellites from the engine's own models (onboard.rtk.navstore.satellite_state: GLONASS state-vector integration,
+Galileo/QZSS/BeiDou Kepler, L1-band group delay). GLONASS code and phase carry the receiver type's
+inter-frequency biases (ReceiverModel.ifb_type; identical for two receivers of one type). The LEA-6T tracks GPS
+only. Epochs then fill `glo_fcn` and `signal`. A GPS-only scenario ("G") keeps its historical random layout
+and reproduces bit for bit.
+
+`Scenario.rover_environment` (e.g. HARSH, fitted to a real walk under trees, docs/hil-sim-error-model.md)
+adds, for the rover only, blockage by elevation/azimuth with reacquisition arcs, receiver-wide and independent
+LLI slips, slips without LLI, and C/N0-driven noise in place of the 1/sin(el) law.
+
 The common slowly varying errors (orbit, satellite clock, ionosphere model error, troposphere residual) are
 Gauss–Markov samples every `SMOOTH_DT_S` (300 s) joined by cubic splines: their σ and τ as stated, their rates
 continuous (a rover epoch differenced with a 20-s-old base epoch sees them drift smoothly, as real ones do).
