@@ -52,14 +52,15 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 
+from hil_sim import glonass_strings as gls
 from hil_sim import ubx_encode as enc
 from hil_sim.faults import FaultOptions, FaultState, hot_shoe_edges
-from onboard.gnsstime import NS_PER_S, GpsTime
+from onboard.gnsstime import GLONASST_MINUS_UTC_S, NS_PER_S, GpsTime, leap_seconds_at_utc
 from onboard.receiver.framing import Frame
 from onboard.receiver.framing import Protocol as FrameProtocol
 from onboard.rtk import lnav
 from onboard.rtk.geodesy import ecef_to_llh
-from onboard.rtk.types import GNSS_GPS, Ephemeris, ObsEpoch
+from onboard.rtk.types import GNSS_GLONASS, GNSS_GPS, Ephemeris, GlonassEphemeris, ObsEpoch
 
 log = logging.getLogger(__name__)
 
@@ -356,6 +357,9 @@ class ReceiverCore:
         self._subframes_seen: dict[int, set[tuple[int, int]]] = {}
         self._frame_cache: dict[tuple[int, int], list[list[int]]] = {}
         self._tracked: list[int] = []
+        self._tracked_glo: list[tuple[int, int]] = []
+        """(slot, channel k) of the GLONASS satellites tracked at the last epoch (M8T with GLONASS enabled)."""
+        self._glo_ephs: dict[int, GlonassEphemeris] | None = None
         self._ephs: list[Ephemeris] | None = None
         self._rng = np.random.default_rng(options.faults.seed + 17)
         self.dropped_flash_reports: list[enc.TimeMarkReport] = []
@@ -677,6 +681,9 @@ class ReceiverCore:
             obs = obs.select(np.isin(obs.gnss_id, list(enabled)))  # CFG-GNSS: disabled systems are not tracked
         self._tracked = sorted(int(s) for g, s in zip(obs.gnss_id, obs.sv_id, strict=True)
                                if int(g) == GNSS_GPS and 1 <= int(s) <= 32)
+        if obs.glo_fcn.shape[0] == len(obs):
+            self._tracked_glo = sorted((int(s), int(k)) for g, s, k in zip(obs.gnss_id, obs.sv_id, obs.glo_fcn,
+                                                                          strict=True) if int(g) == GNSS_GLONASS)
         self._process_camera(t)
 
         def due(msg: tuple[int, int]) -> bool:
@@ -790,6 +797,40 @@ class ReceiverCore:
                     self.stats.subframes_out += 1
             if len(self._frame_cache) > 256:
                 self._frame_cache.clear()
+        if want and self.model.subframe_msg == RXM_SFRBX and self._tracked_glo:
+            out += self._glonass_strings(since, t)
+        return out
+
+    def _glonass_strings(self, since: GpsTime, t: GpsTime) -> list[bytes]:
+        """RXM-SFRBX GLONASS strings 1–5 (hil_sim.glonass_strings) of every tracked GLONASS satellite whose
+        2-s string ended in (since, t]; strings 6–15 (almanac) are not sent."""
+        if self._glo_ephs is None:
+            make = getattr(self.world, "broadcast_navigation", None)
+            nav = make() if make is not None else None
+            self._glo_ephs = {} if nav is None else {
+                e.slot: e for e in (nav.select(GNSS_GLONASS, sv, t) for g, sv in nav.satellites()
+                                    if g == GNSS_GLONASS) if isinstance(e, GlonassEphemeris)}
+        out: list[bytes] = []
+        leap_s = leap_seconds_at_utc(t.to_utc())
+        two = gls.STRING_S * NS_PER_S
+        shift = (GLONASST_MINUS_UTC_S - leap_s) * NS_PER_S  # GLONASS time − GPS time
+        for k in range((since.total_ns + shift) // two + 1, (t.total_ns + shift) // two + 1):
+            end_glo = k * two
+            m = (end_glo // NS_PER_S) % gls.FRAME_S // gls.STRING_S  # string m ends 2m s into its frame
+            if not 1 <= m <= 5:
+                continue
+            frame_start = GpsTime.from_total_ns(end_glo - m * two - shift)
+            for chn, (slot, _k) in enumerate(self._tracked_glo):
+                eph = self._glo_ephs.get(slot)
+                if eph is None:
+                    continue
+                try:
+                    words = gls.sfrbx_words(gls.strings(eph, frame_start, leap_s)[m], frame_start, leap_s)
+                except ValueError as exc:
+                    log.warning("GLONASS slot %d: cannot encode strings (%s)", slot, exc)
+                    continue
+                if self._send(out, enc.rxm_sfrbx_glonass(len(self._tracked) + chn, slot, eph.channel, words)):
+                    self.stats.subframes_out += 1
         return out
 
     # ---- camera

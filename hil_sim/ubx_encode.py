@@ -255,6 +255,15 @@ def rxm_sfrbx(chn: int, prn: int, words30: Sequence[int]) -> bytes:
                  [{"dwrd": w & 0x3FFFFFFF} for w in words30])
 
 
+def rxm_sfrbx_glonass(chn: int, slot: int, channel_k: int, words: Sequence[int]) -> bytes:
+    """RXM-SFRBX (u-blox 8) for a GLONASS L1 OF string: 4 words (hil_sim.glonass_strings.sfrbx_words),
+    freqId = k + 7, sigId 0."""
+    if len(words) != 4:
+        raise LayoutError(f"RXM-SFRBX (GLONASS) needs 4 words, got {len(words)}")
+    return frame("RXM-SFRBX", {"gnssId": GNSS_GLONASS, "svId": slot, "freqId": channel_k + 7, "chn": chn,
+                               "version": 2}, [{"dwrd": w & 0xFFFFFFFF} for w in words])
+
+
 def aid_eph(prn: int, how: int | None = None, words24: Sequence[int] | None = None) -> bytes:
     """AID-EPH reply: 104 bytes with HOW and SF1D0..SF3D7, or the 8-byte 'no ephemeris' form."""
     if words24 is None:
