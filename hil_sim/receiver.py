@@ -60,7 +60,7 @@ from onboard.receiver.framing import Frame
 from onboard.receiver.framing import Protocol as FrameProtocol
 from onboard.rtk import lnav
 from onboard.rtk.geodesy import ecef_to_llh
-from onboard.rtk.types import GNSS_GLONASS, GNSS_GPS, Ephemeris, GlonassEphemeris, ObsEpoch
+from onboard.rtk.types import GNSS_GLONASS, GNSS_GPS, GNSS_QZSS, Ephemeris, GlonassEphemeris, ObsEpoch
 
 log = logging.getLogger(__name__)
 
@@ -360,6 +360,8 @@ class ReceiverCore:
         self._tracked_glo: list[tuple[int, int]] = []
         """(slot, channel k) of the GLONASS satellites tracked at the last epoch (M8T with GLONASS enabled)."""
         self._glo_ephs: dict[int, GlonassEphemeris] | None = None
+        self._tracked_qzss: list[int] = []
+        self._qzss_ephs: dict[int, Ephemeris] | None = None
         self._ephs: list[Ephemeris] | None = None
         self._rng = np.random.default_rng(options.faults.seed + 17)
         self.dropped_flash_reports: list[enc.TimeMarkReport] = []
@@ -681,6 +683,7 @@ class ReceiverCore:
             obs = obs.select(np.isin(obs.gnss_id, list(enabled)))  # CFG-GNSS: disabled systems are not tracked
         self._tracked = sorted(int(s) for g, s in zip(obs.gnss_id, obs.sv_id, strict=True)
                                if int(g) == GNSS_GPS and 1 <= int(s) <= 32)
+        self._tracked_qzss = sorted(int(s) for g, s in zip(obs.gnss_id, obs.sv_id, strict=True) if int(g) == GNSS_QZSS)
         if obs.glo_fcn.shape[0] == len(obs):
             self._tracked_glo = sorted((int(s), int(k)) for g, s, k in zip(obs.gnss_id, obs.sv_id, obs.glo_fcn,
                                                                           strict=True) if int(g) == GNSS_GLONASS)
@@ -795,10 +798,39 @@ class ReceiverCore:
                     data = enc.rxm_sfrbx(chn, prn, lnav.sfrbx_from_transmitted(words30))
                 if self._send(out, data):
                     self.stats.subframes_out += 1
+            if want and self.model.subframe_msg == RXM_SFRBX:
+                out += self._qzss_subframes(sf_id, frame_start, len(self._tracked) + len(self._tracked_glo))
             if len(self._frame_cache) > 256:
                 self._frame_cache.clear()
         if want and self.model.subframe_msg == RXM_SFRBX and self._tracked_glo:
             out += self._glonass_strings(since, t)
+        return out
+
+    def _qzss_subframes(self, sf_id: int, frame_start: GpsTime, chn0: int) -> list[bytes]:
+        """RXM-SFRBX subframe `sf_id` (1–3) of the frame starting at `frame_start` for every tracked QZSS
+        satellite: the L1 C/A LNAV format of GPS (IS-QZSS-PNT), its broadcast ephemeris from the world."""
+        out: list[bytes] = []
+        if self._qzss_ephs is None:
+            make = getattr(self.world, "broadcast_navigation", None)
+            nav = make() if make is not None else None
+            self._qzss_ephs = {} if nav is None else {
+                sv: e for g, sv in nav.satellites() if g == GNSS_QZSS
+                and isinstance(e := nav.select(g, sv, frame_start), Ephemeris)}
+        for chn, sv in enumerate(self._tracked_qzss):
+            eph = self._qzss_ephs.get(sv)
+            if eph is None:
+                continue
+            ck = (1000 + sv, frame_start.total_ns // NS_PER_S)
+            if ck not in self._frame_cache:
+                try:
+                    self._frame_cache[ck] = lnav.encode_subframes_transmitted(eph, frame_start.tow_ns / NS_PER_S)
+                except lnav.LnavError as exc:
+                    log.warning("QZSS %d: cannot encode subframes (%s)", sv, exc)
+                    continue
+            data = enc.rxm_sfrbx(chn0 + chn, sv, lnav.sfrbx_from_transmitted(self._frame_cache[ck][sf_id - 1]),
+                                 gnss_id=GNSS_QZSS)
+            if self._send(out, data):
+                self.stats.subframes_out += 1
         return out
 
     def _glonass_strings(self, since: GpsTime, t: GpsTime) -> list[bytes]:

@@ -247,11 +247,11 @@ def rxm_sfrb(chn: int, prn: int, words24: Sequence[int]) -> bytes:
     return frame("RXM-SFRB", {"chn": chn, "svid": prn}, [{"dwrd": w & 0xFFFFFF} for w in words24])
 
 
-def rxm_sfrbx(chn: int, prn: int, words30: Sequence[int]) -> bytes:
-    """RXM-SFRBX (u-blox 8) for a GPS L1 C/A subframe: 10 words of 30 bits (bits 29..0)."""
+def rxm_sfrbx(chn: int, prn: int, words30: Sequence[int], gnss_id: int = 0) -> bytes:
+    """RXM-SFRBX (u-blox 8) for a GPS (or QZSS, `gnss_id` 5) L1 C/A LNAV subframe: 10 words of 30 bits."""
     if len(words30) != 10:
         raise LayoutError(f"RXM-SFRBX (GPS) needs 10 words, got {len(words30)}")
-    return frame("RXM-SFRBX", {"gnssId": 0, "svId": prn, "chn": chn, "version": 2},
+    return frame("RXM-SFRBX", {"gnssId": gnss_id, "svId": prn, "chn": chn, "version": 2},
                  [{"dwrd": w & 0x3FFFFFFF} for w in words30])
 
 

@@ -12,7 +12,7 @@ from onboard.receiver.decode import decode_rxm_rawx
 from onboard.receiver.framing import Protocol
 from onboard.receiver.sfrbx import iter_navigation
 from onboard.rtk.glonass_nav import GlonassStringAssembler, hamming_ok
-from onboard.rtk.types import GNSS_GLONASS, GlonassEphemeris
+from onboard.rtk.types import GNSS_GALILEO, GNSS_GLONASS, GNSS_QZSS, GlonassEphemeris
 from tests.hil_sim_receiver.test_core import acked, configure, core_for, poll, run, send, ubx_of
 
 
@@ -86,3 +86,23 @@ def _cfg_gnss(core, rows: list[dict]) -> list:
 
     payload = enc.pack(enc.LAYOUTS["CFG-GNSS"], {"msgVer": 0, "numTrkChHw": 32, "numTrkChUse": 32}, rows)
     return send(core, "CFG-GNSS", raw_payload=payload)
+
+
+def test_emulated_m8t_sends_qzss_lnav_subframes_and_galileo_rawx() -> None:
+    world = World(Scenario.multi("gej-2021", duration_s=120.0))
+    core = core_for("m8t", world, time_valid_after_s=1.0)  # factory CFG-GNSS: GPS, Galileo, BeiDou, QZSS on
+    configure(core, meas_ms=1000)
+    frames = run(core, 40.0, step_s=0.5)
+    raw = [decode_rxm_rawx(f.payload) for f in ubx_of(frames, (0x02, 0x15))]
+    last = next(ep for ep in reversed(raw) if ep is not None)
+    assert {GNSS_GALILEO, GNSS_QZSS} <= set(last.gnss_id.tolist())
+    decoded = [e for e in iter_navigation(f for f in frames if f.protocol is Protocol.UBX)
+               if not isinstance(e, GlonassEphemeris) and e.gnss_id == GNSS_QZSS]
+    tracked = {int(s) for s in last.sv_id[last.gnss_id == GNSS_QZSS]}
+    assert {e.prn for e in decoded} == tracked and len(tracked) >= 3
+    nav = world.broadcast_navigation()
+    for e in decoded:
+        ref = nav.select(GNSS_QZSS, e.prn, world.start)
+        assert ref is not None and e.toe == ref.toe and e.iode == ref.iode
+        assert e.sqrt_a == pytest.approx(ref.sqrt_a, rel=1e-9) and e.e == pytest.approx(ref.e, abs=1e-9)
+        assert e.af0_s == pytest.approx(ref.af0_s, abs=1e-12)
