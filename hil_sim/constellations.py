@@ -44,6 +44,7 @@ from onboard.rtk.types import (
     GNSS_GLONASS,
     GNSS_GPS,
     GNSS_QZSS,
+    Ephemeris,
     GlonassEphemeris,
 )
 
@@ -51,6 +52,8 @@ Vec = npt.NDArray[np.float64]
 
 MULTI_ORDER = (GNSS_GPS, GNSS_GLONASS, GNSS_GALILEO, GNSS_QZSS, GNSS_BEIDOU)
 """Systems of the multi-system column layout, in column order."""
+_INAV_SOURCES = 0x005
+"""Galileo data-source bits of I/NAV (E1-B bit 0, E5b-I bit 2)."""
 SIGNAL_CODE = {GNSS_GPS: "1C", GNSS_GLONASS: "1C", GNSS_GALILEO: "1C", GNSS_QZSS: "1C", GNSS_BEIDOU: "2I"}
 """RINEX 3 code of the L1-band signal simulated per system (what RXM-RAWX version 1 with sigId 0 decodes to)."""
 
@@ -125,7 +128,7 @@ def read_navigation(paths: Sequence[Path]) -> tuple[list[AnyEphemeris], tuple | 
 
 def select_broadcast(ephs: Sequence[AnyEphemeris], systems: Sequence[int], mid: GpsTime, duration_s: float,
                      margin_s: float) -> dict[tuple[int, int], AnyEphemeris]:
-    """One healthy ephemeris per satellite of `systems`, toe nearest the scenario middle, valid over the whole
+    """One healthy ephemeris per satellite of `systems` (Galileo: I/NAV first), toe nearest the scenario middle, valid over the whole
     scenario (the truth orbit and what is broadcast). GPS keeps the simulator's historical rule (valid over
     the simulated margin too); the other systems need validity over the scenario only (GLONASS ephemerides
     live 30 min)."""
@@ -144,9 +147,15 @@ def select_broadcast(ephs: Sequence[AnyEphemeris], systems: Sequence[int], mid: 
         if not isinstance(eph, GlonassEphemeris) and eph.gnss_id == GNSS_BEIDOU and not 1 <= eph.prn <= 63:
             continue
         old = best.get(key)
-        if old is None or abs(mid.diff_s(eph.toe)) < abs(mid.diff_s(old.toe)):
+        if old is None or _rank(eph, mid) < _rank(old, mid):
             best[key] = eph
     return best
+
+
+def _rank(eph: AnyEphemeris, mid: GpsTime) -> tuple[bool, float]:
+    """Selection order: Galileo I/NAV before F/NAV (the E1 signal's clock), then toe nearest `mid`."""
+    fnav = isinstance(eph, Ephemeris) and eph.gnss_id == GNSS_GALILEO and not eph.code_on_l2 & _INAV_SOURCES
+    return fnav, abs(mid.diff_s(eph.toe))
 
 
 @dataclass(frozen=True)

@@ -264,6 +264,15 @@ def rxm_sfrbx_glonass(chn: int, slot: int, channel_k: int, words: Sequence[int])
                                "version": 2}, [{"dwrd": w & 0xFFFFFFFF} for w in words])
 
 
+def rxm_sfrbx_galileo(chn: int, sv: int, words: Sequence[int]) -> bytes:
+    """RXM-SFRBX (u-blox 8) for a Galileo E1-B I/NAV page pair: 8 words (hil_sim.galileo_pages.sfrbx_words),
+    sigId 1 (E1-B)."""
+    if len(words) != 8:
+        raise LayoutError(f"RXM-SFRBX (Galileo I/NAV) needs 8 words, got {len(words)}")
+    return frame("RXM-SFRBX", {"gnssId": 2, "svId": sv, "sigId": 1, "chn": chn, "version": 2},
+                 [{"dwrd": w & 0xFFFFFFFF} for w in words])
+
+
 def aid_eph(prn: int, how: int | None = None, words24: Sequence[int] | None = None) -> bytes:
     """AID-EPH reply: 104 bytes with HOW and SF1D0..SF3D7, or the 8-byte 'no ephemeris' form."""
     if words24 is None:

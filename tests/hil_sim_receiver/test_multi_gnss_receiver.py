@@ -1,16 +1,21 @@
-"""The emulated M8T in a GPS + GLONASS world: RXM-RAWX with GLONASS channels, RXM-SFRBX GLONASS strings."""
+"""The emulated M8T in multi-constellation worlds: RXM-RAWX of every system, RXM-SFRBX GLONASS strings, QZSS LNAV
+subframes and Galileo I/NAV page pairs that onboard's decoders read back to the broadcast ephemerides."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pytest
 
+from hil_sim import galileo_pages as galp
 from hil_sim import glonass_strings as gls
 from hil_sim.scenario import Scenario
 from hil_sim.world import World
 from onboard.receiver.decode import decode_rxm_rawx
 from onboard.receiver.framing import Protocol
 from onboard.receiver.sfrbx import iter_navigation
+from onboard.rtk.galileo_inav import DATA_SOURCE_E1B, GalileoNavError, ephemeris_from_words, inav_word
 from onboard.rtk.glonass_nav import GlonassStringAssembler, hamming_ok
 from onboard.rtk.types import GNSS_GALILEO, GNSS_GLONASS, GNSS_QZSS, GlonassEphemeris
 from tests.hil_sim_receiver.test_core import acked, configure, core_for, poll, run, send, ubx_of
@@ -32,6 +37,16 @@ def _same(a: GlonassEphemeris, b: GlonassEphemeris) -> None:
     assert np.allclose(a.pos_m, b.pos_m, atol=1e-3) and np.allclose(a.vel_m_s, b.vel_m_s, atol=1e-6)
     assert np.allclose(a.acc_m_s2, b.acc_m_s2, atol=1e-12)
     assert a.tau_n_s == pytest.approx(b.tau_n_s, abs=1e-15) and a.gamma_n == pytest.approx(b.gamma_n, abs=1e-20)
+
+
+def _same_kepler(a, b) -> None:
+    """Equal fields; floats to the RINEX file's 12 printed digits (the broadcast values are binary)."""
+    for f in dataclasses.fields(b):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        if isinstance(y, float):
+            assert x == pytest.approx(y, rel=1e-9, abs=1e-18), f.name
+        else:
+            assert x == y, f.name
 
 
 def test_glonass_strings_round_trip_through_the_decoder_and_the_hamming_code() -> None:
@@ -88,6 +103,22 @@ def _cfg_gnss(core, rows: list[dict]) -> list:
     return send(core, "CFG-GNSS", raw_payload=payload)
 
 
+def test_galileo_inav_words_round_trip_through_the_decoder_and_the_crc() -> None:
+    world = World(Scenario.multi("gej-2021", duration_s=120.0))
+    nav = world.broadcast_navigation()
+    sats = [sv for g, sv in nav.satellites() if g == GNSS_GALILEO]
+    assert len(sats) >= 10
+    for sv in sats:
+        eph = nav.select(GNSS_GALILEO, sv, world.start)
+        assert eph is not None and eph.code_on_l2 & 0x001  # the world broadcasts I/NAV (E1-B) sets
+        words = galp.words(eph)
+        pages = {t: galp.sfrbx_words(w) for t, w in words.items()}
+        with pytest.raises(GalileoNavError):
+            inav_word([pages[1][0] ^ 0x1000, *pages[1][1:]])  # a flipped data bit fails the CRC
+        got = ephemeris_from_words({t: inav_word(p) for t, p in pages.items()})
+        _same_kepler(got, dataclasses.replace(eph, code_on_l2=DATA_SOURCE_E1B))
+
+
 def test_emulated_m8t_sends_qzss_lnav_subframes_and_galileo_rawx() -> None:
     world = World(Scenario.multi("gej-2021", duration_s=120.0))
     core = core_for("m8t", world, time_valid_after_s=1.0)  # factory CFG-GNSS: GPS, Galileo, BeiDou, QZSS on
@@ -106,3 +137,10 @@ def test_emulated_m8t_sends_qzss_lnav_subframes_and_galileo_rawx() -> None:
         assert ref is not None and e.toe == ref.toe and e.iode == ref.iode
         assert e.sqrt_a == pytest.approx(ref.sqrt_a, rel=1e-9) and e.e == pytest.approx(ref.e, abs=1e-9)
         assert e.af0_s == pytest.approx(ref.af0_s, abs=1e-12)
+    gal = [e for e in iter_navigation(f for f in frames if f.protocol is Protocol.UBX)
+           if not isinstance(e, GlonassEphemeris) and e.gnss_id == GNSS_GALILEO]
+    assert {e.prn for e in gal} == {int(s) for s in last.sv_id[last.gnss_id == GNSS_GALILEO]}
+    for e in gal:
+        ref = nav.select(GNSS_GALILEO, e.prn, world.start)
+        assert ref is not None
+        _same_kepler(e, dataclasses.replace(ref, code_on_l2=DATA_SOURCE_E1B))
