@@ -13,9 +13,10 @@ Multi-constellation cases (`SimCase.systems` other than "G", a world of hil_sim.
 M8T rover's RXM-RAWX carries every system (gnssId/svId/freqId); the base's decoded epochs go out as RTCM3 MSM7
 per constellation (MsmEncoder; 1077 GPS, 1087 GLONASS, 1097 Galileo, 1117 QZSS, 1127 BeiDou, as a u-blox base
 sends) + 1006 every 10 s + the GPS 1019s, without BaseCore's radio budget; the engine gets
-RtkOptions(systems=case.systems) and Nav(store, iono, broadcast=the World's broadcast set: what the rover's and
-base's subframes would carry; the emulator encodes GPS subframes only, so the other systems' ephemerides are
-handed over as a RINEX navigation file would be). `SimCase.harsh` puts the rover under trees
+RtkOptions(systems=case.systems) and Nav(store, iono, broadcast=the World's broadcast set). This runner encodes
+raw measurements only (as the GPS path, whose ephemerides reach BaseCore from the World): the navigation data
+go to the engine as a RINEX navigation file would. The receiver emulator (hil_sim.receiver, `python -m hil_sim`)
+does send RXM-SFRBX for GPS, GLONASS (strings 1–5), QZSS (LNAV) and Galileo (I/NAV types 1–5). `SimCase.harsh` puts the rover under trees
 (hil_sim.scenario.HARSH) and `radio_loss` drops base seconds with a Gilbert chain (HARSH_RADIO_LOSS: the real
 M8P base stream).
 """
