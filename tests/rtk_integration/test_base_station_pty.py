@@ -71,7 +71,7 @@ def test_base_station_sends_rtcm_matching_its_journal_within_budget(tmp_path: Pa
     settings = make_settings(tmp_path, port_device=port, port_baud=9600)
     deps = RecorderDeps(open_port=lambda: SerialByteStream(port, 9600, 0.05))
     options = BaseOptions(station_id=42, position_ecef_m=tuple(world.base_ecef_m), radio_budget_bytes_s=BUDGET_B_S,
-                          radio_burst_bytes=BURST_B)
+                          radio_burst_bytes=BURST_B, obs_message="1004")
     station = base_recorder(settings, deps, options, lambda: SerialByteStream(radio_path, 57600, 0.05))
     (base,) = station.features
     assert isinstance(base, BaseStationFeature)
