@@ -219,7 +219,7 @@ def test_survey_in_over_the_emulated_base_gates_corrections_and_lands_near_the_a
     thread = threading.Thread(target=lambda: result.setdefault("rc", asyncio.run(station.run())), daemon=True)
     thread.start()
     try:
-        wait_until(lambda: base.core.scheduler.counts.sent.get("obs", 0) >= 5, timeout_s=60,
+        wait_until(lambda: base.core.counts()["sent"].get("obs", 0) >= 5, timeout_s=60,
                    what="survey-in done and corrections flowing")
     finally:
         loop = station._loop
@@ -235,7 +235,7 @@ def test_survey_in_over_the_emulated_base_gates_corrections_and_lands_near_the_a
     msgs = [RTCMReader.parse(f.raw) for f in framer.feed(bytes(radio.written))]
     pos = next(m for m in msgs if m.identity == "1006")
     np.testing.assert_allclose([pos.DF025, pos.DF026, pos.DF027], survey.result_ecef_m, atol=1e-3)
-    first_obs_ms = min(int(m.DF004) for m in msgs if m.identity == "1004")
+    first_obs_ms = min(int(m.DF004) for m in msgs if m.identity == "1074")  # the default MSM4 (GPS world)
     journal = [e.time for e in iter_journal(Path(station.status.flight_dir or "")) if isinstance(e, ObsEpoch)]
-    # nothing was sent during the survey: the first 1004 is at least 20 s after the first fix of the survey
+    # nothing was sent during the survey: the first MSM is at least 20 s after the first fix of the survey
     assert first_obs_ms / 1000.0 - journal[0].tow_s >= 20.0
