@@ -79,18 +79,20 @@ def run_matrix(only: list[str] | None = None, models: tuple[str, ...] = ("lea6t"
 
 
 def run_seeds(seeds: list[int], only: list[str] | None = None, models: tuple[str, ...] = ("lea6t", "m8t"),
-              start_hour: float | None = None) -> None:
+              start_hour: float | None = None, systems: str = "G", world: str = "gr-2012") -> None:
     """Print, per scenario and model, the airborne fix % over several World seeds (min, median, mean), the
     wrong fixes summed over the seeds (naming the seeds that had any) and the median first fix: one line each,
     so that a change is judged on more than one draw of the errors."""
+    sky = "GPS L1" if systems == "G" else f"systems {systems}, world {world}"
     print(f"hil_sim flights, seeds {seeds[0]}-{seeds[-1]} ({len(seeds)}){_sky(start_hour)}, directgeo onboard.rtk "
-          "forward, GPS L1, 15 deg mask, fix-and-hold, max age 30 s")
+          f"forward, {sky}, 15 deg mask, fix-and-hold, max age 30 s")
     head = (f"{'scenario':30s} {'model':6s} {'air % min':>9s} {'median':>7s} {'mean':>6s} {'wrong':>6s}  "
             "seeds with wrong fixes / first fix s (median)")
     print(head)
     print("-" * len(head))
     for case, model in _runs(only, models):
-        runs = {seed: evaluate(replace(case, seed=seed, start_hour=start_hour), model) for seed in seeds}
+        runs = {seed: evaluate(replace(case, seed=seed, start_hour=start_hour, systems=systems, world=world), model)
+                for seed in seeds}
         air = np.array([r["air fix %"] for r in runs.values()], float)
         wrong = {seed: r["wrong"] for seed, r in runs.items() if r["wrong"]}
         firsts = np.array([r["first fix s"] for r in runs.values()], float)
@@ -123,7 +125,7 @@ def main() -> None:
     args = ap.parse_args()
     models = tuple(args.model or ("lea6t", "m8t"))
     if args.seeds:
-        run_seeds(args.seeds, args.only, models, args.start_hour)
+        run_seeds(args.seeds, args.only, models, args.start_hour, args.systems, args.world)
     else:
         run_matrix(args.only, models, args.seed, args.start_hour, args.systems, args.world)
 
