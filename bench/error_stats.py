@@ -27,17 +27,24 @@ under trees: an upper bound for a moving antenna); the 2008 u-blox RXM-RAW log (
 hil_sim: the base (static ground antenna, 1200 s) and the rover's flight (take-off at 60 s, airborne after
 84 s) of the standard scenario, LEA-6T and M8T, seed 1.
 
-Run: `.venv/bin/python bench/error_stats.py [--no-sim] [--seed N]` (about 1 min).
+Harsh (`--harsh`): the M8P walk under trees against hil_sim's harsh rover (RoverEnvironment HARSH, GPS +
+GLONASS world gr-2012) through hil_sim.obs_stats, per constellation: availability by elevation, losses and
+outages, arcs, slips with and without LLI, half-cycle time, C/N0 distribution, code RMS by C/N0, and the base
+RTCM stream's loss pattern; then the environment fitted to each (the real fit is HARSH, rounded).
+
+Run: `.venv/bin/python bench/error_stats.py [--no-sim] [--seed N] [--harsh]` (about 1 min; --harsh 20 s).
 """
 
 from __future__ import annotations
 
 import argparse
+import gzip
 import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -430,12 +437,94 @@ def sim(seed: int) -> None:
         report_sd_code(f"SD code hil_sim {model} rover-base", series["rover"], series["base"])
 
 
+WALK_NAV = ("rinex/rover-20181004-1532.nav.gz", "rinex/base-20181004-1452.nav.gz", "cors-glw1/glw1277p.18n.gz",
+            "cors-glw1/glw1277p.18g.gz")
+"""The walk's own ephemerides miss satellites it hardly tracked (blocked): the base's and GLW1's complete them."""
+
+
+def harsh_rows(seed: int = 1, duration_s: float = 1200.0) -> tuple[list[tuple[str, str, str]], Any, Any]:
+    """(rows of (statistic, real, simulated), fitted real environment, refit of the simulation): the M8P walk
+    under trees (20181004-1532, GPS + GLONASS, 10° mask) against the harsh scenario (hil_sim HARSH rover,
+    world gr-2012, standard flight, `duration_s` at 1 Hz), through the same hil_sim.obs_stats code."""
+    from hil_sim.constellations import read_navigation
+    from hil_sim.obs_stats import fit_environment, stream_losses, tracking_stats
+    from hil_sim.rtk_scenarios import HARSH_RADIO_LOSS, radio_drops
+    from hil_sim.scenario import HARSH, Scenario
+    from hil_sim.world import World
+    from onboard.receiver.base_epochs import collect_rtcm
+    from onboard.rtk.navstore import BroadcastNavigation
+    from onboard.rtk.types import GNSS_GLONASS
+
+    walk = read_rinex_obs(M8P / "rinex/rover-20181004-1532.obs.gz")
+    ephs, _, _ = read_navigation([M8P / p for p in WALK_NAV])
+    real_st = tracking_stats(walk.epochs, BroadcastNavigation(ephs), walk.header.approx_pos_ecef_m,
+                             (GNSS_GPS, GNSS_GLONASS))
+    sc = Scenario.multi("gr-2012", duration_s=duration_s, seed=seed, rover_environment=HARSH)
+    world = World(sc)
+    n = int(duration_s) - 10
+    eps = [world.observe("rover", sc.start.add_s(k)) for k in range(n)]
+    pos = np.array([world.truth(sc.start.add_s(k))["antenna_ecef_m"] for k in range(n)])
+    sim_st = tracking_stats(eps, world.broadcast_navigation(), pos, (GNSS_GPS, GNSS_GLONASS))
+    rows: list[tuple[str, str, str]] = []
+    for g, name in ((GNSS_GPS, "GPS"), (GNSS_GLONASS, "GLO")):
+        r, s = real_st[g], sim_st[g]
+
+        def add(label: str, a: float, b: float, fmt: str = "{:.2f}") -> None:
+            rows.append((f"{name} {label}", fmt.format(a), fmt.format(b)))  # noqa: B023
+
+        add("tracked sat-h", r.tracked_sat_h, s.tracked_sat_h)
+        for band in r.avail_by_el:
+            add(f"availability el {band}", r.avail_by_el[band], s.avail_by_el[band], "{:.3f}")
+        add("losses / visible sat-h", r.losses_per_visible_h, s.losses_per_visible_h, "{:.1f}")
+        add("mean outage s", r.outage_mean_s, s.outage_mean_s, "{:.1f}")
+        add("median arc s", r.arc_median_s, s.arc_median_s, "{:.0f}")
+        add("LLI slips / sat-h", r.lli_slips_per_h, s.lli_slips_per_h, "{:.1f}")
+        add("LLI slips / sat-h, independent", r.independent_lli_slips_per_h, s.independent_lli_slips_per_h, "{:.1f}")
+        add("receiver-wide slip events / h", r.common_slip_events_per_h, s.common_slip_events_per_h, "{:.1f}")
+        add("half-cycle run after slip s", r.half_cycle_run_s, s.half_cycle_run_s, "{:.1f}")
+        add("slips without LLI / sat-h", r.unflagged_slips_per_h, s.unflagged_slips_per_h, "{:.1f}")
+        for q, a, b in zip(("p10", "p50", "p90"), r.cn0_p10_p50_p90, s.cn0_p10_p50_p90, strict=True):
+            add(f"C/N0 {q} dB-Hz", a, b, "{:.1f}")
+        for band in r.cn0_mean_by_el:
+            add(f"mean C/N0 el {band}", r.cn0_mean_by_el[band], s.cn0_mean_by_el[band], "{:.1f}")
+        for band in r.code_rms_by_cn0:
+            add(f"code RMS m, C/N0 {band}", r.code_rms_by_cn0[band], s.code_rms_by_cn0[band])
+        add("code sigma at 45 dB-Hz m", r.code_sigma_at_ref_m, s.code_sigma_at_ref_m)
+    with gzip.open(M8P / "rtcm3/base-20181004-1452.rtcm3.gz") as fh:
+        rtcm = collect_rtcm([fh.read()], walk.epochs[0].time)
+    t0 = rtcm.gnss_epochs[0].time
+
+    def fmt(loss: dict[str, float]) -> str:
+        return (f"{loss['lost_fraction']:.2f}, {loss['p_loss_after_ok']:.2f}, {loss['p_loss_after_loss']:.2f}, "
+                f"{loss['mean_run_s']:.1f}")
+
+    sim_loss = stream_losses(np.flatnonzero(~radio_drops(3600, *HARSH_RADIO_LOSS, seed)).astype(float))
+    for g, name in ((GNSS_GPS, "GPS MSM7 1077"), (GNSS_GLONASS, "GLO MSM7 1087")):
+        loss = stream_losses([e.time.diff_s(t0) for e in rtcm.gnss_epochs if g in e.systems])
+        rows.append((f"base stream {name}: lost fraction, P(loss after ok), P(loss after loss), mean loss run s",
+                     fmt(loss), fmt(sim_loss) + " (HARSH_RADIO_LOSS, 1 h)"))
+    return rows, fit_environment(real_st, HARSH.phase_sigma_ref_m), fit_environment(sim_st, HARSH.phase_sigma_ref_m)
+
+
+def harsh(seed: int) -> None:
+    """Print the real walk's statistics next to the harsh scenario's (a Markdown table) and both fits."""
+    rows, fit_real, fit_sim = harsh_rows(seed)
+    print("| statistic | M8P walk, trees (real) | hil_sim harsh (sim) |\n|---|---|---|")
+    for name, a, b in rows:
+        print(f"| {name} | {a} | {b} |")
+    print(f"\nfit of the real walk: {fit_real}\nrefit of the simulation: {fit_sim}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--no-sim", action="store_true")
     ap.add_argument("--no-real", action="store_true")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--harsh", action="store_true", help="only the walk under trees vs the harsh scenario")
     args = ap.parse_args()
+    if args.harsh:
+        harsh(args.seed)
+        return
     if not args.no_real:
         real()
     if not args.no_sim:

@@ -1,6 +1,6 @@
 """Bench: simulated-world epochs and LNAV codec speed, each next to a peer doing comparable work.
 
-- World.observe (rover + base, full physics) per epoch, next to onboard SPP (pntpos) solving that same epoch,
+- World.observe (rover + base, full physics) per epoch (the GPS world and the two multi-constellation worlds), next to onboard SPP (pntpos) solving that same epoch,
   and against the real-time budget of a 5 Hz two-receiver simulation (100 ms per epoch pair).
 - LNAV: our encode→decode of subframes 1–3 per ephemeris, next to RTKLIB decode_frame (pyrtklib) decoding
   the same subframes.
@@ -21,9 +21,11 @@ from onboard.rtk.ephemeris import EphemerisStore, satellite_states
 from onboard.rtk.pntpos import pntpos
 
 
-def bench_world(n: int = 300) -> None:
+def bench_world(n: int = 300, scenario: Scenario | None = None, label: str = "GPS") -> None:
+    """World construction and observe() cost of `scenario` (default: the GPS world), next to onboard SPP."""
+    print(f"-- world: {label}")
     t0 = time.perf_counter()
-    world = World(Scenario.default())
+    world = World(scenario or Scenario.default())
     t_init = time.perf_counter() - t0
     epochs = []
     t0 = time.perf_counter()
@@ -34,7 +36,8 @@ def bench_world(n: int = 300) -> None:
     t_obs = (time.perf_counter() - t0) / n
     store = EphemerisStore(world.ephemerides())
     t0 = time.perf_counter()
-    for ep in epochs:
+    for full in epochs:
+        ep = full.select(full.gnss_id == 0)  # today's SPP is GPS-only
         sats = satellite_states(store, ep.sv_id, ep.time, ep.pr_m)
         pntpos(ep.pr_m, sats, ep.time.tow_s, math.radians(5), dop_hz=ep.dop_hz, iono=world.iono_params())
     t_spp = (time.perf_counter() - t0) / n
@@ -81,4 +84,6 @@ def bench_lnav() -> None:
 
 if __name__ == "__main__":
     bench_world()
+    bench_world(scenario=Scenario.multi("gr-2012"), label="gr-2012 (GPS + GLONASS, 32 channels)")
+    bench_world(scenario=Scenario.multi("gej-2021"), label="gej-2021 (GPS + Galileo + QZSS, 32 channels)")
     bench_lnav()

@@ -10,7 +10,8 @@ wrong fixes (Q=1 more than 10 cm from the true antenna in 3D, over all epochs, s
 slips the engine detected, engine CPU µs per epoch. Flights: the standard survey flight, 600 s (take-off at
 60 s, climb to 84 s, 6 lines, landing), 1 Hz rover and base. The whole matrix: about 3 min of CPU.
 
-Run: `.venv/bin/python bench/rtk_sim.py [--only SUBSTR ...] [--model lea6t|m8t] [--seed N | --seeds 1-16]`
+Run: `.venv/bin/python bench/rtk_sim.py [--only SUBSTR ...] [--model lea6t|m8t] [--seed N | --seeds 1-16]
+[--systems GREJ --world gr-2012|gej-2021]` (the LEA-6T tracks GPS only in any world)
 (`--seeds`: one summary line per scenario over the seeds: min/median/mean airborne fix %, wrong fixes)
 """
 
@@ -23,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from hil_sim.rtk_scenarios import SimCase, evaluate
+from hil_sim.rtk_scenarios import HARSH_RADIO_LOSS, SimCase, evaluate
 
 GAPS_S = ((130.0, 135.0), (200.0, 210.0), (290.0, 310.0), (400.0, 420.0))
 """5, 10, 20 and 20 s dropouts, all while the drone flies its lines and turns (climb ends at 84 s)."""
@@ -37,6 +38,7 @@ CASES = [
     SimCase("5 satellites", "as the data support, 0 wrong", max_sats=5),
     SimCase("5 satellites, known take-off", "0 wrong", max_sats=5, known_start=True),
     SimCase("known take-off point", "fix at the first epoch, 0 wrong", known_start=True),
+    SimCase("harsh: trees + real base loss", "as the data support, 0 wrong", harsh=True, radio_loss=HARSH_RADIO_LOSS),
 ]
 
 
@@ -63,30 +65,34 @@ def _sky(hour: float | None) -> str:
 
 
 def run_matrix(only: list[str] | None = None, models: tuple[str, ...] = ("lea6t", "m8t"), seed: int = 1,
-               start_hour: float | None = None) -> None:
-    """Print the matrix (scenarios whose name contains one of `only`, or all)."""
-    print(f"hil_sim flights (seed {seed}{_sky(start_hour)}), directgeo onboard.rtk forward, GPS L1, 15 deg mask, "
+               start_hour: float | None = None, systems: str = "G", world: str = "gr-2012") -> None:
+    """Print the matrix (scenarios whose name contains one of `only`, or all); `systems` other than "G" runs
+    it in the multi-constellation `world` with the engine's RtkOptions(systems=...)."""
+    sky = "GPS L1" if systems == "G" else f"systems {systems}, world {world}"
+    print(f"hil_sim flights (seed {seed}{_sky(start_hour)}), directgeo onboard.rtk forward, {sky}, 15 deg mask, "
           "fix-and-hold, max age 30 s")
     print(HEADER)
     print("-" * len(HEADER))
     for case, model in _runs(only, models):
-        c = replace(case, seed=seed, start_hour=start_hour)
+        c = replace(case, seed=seed, start_hour=start_hour, systems=systems, world=world)
         print(row(c, model, evaluate(c, model)), flush=True)
 
 
 def run_seeds(seeds: list[int], only: list[str] | None = None, models: tuple[str, ...] = ("lea6t", "m8t"),
-              start_hour: float | None = None) -> None:
+              start_hour: float | None = None, systems: str = "G", world: str = "gr-2012") -> None:
     """Print, per scenario and model, the airborne fix % over several World seeds (min, median, mean), the
     wrong fixes summed over the seeds (naming the seeds that had any) and the median first fix: one line each,
     so that a change is judged on more than one draw of the errors."""
+    sky = "GPS L1" if systems == "G" else f"systems {systems}, world {world}"
     print(f"hil_sim flights, seeds {seeds[0]}-{seeds[-1]} ({len(seeds)}){_sky(start_hour)}, directgeo onboard.rtk "
-          "forward, GPS L1, 15 deg mask, fix-and-hold, max age 30 s")
+          f"forward, {sky}, 15 deg mask, fix-and-hold, max age 30 s")
     head = (f"{'scenario':30s} {'model':6s} {'air % min':>9s} {'median':>7s} {'mean':>6s} {'wrong':>6s}  "
             "seeds with wrong fixes / first fix s (median)")
     print(head)
     print("-" * len(head))
     for case, model in _runs(only, models):
-        runs = {seed: evaluate(replace(case, seed=seed, start_hour=start_hour), model) for seed in seeds}
+        runs = {seed: evaluate(replace(case, seed=seed, start_hour=start_hour, systems=systems, world=world), model)
+                for seed in seeds}
         air = np.array([r["air fix %"] for r in runs.values()], float)
         wrong = {seed: r["wrong"] for seed, r in runs.items() if r["wrong"]}
         firsts = np.array([r["first fix s"] for r in runs.values()], float)
@@ -113,12 +119,15 @@ def main() -> None:
     ap.add_argument("--seeds", type=_seed_range, help="several seeds, e.g. 1-16: one summary line per scenario")
     ap.add_argument("--start-hour", type=float, help="start at this hour (GPST) of 2010-07-01 for another sky "
                     "(default 13: the matrix's targets are set there)")
+    ap.add_argument("--systems", default="G", help="constellations, e.g. GREJ (default G: the GPS world)")
+    ap.add_argument("--world", default="gr-2012", help="multi-constellation world (hil_sim.scenario.MULTI_WORLDS): "
+                    "gr-2012 (GPS+GLONASS) or gej-2021 (GPS+Galileo+QZSS)")
     args = ap.parse_args()
     models = tuple(args.model or ("lea6t", "m8t"))
     if args.seeds:
-        run_seeds(args.seeds, args.only, models, args.start_hour)
+        run_seeds(args.seeds, args.only, models, args.start_hour, args.systems, args.world)
     else:
-        run_matrix(args.only, models, args.seed, args.start_hour)
+        run_matrix(args.only, models, args.seed, args.start_hour, args.systems, args.world)
 
 
 if __name__ == "__main__":

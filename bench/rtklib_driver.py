@@ -3,7 +3,7 @@
 `python bench/rtklib_driver.py --lib pyrtklib|pyrtklib5 ROVER.obs BASE.obs NAV [NAV...] -o OUT.pos`
 reads RINEX with RTKLIB's own reader, pairs each rover epoch with the base epoch nearest in time (as RTKLIB
 postpos does for post-processing), calls rtkpos() once per epoch and writes an RTKLIB-style .pos
-(week tow x y z Q ns ...). Options: GPS only, L1, kinematic, fix-and-hold, ratio 3, 15° mask, broadcast
+(week tow x y z Q ns ...). Options: GPS only (or --systems, GLONASS AR on), L1, kinematic, fix-and-hold, ratio 3, 15° mask, broadcast
 ionosphere, Saastamoinen troposphere, base position from the RINEX header (or --base-pos).
 
 It exists so the benchmark measures both engines the same way: a whole Python process doing the same job.
@@ -31,18 +31,41 @@ def _plain(path: str, tmp: Path) -> str:
     return str(out)
 
 
-def configure(mod, elmask_deg: float = 15.0, ratio: float = 3.0):  # type: ignore[no-untyped-def]
-    """RTKLIB processing options matching the benchmark's common settings."""
+NAVSYS = {"G": "SYS_GPS", "R": "SYS_GLO", "E": "SYS_GAL", "J": "SYS_QZS", "C": "SYS_CMP"}
+"""RINEX system letter → RTKLIB navsys flag name."""
+
+
+def navsys_mask(mod, systems: str) -> int:  # type: ignore[no-untyped-def]
+    """RTKLIB's navsys bit mask of `systems` (RINEX letters, e.g. "GR" → SYS_GPS|SYS_GLO)."""
+    mask = 0
+    for letter in systems:
+        mask |= getattr(mod, NAVSYS[letter])
+    return mask
+
+
+def configure(mod, elmask_deg: float = 15.0, ratio: float = 3.0, systems: str = "G",  # type: ignore[no-untyped-def]
+              dynamics: bool | None = None):
+    """RTKLIB processing options matching the benchmark's common settings; GLONASS, when used, with its
+    ambiguities fixed (glomodear=1, both receivers of one type). `dynamics` None keeps the binding's default
+    receiver dynamics (pyrtklib 2.4.3: off, pyrtklib5 demo5: on), else sets it (RTKLIB pos1-dynamics)."""
     popt = mod.prcopt_default
+    if dynamics is not None:
+        popt.dynamics = int(dynamics)
     popt.mode = mod.PMODE_KINEMA
     popt.nf = 1
-    popt.navsys = mod.SYS_GPS
+    popt.navsys = navsys_mask(mod, systems)
+    popt.glomodear = 1 if "R" in systems else 0
     popt.elmin = elmask_deg * mod.D2R
     popt.modear = 3  # fix-and-hold
     popt.thresar[0] = ratio
     popt.ionoopt = mod.IONOOPT_BRDC
     popt.tropopt = mod.TROPOPT_SAAS
     return popt
+
+
+def dynamics_flag(text: str | None) -> bool | None:
+    """--dynamics on/off/absent → True/False/None."""
+    return None if text is None else text == "on"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -53,6 +76,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("nav", nargs="+")
     parser.add_argument("--base-pos", help="X,Y,Z ECEF m (default: base RINEX header)")
     parser.add_argument("--elmask", type=float, default=15.0)
+    parser.add_argument("--systems", default="G", help="RINEX system letters (default G)")
+    parser.add_argument("--dynamics", choices=("on", "off"), help="receiver dynamics (default: the binding's)")
     parser.add_argument("-o", "--output", required=True)
     args = parser.parse_args(argv)
     mod = importlib.import_module(args.lib)
@@ -74,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
         mod.sortobs(obs_r)
         mod.sortobs(obs_b)
         mod.uniqnav(nav)
-    popt = configure(mod, args.elmask)
+    popt = configure(mod, args.elmask, systems=args.systems, dynamics=dynamics_flag(args.dynamics))
     if args.base_pos:
         rb = [float(v) for v in args.base_pos.split(",")]
     else:

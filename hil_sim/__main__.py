@@ -63,6 +63,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--receiver", choices=("rover", "base"), default="rover",
                    help="which antenna of the world: the drone's (rover, default) or the base station's")
     r.add_argument("--nav", help="RINEX navigation file of the world (default: the scenario's)")
+    r.add_argument("--world", help="multi-constellation world (hil_sim.scenario.MULTI_WORLDS: gr-2012, gej-2021; "
+                   "default: the GPS world); the M8T tracks what CFG-GNSS enables")
+    r.add_argument("--harsh", action="store_true", help="the rover under trees (RoverEnvironment HARSH)")
     r.add_argument("--duration", type=float, default=None,
                    help="simulated span in s (default: the scenario's); afterwards no more measurements")
     g = r.add_mutually_exclusive_group()
@@ -173,7 +176,7 @@ def run_radio(args: argparse.Namespace) -> int:
 def run_receiver(args: argparse.Namespace) -> int:
     """Build the world and the emulator, print the pty path, run until a signal."""
     from hil_sim.pty_server import ReceiverEmulator
-    from hil_sim.scenario import Scenario
+    from hil_sim.scenario import HARSH, Scenario
     from hil_sim.world import World
 
     overrides: dict[str, object] = {"seed": args.seed}
@@ -181,7 +184,10 @@ def run_receiver(args: argparse.Namespace) -> int:
         overrides["nav_path"] = args.nav
     if args.duration is not None:
         overrides["duration_s"] = args.duration
-    scenario = Scenario.default(model=args.model, **overrides)
+    if args.harsh:
+        overrides["rover_environment"] = HARSH
+    scenario = (Scenario.multi(args.world, model=args.model, **overrides) if args.world
+                else Scenario.default(model=args.model, **overrides))
     valid_after = args.time_valid_after
     if valid_after is None:
         valid_after = scenario.camera.valid_after_s

@@ -52,14 +52,24 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 
+from hil_sim import galileo_pages as galp
+from hil_sim import glonass_strings as gls
 from hil_sim import ubx_encode as enc
 from hil_sim.faults import FaultOptions, FaultState, hot_shoe_edges
-from onboard.gnsstime import NS_PER_S, GpsTime
+from onboard.gnsstime import GLONASST_MINUS_UTC_S, NS_PER_S, GpsTime, leap_seconds_at_utc
 from onboard.receiver.framing import Frame
 from onboard.receiver.framing import Protocol as FrameProtocol
 from onboard.rtk import lnav
 from onboard.rtk.geodesy import ecef_to_llh
-from onboard.rtk.types import GNSS_GPS, Ephemeris, ObsEpoch
+from onboard.rtk.types import (
+    GNSS_GALILEO,
+    GNSS_GLONASS,
+    GNSS_GPS,
+    GNSS_QZSS,
+    Ephemeris,
+    GlonassEphemeris,
+    ObsEpoch,
+)
 
 log = logging.getLogger(__name__)
 
@@ -356,6 +366,13 @@ class ReceiverCore:
         self._subframes_seen: dict[int, set[tuple[int, int]]] = {}
         self._frame_cache: dict[tuple[int, int], list[list[int]]] = {}
         self._tracked: list[int] = []
+        self._tracked_glo: list[tuple[int, int]] = []
+        """(slot, channel k) of the GLONASS satellites tracked at the last epoch (M8T with GLONASS enabled)."""
+        self._glo_ephs: dict[int, GlonassEphemeris] | None = None
+        self._tracked_qzss: list[int] = []
+        self._tracked_gal: list[int] = []
+        self._gal_ephs: dict[int, Any] | None = None
+        self._qzss_ephs: dict[int, Ephemeris] | None = None
         self._ephs: list[Ephemeris] | None = None
         self._rng = np.random.default_rng(options.faults.seed + 17)
         self.dropped_flash_reports: list[enc.TimeMarkReport] = []
@@ -677,6 +694,11 @@ class ReceiverCore:
             obs = obs.select(np.isin(obs.gnss_id, list(enabled)))  # CFG-GNSS: disabled systems are not tracked
         self._tracked = sorted(int(s) for g, s in zip(obs.gnss_id, obs.sv_id, strict=True)
                                if int(g) == GNSS_GPS and 1 <= int(s) <= 32)
+        self._tracked_qzss = sorted(int(s) for g, s in zip(obs.gnss_id, obs.sv_id, strict=True) if int(g) == GNSS_QZSS)
+        self._tracked_gal = sorted(int(s) for g, s in zip(obs.gnss_id, obs.sv_id, strict=True) if int(g) == GNSS_GALILEO)
+        if obs.glo_fcn.shape[0] == len(obs):
+            self._tracked_glo = sorted((int(s), int(k)) for g, s, k in zip(obs.gnss_id, obs.sv_id, obs.glo_fcn,
+                                                                          strict=True) if int(g) == GNSS_GLONASS)
         self._process_camera(t)
 
         def due(msg: tuple[int, int]) -> bool:
@@ -788,8 +810,103 @@ class ReceiverCore:
                     data = enc.rxm_sfrbx(chn, prn, lnav.sfrbx_from_transmitted(words30))
                 if self._send(out, data):
                     self.stats.subframes_out += 1
+            if want and self.model.subframe_msg == RXM_SFRBX:
+                out += self._qzss_subframes(sf_id, frame_start, len(self._tracked) + len(self._tracked_glo))
             if len(self._frame_cache) > 256:
                 self._frame_cache.clear()
+        if want and self.model.subframe_msg == RXM_SFRBX and self._tracked_glo:
+            out += self._glonass_strings(since, t)
+        if want and self.model.subframe_msg == RXM_SFRBX and self._tracked_gal:
+            out += self._galileo_pages(since, t)
+        return out
+
+    def _broadcast(self, gnss_id: int, t: GpsTime) -> dict[int, Any]:
+        """The world's broadcast ephemeris of every satellite of `gnss_id` (empty for a GPS-only world)."""
+        make = getattr(self.world, "broadcast_navigation", None)
+        nav = make() if make is not None else None
+        if nav is None:
+            return {}
+        return {sv: e for g, sv in nav.satellites() if g == gnss_id and (e := nav.select(g, sv, t)) is not None}
+
+    def _galileo_pages(self, since: GpsTime, t: GpsTime) -> list[bytes]:
+        """RXM-SFRBX E1-B page pairs of I/NAV word types 1–5 (hil_sim.galileo_pages) of every tracked Galileo
+        satellite whose page ended in (since, t]; almanac and spare pages are not sent."""
+        if self._gal_ephs is None:
+            self._gal_ephs = self._broadcast(GNSS_GALILEO, t)
+        out: list[bytes] = []
+        two = galp.PAGE_S * NS_PER_S
+        page_word = {k: w for w, k in galp.PAGE_OF_WORD.items()}
+        chn0 = len(self._tracked) + len(self._tracked_glo) + len(self._tracked_qzss)
+        for k in range(since.total_ns // two + 1, t.total_ns // two + 1):
+            end = GpsTime.from_total_ns(k * two)
+            page = (end.tow_ns // NS_PER_S) % galp.SUBFRAME_S // galp.PAGE_S - 1  # page ending at `end`
+            word_type = page_word.get(page % (galp.SUBFRAME_S // galp.PAGE_S))
+            if word_type is None:
+                continue
+            for chn, sv in enumerate(self._tracked_gal):
+                eph = self._gal_ephs.get(sv)
+                if not isinstance(eph, Ephemeris):
+                    continue
+                try:
+                    word = galp.words(eph, end.tow_ns / NS_PER_S)[word_type]
+                except ValueError as exc:
+                    log.warning("Galileo E%02d: cannot encode I/NAV words (%s)", sv, exc)
+                    continue
+                if self._send(out, enc.rxm_sfrbx_galileo(chn0 + chn, sv, galp.sfrbx_words(word))):
+                    self.stats.subframes_out += 1
+        return out
+
+    def _qzss_subframes(self, sf_id: int, frame_start: GpsTime, chn0: int) -> list[bytes]:
+        """RXM-SFRBX subframe `sf_id` (1–3) of the frame starting at `frame_start` for every tracked QZSS
+        satellite: the L1 C/A LNAV format of GPS (IS-QZSS-PNT), its broadcast ephemeris from the world."""
+        out: list[bytes] = []
+        if self._qzss_ephs is None:
+            self._qzss_ephs = {sv: e for sv, e in self._broadcast(GNSS_QZSS, frame_start).items()
+                               if isinstance(e, Ephemeris)}
+        for chn, sv in enumerate(self._tracked_qzss):
+            eph = self._qzss_ephs.get(sv)
+            if eph is None:
+                continue
+            ck = (1000 + sv, frame_start.total_ns // NS_PER_S)
+            if ck not in self._frame_cache:
+                try:
+                    self._frame_cache[ck] = lnav.encode_subframes_transmitted(eph, frame_start.tow_ns / NS_PER_S)
+                except lnav.LnavError as exc:
+                    log.warning("QZSS %d: cannot encode subframes (%s)", sv, exc)
+                    continue
+            data = enc.rxm_sfrbx(chn0 + chn, sv, lnav.sfrbx_from_transmitted(self._frame_cache[ck][sf_id - 1]),
+                                 gnss_id=GNSS_QZSS)
+            if self._send(out, data):
+                self.stats.subframes_out += 1
+        return out
+
+    def _glonass_strings(self, since: GpsTime, t: GpsTime) -> list[bytes]:
+        """RXM-SFRBX GLONASS strings 1–5 (hil_sim.glonass_strings) of every tracked GLONASS satellite whose
+        2-s string ended in (since, t]; strings 6–15 (almanac) are not sent."""
+        if self._glo_ephs is None:
+            self._glo_ephs = {sv: e for sv, e in self._broadcast(GNSS_GLONASS, t).items()
+                              if isinstance(e, GlonassEphemeris)}
+        out: list[bytes] = []
+        leap_s = leap_seconds_at_utc(t.to_utc())
+        two = gls.STRING_S * NS_PER_S
+        shift = (GLONASST_MINUS_UTC_S - leap_s) * NS_PER_S  # GLONASS time − GPS time
+        for k in range((since.total_ns + shift) // two + 1, (t.total_ns + shift) // two + 1):
+            end_glo = k * two
+            m = (end_glo // NS_PER_S) % gls.FRAME_S // gls.STRING_S  # string m ends 2m s into its frame
+            if not 1 <= m <= 5:
+                continue
+            frame_start = GpsTime.from_total_ns(end_glo - m * two - shift)
+            for chn, (slot, _k) in enumerate(self._tracked_glo):
+                eph = self._glo_ephs.get(slot)
+                if eph is None:
+                    continue
+                try:
+                    words = gls.sfrbx_words(gls.strings(eph, frame_start, leap_s)[m], frame_start, leap_s)
+                except ValueError as exc:
+                    log.warning("GLONASS slot %d: cannot encode strings (%s)", slot, exc)
+                    continue
+                if self._send(out, enc.rxm_sfrbx_glonass(len(self._tracked) + chn, slot, eph.channel, words)):
+                    self.stats.subframes_out += 1
         return out
 
     # ---- camera

@@ -25,6 +25,32 @@ DEFAULT_START = GpsTime(1590, 392_400 * 1_000_000_000)
 
 
 @dataclass(frozen=True)
+class MultiWorld:
+    """A multi-constellation sky: shipped navigation files (data/NOTICE.md), the systems they hold, a start
+    time on their day and a site where those systems are in view."""
+
+    nav_paths: tuple[Path, ...]
+    systems: str
+    start: GpsTime
+    site_lat_deg: float
+    site_lon_deg: float
+    site_h_m: float
+
+
+MULTI_WORLDS: dict[str, MultiWorld] = {
+    "gr-2012": MultiWorld(
+        tuple(DATA_DIR / "broadcast-nav-20121031" / f"brdc3050.12{x}" for x in "ngq"), "GR",
+        GpsTime(1712, (259_200 + 2 * 3600) * 1_000_000_000), 35.68, 139.77, 40.0),
+    "gej-2021": MultiWorld(
+        (DATA_DIR / "geonet-3034-sept-20210922" / "SEPT2650.21P.gz",), "GEJ",
+        GpsTime(2176, (259_200 + 6 * 3600 + 1800) * 1_000_000_000), 35.342, 139.522, 60.0),
+}
+"""2012-10-31 02:00 GPST (GPS + GLONASS FDMA, RTKLIB test data, BSD-2) over Tokyo (QZS-1's file is read too but
+it broadcast itself unhealthy all that day: systems "GRJ" simulates no QZSS there); 2021-09-22 06:30 GPST
+(GPS + Galileo + 4 QZSS, cssrlib-data, MIT) over Fujisawa, where those files were recorded."""
+
+
+@dataclass(frozen=True)
 class ErrorModel:
     """Error budget of the simulated observables (all 1σ; `*_zenith_*` values are scaled by 1/sin(el)).
 
@@ -96,6 +122,57 @@ class ErrorModel:
 
 
 @dataclass(frozen=True)
+class RoverEnvironment:
+    """A hard place for the rover's antenna (e.g. walking under trees): blockage, slips and C/N0-driven noise.
+
+    Replaces, for the rover only, the ErrorModel's slip rates, half-cycle time, C/N0 model and the 1/sin(el)
+    noise law; the base stays in the open sky. Blockage: a two-state (tracked/blocked) process per satellite
+    on the 1-s grid with the unavailability `unavailability` per elevation band `el_bands_deg` (lower edges,
+    the last band to 90°) × the relative factor of its 45° azimuth sector (`az_factor`, 8 values from north,
+    clockwise), mean outage `outage_mean_s`; each reacquisition is a new arc (new ambiguity, lock time reset,
+    LLI). Slips: independent LLI slips `lli_slips_per_h` per satellite, receiver-wide events (every satellite
+    slips at once) `common_slip_events_per_h`, slips without LLI `unflagged_slips_per_h` (±1…3 cycles).
+    Noise: code (white and multipath, split as in the ErrorModel) of total σ `code_sigma_ref_m` and white
+    phase `phase_sigma_ref_m` at `cn0_ref_dbhz`, scaled by 10^((ref − C/N0)/20) (thermal noise ∝ 1/√(C/N0),
+    what the measured code RMS per C/N0 bin follows); GLONASS code × `glonass_code_factor` (its C/A chip is
+    twice as long). C/N0 = `cn0_horizon_dbhz` + (`cn0_zenith_dbhz` − horizon)·sin(el) + N(0, `cn0_sigma_dbhz`).
+    `HARSH` holds the values fitted to the real M8P walk (hil_sim.obs_stats.fit_environment;
+    docs/hil-sim-error-model.md).
+    """
+
+    el_bands_deg: tuple[float, ...] = (10.0, 20.0, 30.0, 45.0, 60.0)
+    unavailability: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    az_factor: tuple[float, ...] = (1.0,) * 8
+    outage_mean_s: float = 3.0
+    lli_slips_per_h: float = 0.0
+    common_slip_events_per_h: float = 0.0
+    unflagged_slips_per_h: float = 0.0
+    half_cycle_resolve_s: float = 2.0
+    cn0_horizon_dbhz: float = 35.0
+    cn0_zenith_dbhz: float = 50.0
+    cn0_sigma_dbhz: float = 1.0
+    cn0_ref_dbhz: float = 45.0
+    code_sigma_ref_m: float = 0.5
+    phase_sigma_ref_m: float = 0.001
+    glonass_code_factor: float = 1.0
+
+
+HARSH = RoverEnvironment(
+    el_bands_deg=(10.0, 20.0, 30.0, 45.0, 60.0), unavailability=(0.100, 0.066, 0.010, 0.009, 0.007),
+    az_factor=(0.30, 0.57, 0.92, 3.47, 0.40, 1.33, 0.28, 0.72), outage_mean_s=2.7, lli_slips_per_h=38.1,
+    common_slip_events_per_h=4.6, unflagged_slips_per_h=2.6, half_cycle_resolve_s=2.9, cn0_horizon_dbhz=34.6,
+    cn0_zenith_dbhz=51.1, cn0_sigma_dbhz=3.5, cn0_ref_dbhz=45.0, code_sigma_ref_m=0.93, phase_sigma_ref_m=0.0018,
+    glonass_code_factor=2.43,
+)
+"""The u-blox M8P walking a river trail under trees (Galway 2018, set 20181004-1532, GPS + GLONASS, 10° mask):
+`hil_sim.obs_stats.fit_environment` of its RINEX (bench/error_stats.py --harsh prints the fit and the
+simulated statistics beside the real ones). Phase σ: not measurable there (no truth for a moving antenna): the
+static M8P's 1 mm zenith (C/N0 ≈ 50 dB-Hz) carried to 45 dB-Hz by the same 10^(Δ/20) law. Code σ: 0.93 m
+in, because the estimator (a quadratic removed per arc takes some multipath with it) returns 0.79 m, the
+walk's figure, for it on the simulated flight."""
+
+
+@dataclass(frozen=True)
 class ReceiverModel:
     """A u-blox receiver's clock and tracking behaviour.
 
@@ -112,6 +189,8 @@ class ReceiverModel:
     clock_jump_threshold_s: float = 0.5e-3
     elevation_mask_deg: float = 5.0
     max_sats: int = 16
+    ifb_type: str = "ublox-m8"
+    """GLONASS inter-frequency bias type (hil_sim.constellations.IFB_TYPES): "ublox-m8" or "other"."""
 
     @classmethod
     def lea6t(cls, **overrides: object) -> ReceiverModel:
@@ -124,6 +203,11 @@ class ReceiverModel:
     def m8t(cls, **overrides: object) -> ReceiverModel:
         """NEO/LEA-M8T (RXM-RAWX): free-running clock, tags …992 ms, an occasional 1-ms step."""
         return dataclasses.replace(cls(), **overrides)  # type: ignore[arg-type]
+
+    def tracks(self, gnss_id: int) -> bool:
+        """Whether this receiver tracks the system: the LEA-6T GPS only, the M8T every simulated one (CFG-GNSS
+        chooses among them in the receiver emulator)."""
+        return self.kind != "lea6t" or gnss_id == 0
 
     @classmethod
     def for_kind(cls, kind: str, **overrides: object) -> ReceiverModel:
@@ -199,9 +283,13 @@ class Scenario:
     site_h_m: float = 500.0
     base_offset_enu_m: tuple[float, float, float] = (800.0, -600.0, 2.0)
     nav_path: Path = DEFAULT_NAV_PATH
+    extra_nav_paths: tuple[Path, ...] = ()
+    systems: str = "G"
     errors: ErrorModel = field(default_factory=ErrorModel)
     flight: FlightPlan = field(default_factory=FlightPlan)
     camera: CameraPlan = field(default_factory=CameraPlan)
+    rover_environment: RoverEnvironment | None = None
+    """None: the rover sees the open sky of the ErrorModel; else its hard environment (e.g. HARSH)."""
     rover_receiver: ReceiverModel = field(default_factory=ReceiverModel.m8t)
     base_receiver: ReceiverModel = field(default_factory=lambda: ReceiverModel.m8t(
         clock_bias0_s=0.21e-3, clock_drift_s_s=0.12e-6))
@@ -217,7 +305,27 @@ class Scenario:
         values.update(overrides)
         if "nav_path" in values:
             values["nav_path"] = Path(str(values["nav_path"]))
+        if "extra_nav_paths" in values:
+            values["extra_nav_paths"] = tuple(Path(str(p)) for p in values["extra_nav_paths"])  # type: ignore[attr-defined]
         return cls(**values)  # type: ignore[arg-type]
+
+    @classmethod
+    def multi(cls, world: str = "gr-2012", model: str = "m8t", systems: str | None = None,
+              **overrides: object) -> Scenario:
+        """The standard flight in a multi-constellation world (MULTI_WORLDS): its navigation files, day, hour
+        and site; `systems` a subset of the world's (default: all it has); fields overridable."""
+        if world not in MULTI_WORLDS:
+            raise ValueError(f"unknown world {world!r} (expected one of {sorted(MULTI_WORLDS)})")
+        w = MULTI_WORLDS[world]
+        values: dict[str, object] = {
+            "nav_path": w.nav_paths[0], "extra_nav_paths": w.nav_paths[1:], "systems": systems or w.systems,
+            "start": w.start, "site_lat_deg": w.site_lat_deg, "site_lon_deg": w.site_lon_deg,
+            "site_h_m": w.site_h_m}
+        if model == "m8t":  # 32 tracking channels: a multi-constellation sky fills more than 16
+            values["rover_receiver"] = ReceiverModel.m8t(max_sats=32)
+            values["base_receiver"] = ReceiverModel.m8t(clock_bias0_s=0.21e-3, clock_drift_s_s=0.12e-6, max_sats=32)
+        values.update(overrides)
+        return cls.default(model, **values)
 
     @staticmethod
     def base_offset_for(baseline_m: float, azimuth_deg: float = 127.0, up_m: float = 2.0) -> tuple[float, float, float]:

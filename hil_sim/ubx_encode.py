@@ -20,7 +20,7 @@ import numpy as np
 
 from onboard.gnsstime import GpsTime, leap_seconds_at_utc
 from onboard.receiver.framing import ubx_frame
-from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP, ObsEpoch
+from onboard.rtk.types import FCN_NONE, GNSS_GLONASS, LLI_HALF_CYCLE, LLI_SLIP, ObsEpoch
 
 Field = tuple[str, str]
 """(u-blox field name, little-endian struct code)."""
@@ -208,12 +208,15 @@ def rxm_rawx(epoch: ObsEpoch) -> bytes:
     """RXM-RAWX (u-blox 8, version 1) of `epoch`; rcvTow is the receiver tag in s.
 
     trkStat: bit0 prValid, bit1 cpValid, bit2 halfCyc valid (no LLI half-cycle flag), bit3 subHalfCyc.
+    gnssId/svId as in the epoch; freqId the GLONASS channel k + 7 (0 for the other systems); sigId 0 (the L1
+    C/A-class signal of every system: GPS/QZSS L1C/A, GLONASS L1OF, Galileo E1C, BeiDou B1I D1).
     Std-dev codes: pr 0.01·2^n m, cp 0.004·n cycles, Doppler 0.002·2^n Hz (n = 4 when unknown).
     """
     n = len(epoch)
     std_pr = epoch.pr_std_m if epoch.pr_std_m.shape[0] == n else np.full(n, np.nan)
     std_cp = epoch.cp_std_cyc if epoch.cp_std_cyc.shape[0] == n else np.full(n, np.nan)
     half = epoch.half_cyc_sub if epoch.half_cyc_sub.shape[0] == n else np.zeros(n, np.uint8)
+    fcn = epoch.glo_fcn if epoch.glo_fcn.shape[0] == n else np.full(n, FCN_NONE, np.int8)
     rows = []
     for i in range(n):
         cp = float(epoch.cp_cyc[i])
@@ -223,7 +226,8 @@ def rxm_rawx(epoch: ObsEpoch) -> bytes:
         trk = 0x01 | (0x02 if phase_ok else 0) | (0 if lli & LLI_HALF_CYCLE else 0x04) | (0x08 if half[i] else 0)
         rows.append({
             "prMes": float(epoch.pr_m[i]), "cpMes": cp if phase_ok else 0.0, "doMes": float(epoch.dop_hz[i]),
-            "gnssId": int(epoch.gnss_id[i]), "svId": int(epoch.sv_id[i]), "sigId": 0, "freqId": 0,
+            "gnssId": int(epoch.gnss_id[i]), "svId": int(epoch.sv_id[i]), "sigId": 0,
+            "freqId": int(fcn[i]) + 7 if int(epoch.gnss_id[i]) == GNSS_GLONASS and int(fcn[i]) != FCN_NONE else 0,
             "locktime": int(min(64500, max(0.0, lock))) if math.isfinite(lock) else 0,
             "cno": round(float(epoch.cn0_dbhz[i])),
             "prStdev": _code(float(std_pr[i]), lambda s: round(math.log2(s / 0.01)), 4),
@@ -243,12 +247,30 @@ def rxm_sfrb(chn: int, prn: int, words24: Sequence[int]) -> bytes:
     return frame("RXM-SFRB", {"chn": chn, "svid": prn}, [{"dwrd": w & 0xFFFFFF} for w in words24])
 
 
-def rxm_sfrbx(chn: int, prn: int, words30: Sequence[int]) -> bytes:
-    """RXM-SFRBX (u-blox 8) for a GPS L1 C/A subframe: 10 words of 30 bits (bits 29..0)."""
+def rxm_sfrbx(chn: int, prn: int, words30: Sequence[int], gnss_id: int = 0) -> bytes:
+    """RXM-SFRBX (u-blox 8) for a GPS (or QZSS, `gnss_id` 5) L1 C/A LNAV subframe: 10 words of 30 bits."""
     if len(words30) != 10:
         raise LayoutError(f"RXM-SFRBX (GPS) needs 10 words, got {len(words30)}")
-    return frame("RXM-SFRBX", {"gnssId": 0, "svId": prn, "chn": chn, "version": 2},
+    return frame("RXM-SFRBX", {"gnssId": gnss_id, "svId": prn, "chn": chn, "version": 2},
                  [{"dwrd": w & 0x3FFFFFFF} for w in words30])
+
+
+def rxm_sfrbx_glonass(chn: int, slot: int, channel_k: int, words: Sequence[int]) -> bytes:
+    """RXM-SFRBX (u-blox 8) for a GLONASS L1 OF string: 4 words (hil_sim.glonass_strings.sfrbx_words),
+    freqId = k + 7, sigId 0."""
+    if len(words) != 4:
+        raise LayoutError(f"RXM-SFRBX (GLONASS) needs 4 words, got {len(words)}")
+    return frame("RXM-SFRBX", {"gnssId": GNSS_GLONASS, "svId": slot, "freqId": channel_k + 7, "chn": chn,
+                               "version": 2}, [{"dwrd": w & 0xFFFFFFFF} for w in words])
+
+
+def rxm_sfrbx_galileo(chn: int, sv: int, words: Sequence[int]) -> bytes:
+    """RXM-SFRBX (u-blox 8) for a Galileo E1-B I/NAV page pair: 8 words (hil_sim.galileo_pages.sfrbx_words),
+    sigId 1 (E1-B)."""
+    if len(words) != 8:
+        raise LayoutError(f"RXM-SFRBX (Galileo I/NAV) needs 8 words, got {len(words)}")
+    return frame("RXM-SFRBX", {"gnssId": 2, "svId": sv, "sigId": 1, "chn": chn, "version": 2},
+                 [{"dwrd": w & 0xFFFFFFFF} for w in words])
 
 
 def aid_eph(prn: int, how: int | None = None, words24: Sequence[int] | None = None) -> bytes:

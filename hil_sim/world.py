@@ -58,6 +58,19 @@ time t (GPS time):
   pseudorange (by c·1 ms = 299 792.458 m) and the phase (by exactly 1 575 420 cycles, an integer, no slip)
   all jump together, as on real u-blox RXM-RAW/RAWX; the RAWX `clock_reset` flag marks the epoch after it.
 
+Other constellations (`Scenario.systems`, e.g. "GREJ"; worlds in hil_sim.scenario.MULTI_WORLDS): the same
+equations per satellite on its own carrier (hil_sim.constellations: Galileo E1/QZSS L1 1575.42 MHz, BeiDou B1I,
+GLONASS 1602 + 0.5625·k MHz with k from its ephemeris; λ, Doppler and the ionosphere ×(f_L1/f)² follow), the
+satellites from the engine's own models (onboard.rtk.navstore.satellite_state: GLONASS state-vector integration,
+Galileo/QZSS/BeiDou Kepler, L1-band group delay). GLONASS code and phase carry the receiver type's
+inter-frequency biases (ReceiverModel.ifb_type; identical for two receivers of one type). The LEA-6T tracks GPS
+only. Epochs then fill `glo_fcn` and `signal`. A GPS-only scenario ("G") keeps its historical random layout
+and reproduces bit for bit.
+
+`Scenario.rover_environment` (e.g. HARSH, fitted to a real walk under trees, docs/hil-sim-error-model.md)
+adds, for the rover only, blockage by elevation/azimuth with reacquisition arcs, receiver-wide and independent
+LLI slips, slips without LLI, and C/N0-driven noise in place of the 1/sin(el) law.
+
 The common slowly varying errors (orbit, satellite clock, ionosphere model error, troposphere residual) are
 Gauss–Markov samples every `SMOOTH_DT_S` (300 s) joined by cubic splines: their σ and τ as stated, their rates
 continuous (a rover epoch differenced with a 20-s-old base epoch sees them drift smoothly, as real ones do).
@@ -81,22 +94,32 @@ from scipy.interpolate import CubicSpline
 from scipy.signal import lfilter
 
 from hil_sim.camera import CameraEvent, camera_events
+from hil_sim.constellations import (
+    SIGNAL_CODE,
+    SatelliteLayout,
+    carrier_hz,
+    glonass_ifb,
+    parse_systems,
+    read_navigation,
+    sat_of,
+    select_broadcast,
+)
 from hil_sim.flight import Trajectory
-from hil_sim.scenario import ReceiverModel, Scenario
+from hil_sim.scenario import ReceiverModel, RoverEnvironment, Scenario
 from onboard.errors import InputError
-from onboard.formats.rinex_nav import read_rinex_nav
-from onboard.gnsstime import NS_PER_S, GpsTime
-from onboard.rtk.consts import CLIGHT_M_S, FREQ_L1_HZ, LAMBDA_L1_M, OMEGA_E_RAD_S
-from onboard.rtk.ephemeris import MAX_EPH_AGE_S, eph_position, eph_position_velocity
+from onboard.gnsstime import NS_PER_S, GpsTime, leap_seconds_at_utc
+from onboard.rtk.consts import CLIGHT_M_S, FREQ_L1_HZ, OMEGA_E_RAD_S
+from onboard.rtk.ephemeris import eph_position, eph_position_velocity
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
+from onboard.rtk.glonass import glonass_position
 from onboard.rtk.models import klobuchar_m, saastamoinen_m
-from onboard.rtk.types import GNSS_GPS, LLI_HALF_CYCLE, LLI_SLIP, Ephemeris, ObsEpoch
+from onboard.rtk.navstore import AnyEphemeris, BroadcastNavigation, satellite_state
+from onboard.rtk.types import FCN_NONE, GNSS_GLONASS, GNSS_GPS, LLI_HALF_CYCLE, LLI_SLIP, Ephemeris, ObsEpoch
 
 log = logging.getLogger(__name__)
 
 Vec = npt.NDArray[np.float64]
 RECEIVERS = ("rover", "base")
-N_PRN = 32
 MARGIN_S = 300.0
 """Span simulated before the start and after the end of the scenario (s); observations outside raise."""
 SLOW_DT_S = 10.0
@@ -112,10 +135,16 @@ smoothly (travelling ionospheric disturbances: ≤ 1 TECU over 10-60 min, millim
 AMBIGUITY_RANGE_CYC = 500
 MOVING_SPEED_M_S = 0.5
 """Rover speed above which its code multipath follows the moving-antenna process (ErrorModel.mp_tau_moving_s)."""
-LEAP_S_2010 = 15
 
 # Purposes of the random streams (part of every seed so streams never overlap).
-_P_ORBIT, _P_SATCLK, _P_IONO, _P_TROPO, _P_GRAD, _P_MP, _P_CLOCK, _P_TRACK, _P_EPOCH = range(1, 10)
+_P_ORBIT, _P_SATCLK, _P_IONO, _P_TROPO, _P_GRAD, _P_MP, _P_CLOCK, _P_TRACK, _P_EPOCH, _P_IFB, _P_BLOCK = range(1, 12)
+
+
+def _sat_position(eph: AnyEphemeris, t: GpsTime) -> Vec:
+    """Broadcast satellite position (ECEF of the instant `t`), either ephemeris kind."""
+    if isinstance(eph, Ephemeris):
+        return eph_position(eph, t)[0]
+    return glonass_position(eph, t)[0]
 
 
 class OutsideSimulatedSpan(ValueError):
@@ -273,26 +302,35 @@ class World:
                 f"navigation file {nav_path} not found: the simulator needs real broadcast orbits "
                 "(Scenario.nav_path; default hil_sim/data/broadcast-nav-20100701/brdc1820.10n, shipped with the package)"
             )
-        nav = read_rinex_nav(nav_path)
-        self._alpha = nav.iono_alpha
-        self._beta = nav.iono_beta
+        systems = parse_systems(sc.systems)
+        all_ephs, self._alpha, self._beta = read_navigation([nav_path, *sc.extra_nav_paths])
         self.start = sc.start
         self.end = sc.start.add_s(sc.duration_s)
         mid = sc.start.add_s(sc.duration_s / 2)
-        best: dict[int, Ephemeris] = {}
-        for eph in nav.ephemerides:
-            if eph.health != 0 or not 1 <= eph.prn <= N_PRN:
-                continue
-            if abs(mid.diff_s(eph.toe)) > MAX_EPH_AGE_S - sc.duration_s / 2 - MARGIN_S:
-                continue
-            old = best.get(eph.prn)
-            if old is None or abs(mid.diff_s(eph.toe)) < abs(mid.diff_s(old.toe)):
-                best[eph.prn] = eph
-        if not best:
+        best = select_broadcast(all_ephs, systems, mid, sc.duration_s, MARGIN_S)
+        if not any(g == GNSS_GPS for g, _ in best) and systems == (GNSS_GPS,):
             raise InputError(f"{nav_path}: no healthy GPS ephemeris valid over the scenario ({sc.start}, "
                              f"{sc.duration_s} s)")
-        self._eph = best
-        self.prns = sorted(best)
+        if not best:
+            raise InputError(f"{nav_path}: no healthy ephemeris of {sc.systems} valid over the scenario "
+                             f"({sc.start}, {sc.duration_s} s)")
+        self.layout = SatelliteLayout(gps_only=systems == (GNSS_GPS,))
+        n_cols = self.layout.n_cols
+        self._n_cols = n_cols
+        self._eph: dict[int, AnyEphemeris] = {self.layout.column(*k): e for k, e in best.items()}
+        self.cols = sorted(self._eph)
+        """Columns of the simulated satellites (hil_sim.constellations.SatelliteLayout)."""
+        self._sat = {c: sat_of(e) for c, e in self._eph.items()}
+        self.prns = sorted(sv for g, sv in best if g == GNSS_GPS)
+        """GPS PRNs with a broadcast ephemeris (the GPS part of `cols`)."""
+        self._freq_hz = np.full(n_cols, FREQ_L1_HZ)
+        self._glo_fcn = np.full(n_cols, FCN_NONE, dtype=np.int8)
+        for c, e in self._eph.items():
+            self._freq_hz[c] = carrier_hz(e)
+            if self._sat[c][0] == GNSS_GLONASS:
+                self._glo_fcn[c] = e.channel  # type: ignore[union-attr]
+        self._lambda_m = CLIGHT_M_S / self._freq_hz
+        self._leap_s = leap_seconds_at_utc(sc.start.to_gpst_datetime())
         self.trajectory = Trajectory(sc.flight, sc.start, sc.site_lat_deg, sc.site_lon_deg, sc.site_h_m)
         self.base_ecef_m = self.trajectory.enu_to_ecef(np.asarray(sc.base_offset_enu_m, dtype=float))
         self._base_enu_m = np.asarray(sc.base_offset_enu_m, dtype=float)
@@ -307,36 +345,58 @@ class World:
         self._smooth = _SplineGrid(t0_ns, SMOOTH_DT_S, math.ceil(span_s / SMOOTH_DT_S) + 4)
         nk = self._smooth.n
         self._orbit_err = self._smooth.spline(em.orbit_sigma_m * _gauss_markov(
-            _rng(seed, _P_ORBIT), nk, 3 * N_PRN, SMOOTH_DT_S, em.orbit_tau_s))
+            _rng(seed, _P_ORBIT), nk, 3 * n_cols, SMOOTH_DT_S, em.orbit_tau_s))
         self._satclk_err_m = self._smooth.spline(em.sat_clock_sigma_m * _gauss_markov(
-            _rng(seed, _P_SATCLK), nk, N_PRN, SMOOTH_DT_S, em.sat_clock_tau_s))
+            _rng(seed, _P_SATCLK), nk, n_cols, SMOOTH_DT_S, em.sat_clock_tau_s))
         self._iono_err = self._smooth.spline(em.iono_model_error_fraction * _gauss_markov(
-            _rng(seed, _P_IONO), nk, N_PRN, SMOOTH_DT_S, em.iono_model_error_tau_s))
+            _rng(seed, _P_IONO), nk, n_cols, SMOOTH_DT_S, em.iono_model_error_tau_s))
         self._tropo_res_m = self._smooth.spline(em.tropo_residual_zenith_sigma_m * _gauss_markov(
             _rng(seed, _P_TROPO), nk, 1, SMOOTH_DT_S, em.tropo_residual_tau_s))
-        ang = _rng(seed, _P_GRAD).uniform(0.0, 2 * math.pi, N_PRN)
+        ang = _rng(seed, _P_GRAD).uniform(0.0, 2 * math.pi, n_cols)
         self._iono_grad_enu = em.iono_gradient_mm_per_km * 1e-6 * np.stack([np.sin(ang), np.cos(ang)], axis=1)
         models = {"rover": sc.rover_receiver, "base": sc.base_receiver}
         self._mp_code: dict[str, Vec] = {}
         self._mp_phase: dict[str, Vec] = {}
         self._clock: dict[str, _Clock] = {}
         self._tracks: dict[str, list[_Track | None]] = {}
+        self._blocked: dict[str, npt.NDArray[np.bool_]] = {}
         self._model = models
         # the moving rover's code multipath: its own process (new reflection geometry at every metre)
-        self._mp_code_moving = _gauss_markov(_rng(seed, _P_MP, 0, 2), nf, N_PRN, FAST_DT_S, em.mp_tau_moving_s)
+        self._mp_code_moving = _gauss_markov(_rng(seed, _P_MP, 0, 2), nf, n_cols, FAST_DT_S, em.mp_tau_moving_s)
         for r_idx, rcv in enumerate(RECEIVERS):
-            self._mp_code[rcv] = _gauss_markov(_rng(seed, _P_MP, r_idx, 0), nf, N_PRN, FAST_DT_S, em.mp_tau_s)
-            self._mp_phase[rcv] = _gauss_markov(_rng(seed, _P_MP, r_idx, 1), nf, N_PRN, FAST_DT_S, em.mp_tau_s)
+            self._mp_code[rcv] = _gauss_markov(_rng(seed, _P_MP, r_idx, 0), nf, n_cols, FAST_DT_S, em.mp_tau_s)
+            self._mp_phase[rcv] = _gauss_markov(_rng(seed, _P_MP, r_idx, 1), nf, n_cols, FAST_DT_S, em.mp_tau_s)
             same_clock = rcv == "base" and sc.base_receiver == sc.rover_receiver
             self._clock[rcv] = _Clock(models[rcv], self._fast, sc.start.total_ns, em.clock_drift_rw_s_s_per_sqrt_s,
                                       _rng(seed, _P_CLOCK, 0 if same_clock else r_idx))
             self._tracks[rcv] = self._build_tracks(r_idx, rcv)
+        # GLONASS inter-frequency biases per receiver type (identical for two receivers of one type)
+        self._code_ifb_m: dict[str, Vec] = {}
+        self._phase_ifb_m: dict[str, Vec] = {}
+        glo = self._glo_fcn != FCN_NONE
+        for rcv in RECEIVERS:
+            code, phase = np.zeros(n_cols), np.zeros(n_cols)
+            if glo.any():
+                code[glo], phase[glo] = glonass_ifb(models[rcv].ifb_type, self._glo_fcn[glo], (seed, _P_IFB))
+            self._code_ifb_m[rcv], self._phase_ifb_m[rcv] = code, phase
         self._last_obs: dict[str, tuple[int, int] | None] = {"rover": None, "base": None}
 
     # ------------------------------------------------------------------------------- public queries
     def ephemerides(self) -> list[Ephemeris]:
-        """The broadcast ephemerides (one per healthy PRN) valid over the whole scenario."""
-        return [self._eph[p] for p in self.prns]
+        """The GPS broadcast ephemerides (one per healthy PRN) valid over the whole scenario."""
+        return [e for c in self.cols if isinstance(e := self._eph[c], Ephemeris) and e.gnss_id == GNSS_GPS]
+
+    def broadcast_navigation(self) -> BroadcastNavigation:
+        """Every system's broadcast set (the truth orbits) for the engine (`Nav.broadcast`)."""
+        return BroadcastNavigation(self._eph[c] for c in self.cols)
+
+    def glonass_channels(self) -> dict[int, int]:
+        """GLONASS slot → frequency channel k of the simulated satellites."""
+        return {sv: int(self._glo_fcn[c]) for c, (g, sv) in self._sat.items() if g == GNSS_GLONASS}
+
+    def satellites(self) -> list[tuple[int, int]]:
+        """(gnssId, svId) of every simulated satellite, in column order."""
+        return [self._sat[c] for c in self.cols]
 
     def iono_params(self) -> tuple[tuple[float, ...] | None, tuple[float, ...] | None]:
         """Klobuchar (α, β) of the navigation file header (None when absent)."""
@@ -397,19 +457,19 @@ class World:
         return self._simulate(receiver, t_rx_nominal, update_state=False)[1]
 
     # ------------------------------------------------------------------------------------ internals
-    def _geometry(self, prn: int, t: GpsTime, rcv_ecef: Vec, rcv_vel: Vec) -> dict[str, Any]:
+    def _geometry(self, col: int, t: GpsTime, rcv_ecef: Vec, rcv_vel: Vec) -> dict[str, Any]:
         """Light-time solution for a receiver at `rcv_ecef` (ECEF m, moving at `rcv_vel`) at GPS time t:
         range (m), range rate (m/s), satellite position/velocity rotated into the ECEF frame of reception,
         satellite clock (s, incl. relativity, −TGD and the clock error) and drift (s/s)."""
-        eph = self._eph[prn]
-        orbit_err = self._smooth.at(self._orbit_err, t)[3 * (prn - 1):3 * prn]
-        clk_err_s = float(self._smooth.at(self._satclk_err_m, t)[prn - 1]) / CLIGHT_M_S
+        eph = self._eph[col]
+        orbit_err = self._smooth.at(self._orbit_err, t)[3 * col:3 * col + 3]
+        clk_err_s = float(self._smooth.at(self._satclk_err_m, t)[col]) / CLIGHT_M_S
         tau = 0.075
         rot = np.eye(3)
         pos_r = np.zeros(3)
         rho = 0.0
         for _ in range(3):  # converges to < 1e-12 s: the first guess is within ~10 ms
-            pos, _ = eph_position(eph, t.add_s(-tau))
+            pos = _sat_position(eph, t.add_s(-tau))
             th = OMEGA_E_RAD_S * tau
             c, s = math.cos(th), math.sin(th)
             rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -417,7 +477,12 @@ class World:
             rho = float(np.linalg.norm(pos_r - rcv_ecef))
             tau = rho / CLIGHT_M_S
         t_tx = t.add_s(-tau)
-        pos, vel, clk, drift = eph_position_velocity(eph, t_tx)
+        if isinstance(eph, Ephemeris) and eph.gnss_id == GNSS_GPS:
+            pos, vel, clk, drift = eph_position_velocity(eph, t_tx)
+            clk -= eph.tgd_s
+        else:  # the engine's model of every other system (GLONASS state vector, Galileo/QZSS/BeiDou Kepler)
+            st = satellite_state(eph, t_tx)
+            pos, vel, clk, drift = st.pos_m, st.vel_m_s, st.clock_s, st.drift_s_s
         pos_r = rot @ (pos + orbit_err)
         rho = float(np.linalg.norm(pos_r - rcv_ecef))
         los = (pos_r - rcv_ecef) / rho
@@ -425,11 +490,12 @@ class World:
         e_vs = float(los @ vel_r)
         rho_dot = (e_vs - float(los @ rcv_vel)) / (1.0 + e_vs / CLIGHT_M_S)
         return {"rho_m": rho, "rho_dot_m_s": rho_dot, "sat_pos_m": pos_r, "sat_vel_m_s": vel_r,
-                "sat_clock_s": clk - eph.tgd_s + clk_err_s, "sat_drift_s_s": drift, "los": los, "t_tx": t_tx}
+                "sat_clock_s": clk + clk_err_s, "sat_drift_s_s": drift, "los": los, "t_tx": t_tx}
 
     def _delays(self, t: GpsTime, lat: float, lon: float, h: float, az: Vec, el: Vec, d_enu: Vec,
                 col: npt.NDArray[np.int_]) -> tuple[Vec, Vec, Vec, Vec]:
-        """(troposphere, ionosphere, Saastamoinen part, Klobuchar part) slant delays (m) on L1."""
+        """(troposphere, ionosphere, Saastamoinen part, Klobuchar part) slant delays (m); the ionosphere on
+        each satellite's own carrier (Klobuchar's L1 delay × (f_L1/f)²)."""
         sin_el = np.sin(np.maximum(el, math.radians(1.0)))
         tropo_model = saastamoinen_m(lat, h, el)
         tropo = tropo_model + float(self._smooth.at(self._tropo_res_m, t)[0]) / sin_el
@@ -437,22 +503,45 @@ class World:
         obliquity = 1.0 + 16.0 * (0.53 - el / math.pi) ** 3
         grad = self._iono_grad_enu[col] @ d_enu[:2] if col.size else np.zeros(0)
         iono = iono_model * (1.0 + self._smooth.at(self._iono_err, t)[col]) + grad * obliquity
-        return tropo, iono, tropo_model, iono_model
+        scale = (FREQ_L1_HZ / self._freq_hz[col]) ** 2
+        return tropo, iono * scale, tropo_model, iono_model * scale
 
-    def _elevation_grid(self, receiver: str) -> Vec:
-        """Elevation (rad) of every PRN (NaN without ephemeris) at the slow grid's instants, for `receiver`."""
+    def _elevation_grid(self, receiver: str) -> tuple[Vec, Vec]:
+        """Elevation and azimuth (rad) of every column (NaN without ephemeris) at the slow grid's instants."""
         g = self._slow
-        el = np.full((g.n, N_PRN), np.nan)
+        el = np.full((g.n, self._n_cols), np.nan)
+        az = np.full((g.n, self._n_cols), np.nan)
         for k in range(g.n):
             t = g.time(k)
             rcv = self._position_clamped(receiver, t)
             lat, lon, _ = ecef_to_llh(rcv)
             r = enu_rotation(lat, lon)
-            for prn in self.prns:
-                pos, _ = eph_position(self._eph[prn], t.add_s(-0.075))
-                enu = r @ (pos - rcv)
-                el[k, prn - 1] = math.atan2(enu[2], math.hypot(enu[0], enu[1]))
-        return el
+            for col in self.cols:
+                enu = r @ (_sat_position(self._eph[col], t.add_s(-0.075)) - rcv)
+                el[k, col] = math.atan2(enu[2], math.hypot(enu[0], enu[1]))
+                az[k, col] = math.atan2(enu[0], enu[1]) % (2 * math.pi)
+        return el, az
+
+    def _blockage(self, r_idx: int, col: int, el: Vec, az: Vec, env: RoverEnvironment) -> npt.NDArray[np.bool_]:
+        """Blocked flag of one satellite on the fast grid: a two-state chain whose unavailability follows the
+        environment's elevation bands × azimuth factors (RoverEnvironment), mean outage `outage_mean_s`."""
+        f = self._fast
+        x = np.arange(f.n) * f.dt_s / self._slow.dt_s
+        el_f = np.interp(x, np.arange(self._slow.n), el)
+        az_f = az[np.minimum(np.floor(x).astype(int), self._slow.n - 1)]
+        band = np.searchsorted(np.asarray(env.el_bands_deg), np.degrees(el_f), side="right") - 1
+        u = np.where(band >= 0, np.asarray(env.unavailability)[np.maximum(band, 0)], 0.0)
+        sector = (np.nan_to_num(np.degrees(az_f)) // (360.0 / len(env.az_factor))).astype(int) % len(env.az_factor)
+        u = np.clip(u * np.asarray(env.az_factor)[sector], 0.0, 0.95)
+        p_unblock = min(1.0, f.dt_s / env.outage_mean_s)
+        p_block = np.minimum(1.0, p_unblock * u / np.maximum(1.0 - u, 1e-9))
+        draw = _rng(self.scenario.seed, _P_BLOCK, r_idx, col + 1).random(f.n)
+        blocked = np.zeros(f.n, bool)
+        state = False
+        for k in range(f.n):
+            state = draw[k] >= p_unblock if state else draw[k] < p_block[k]
+            blocked[k] = state
+        return blocked
 
     def _position_clamped(self, receiver: str, t: GpsTime) -> Vec:
         return self.receiver_position_ecef_m(receiver, t)
@@ -461,17 +550,27 @@ class World:
         """Acquisitions, slips and ambiguities of every satellite at `receiver` over the simulated span."""
         em = self.scenario.errors
         mask = math.radians(self._model[receiver].elevation_mask_deg)
-        el = self._elevation_grid(receiver)
+        el, az = self._elevation_grid(receiver)
+        env = self.scenario.rover_environment if receiver == "rover" else None
+        lli_rate = env.lli_slips_per_h if env else em.slip_lli_rate_per_h
+        und_rate = env.unflagged_slips_per_h if env else em.slip_undetected_rate_per_h
+        common_ns: list[int] = []
+        if env is not None:
+            rc = _rng(self.scenario.seed, _P_BLOCK, r_idx, 0)
+            span = (self._slow.n - 1) * self._slow.dt_ns
+            n_common = rc.poisson(env.common_slip_events_per_h * span / 3.6e12)
+            common_ns = sorted(int(x) for x in self._slow.t0_ns + rc.uniform(0, span, n_common))
+            self._blocked[receiver] = np.zeros((self._fast.n, self._n_cols), bool)
         if receiver == "rover":
             self._el_grid_rover = el
         else:
             self._el_grid_base = el
         g = self._slow
         span_ns = (g.n - 1) * g.dt_ns
-        tracks: list[_Track | None] = [None] * N_PRN
-        for prn in self.prns:
-            rng = _rng(self.scenario.seed, _P_TRACK, r_idx, prn)
-            e = el[:, prn - 1] - mask
+        tracks: list[_Track | None] = [None] * self._n_cols
+        for col in self.cols:
+            rng = _rng(self.scenario.seed, _P_TRACK, r_idx, col + 1)
+            e = el[:, col] - mask
             resets: list[tuple[int, bool]] = []
             if e[0] >= 0:
                 resets.append((g.t0_ns, False))
@@ -480,15 +579,22 @@ class World:
                     frac = -e[k - 1] / (e[k] - e[k - 1])
                     resets.append((g.t0_ns + round((k - 1 + frac) * g.dt_ns), False))
             span_h = span_ns / 3.6e12
-            n_lli = rng.poisson(em.slip_lli_rate_per_h * span_h)
-            n_und = rng.poisson(em.slip_undetected_rate_per_h * span_h)
+            n_lli = rng.poisson(lli_rate * span_h)
+            n_und = rng.poisson(und_rate * span_h)
             lli_t = sorted(int(x) for x in g.t0_ns + rng.uniform(0, span_ns, n_lli))
             und_t = sorted(int(x) for x in g.t0_ns + rng.uniform(0, span_ns, n_und))
             resets += [(t, True) for t in lli_t]
+            if env is not None:  # receiver-wide slips and the reacquisitions after each blockage
+                blocked = self._blockage(r_idx, col, el[:, col], az[:, col], env)
+                self._blocked[receiver][:, col] = blocked
+                ends = np.flatnonzero(blocked[:-1] & ~blocked[1:]) + 1
+                resets += [(t, True) for t in common_ns]
+                # reacquired half a step before the first unblocked sample: the first epoch seen again is the new arc
+                resets += [(self._fast.t0_ns + int(k) * self._fast.dt_ns - self._fast.dt_ns // 2, True) for k in ends]
             resets.sort()
             mag = rng.integers(1, max(1, em.slip_undetected_max_cyc) + 1, n_und)
             sign = rng.choice(np.array([-1, 1]), n_und)
-            tracks[prn - 1] = _Track(
+            tracks[col] = _Track(
                 resets_ns=[t for t, _ in resets], reset_lli=[lli for _, lli in resets],
                 reset_n_cyc=[int(x) for x in rng.integers(-AMBIGUITY_RANGE_CYC, AMBIGUITY_RANGE_CYC + 1, len(resets))],
                 reset_half=[bool(x) for x in rng.random(len(resets)) < em.half_cycle_probability],
@@ -496,10 +602,15 @@ class World:
             )
         return tracks
 
-    def _tracked(self, receiver: str, prn: int, t: GpsTime) -> bool:
+    def _tracked(self, receiver: str, col: int, t: GpsTime) -> bool:
         el = self._el_grid_rover if receiver == "rover" else self._el_grid_base
         mask = math.radians(self._model[receiver].elevation_mask_deg)
-        return bool(self._slow.interp(el[:, prn - 1], t) >= mask)
+        blocked = self._blocked.get(receiver)
+        if blocked is not None:
+            i, f = self._fast.locate(t)
+            if blocked[i + (f >= 0.5), col]:
+                return False
+        return bool(self._slow.interp(el[:, col], t) >= mask)
 
     def _simulate(self, receiver: str, t_nom: GpsTime, update_state: bool = True) -> tuple[ObsEpoch, dict[str, Any]]:
         if receiver not in RECEIVERS:
@@ -520,26 +631,29 @@ class World:
         r_enu = enu_rotation(lat, lon)
         d_enu = rcv_enu - self._base_enu_m  # horizontal separation from the base drives the iono gradient
 
-        # Per-epoch white noise, fixed layout over all 32 PRNs so it does not depend on the visible set.
-        noise = _rng(sc.seed, _P_EPOCH, r_idx, t_nom.total_ns, t_nom.total_ns >> 32).standard_normal((4, N_PRN))
+        # Per-epoch white noise, fixed layout over all columns so it does not depend on the visible set.
+        noise = _rng(sc.seed, _P_EPOCH, r_idx, t_nom.total_ns, t_nom.total_ns >> 32).standard_normal(
+            (4, self._n_cols))
         prev = self._last_obs[receiver]
         prev_ns = prev[0] if prev is not None and prev[0] < t.total_ns else t.total_ns - NS_PER_S
         prev_jumps = prev[1] if prev is not None else timing.jumps
 
         rows: list[dict[str, Any]] = []
-        for prn in self.prns:
-            if not self._tracked(receiver, prn, t):
+        for c in self.cols:
+            if not model.tracks(self._sat[c][0]) or not self._tracked(receiver, c, t):
                 continue
-            geo = self._geometry(prn, t, rcv, rcv_vel)
+            geo = self._geometry(c, t, rcv, rcv_vel)
             enu = r_enu @ (geo["sat_pos_m"] - rcv)
             el_s = math.atan2(enu[2], math.hypot(enu[0], enu[1]))
             az_s = math.atan2(enu[0], enu[1]) % (2 * math.pi)
-            rows.append({"prn": prn, "el": el_s, "az": az_s, **geo})
+            rows.append({"col": c, "el": el_s, "az": az_s, **geo})
         if len(rows) > model.max_sats:
-            rows = sorted(sorted(rows, key=lambda r: -r["el"])[: model.max_sats], key=lambda r: r["prn"])
+            rows = sorted(sorted(rows, key=lambda r: -r["el"])[: model.max_sats], key=lambda r: r["col"])
         n = len(rows)
-        prn_arr = np.array([r["prn"] for r in rows], dtype=np.int16)
-        col = prn_arr.astype(int) - 1
+        col = np.array([r["col"] for r in rows], dtype=int)
+        gnss_arr = np.array([self._sat[c][0] for c in col], dtype=np.int8)
+        prn_arr = np.array([self._sat[c][1] for c in col], dtype=np.int16)
+        lam = self._lambda_m[col]
         el = np.array([r["el"] for r in rows])
         az = np.array([r["az"] for r in rows])
         rho = np.array([r["rho_m"] for r in rows])
@@ -566,13 +680,29 @@ class World:
 
         moving = receiver == "rover" and float(np.linalg.norm(rcv_vel)) > MOVING_SPEED_M_S
         mp_src = self._mp_code_moving if moving else self._mp_code[receiver]
-        mp_code = em.mp_code_sigma_zenith_m / sin_el * self._fast.interp(mp_src, t)[col]
+        env = sc.rover_environment if receiver == "rover" else None
         mp_phase = em.mp_phase_sigma_zenith_m / sin_el * self._fast.interp(self._mp_phase[receiver], t)[col]
-        eps_code = em.code_sigma_zenith_m / sin_el * noise[0, col]
-        eps_phase = em.phase_sigma_zenith_m / sin_el * noise[1, col]
         eps_dop = em.doppler_sigma_zenith_hz / sin_el * noise[2, col]
-        cn0 = em.cn0_horizon_dbhz + (em.cn0_zenith_dbhz - em.cn0_horizon_dbhz) * np.sin(np.maximum(el, 0.0))
-        cn0 = cn0 + em.cn0_sigma_dbhz * noise[3, col]
+        if env is None:
+            mp_code = em.mp_code_sigma_zenith_m / sin_el * self._fast.interp(mp_src, t)[col]
+            eps_code = em.code_sigma_zenith_m / sin_el * noise[0, col]
+            eps_phase = em.phase_sigma_zenith_m / sin_el * noise[1, col]
+            cn0 = em.cn0_horizon_dbhz + (em.cn0_zenith_dbhz - em.cn0_horizon_dbhz) * np.sin(np.maximum(el, 0.0))
+            cn0 = cn0 + em.cn0_sigma_dbhz * noise[3, col]
+            pr_std = np.hypot(em.code_sigma_zenith_m, em.mp_code_sigma_zenith_m) / sin_el
+            half_ns = round(em.half_cycle_resolve_s * NS_PER_S)
+        else:  # C/N0 drives the noise (RoverEnvironment)
+            cn0_model = env.cn0_horizon_dbhz + (env.cn0_zenith_dbhz - env.cn0_horizon_dbhz) * np.sin(np.maximum(el, 0.0))
+            scale = 10.0 ** ((env.cn0_ref_dbhz - cn0_model) / 20.0)
+            code_scale = scale * np.where(gnss_arr == GNSS_GLONASS, env.glonass_code_factor, 1.0)
+            tot = math.hypot(em.code_sigma_zenith_m, em.mp_code_sigma_zenith_m)
+            w_frac, m_frac = (em.code_sigma_zenith_m / tot, em.mp_code_sigma_zenith_m / tot) if tot else (0.0, 0.0)
+            mp_code = env.code_sigma_ref_m * m_frac * code_scale * self._fast.interp(mp_src, t)[col]
+            eps_code = env.code_sigma_ref_m * w_frac * code_scale * noise[0, col]
+            eps_phase = env.phase_sigma_ref_m * scale * noise[1, col]
+            cn0 = cn0_model + env.cn0_sigma_dbhz * noise[3, col]
+            pr_std = env.code_sigma_ref_m * code_scale
+            half_ns = round(env.half_cycle_resolve_s * NS_PER_S)
 
         b = timing.clock_bias_s
         clocks_m = CLIGHT_M_S * (b - dts)
@@ -581,10 +711,9 @@ class World:
         lock_ms = np.zeros(n)
         lli = np.zeros(n, dtype=np.uint8)
         half_sub = np.zeros(n, dtype=np.uint8)
-        half_ns = round(em.half_cycle_resolve_s * NS_PER_S)
         tracks = self._tracks[receiver]
-        for i, prn in enumerate(prn_arr):
-            tr = tracks[int(prn) - 1]
+        for i, c in enumerate(col):
+            tr = tracks[int(c)]
             assert tr is not None
             k = int(np.searchsorted(tr.resets_ns, t.total_ns, side="right")) - 1
             k = max(k, 0)
@@ -601,18 +730,22 @@ class World:
             if tr.reset_lli[k] and prev_ns < t_reset <= t.total_ns:
                 lli[i] |= LLI_SLIP
 
-        pr = rho + clocks_m + tropo + iono + mp_code + eps_code
-        cp = (rho + clocks_m + tropo - iono + mp_phase + eps_phase) / LAMBDA_L1_M + amb + half
-        dop = -(rho_dot + CLIGHT_M_S * (timing.clock_drift_s_s - dts_dot) + atmo_rate) / LAMBDA_L1_M + eps_dop
-        pr_std = np.hypot(em.code_sigma_zenith_m, em.mp_code_sigma_zenith_m) / sin_el
+        code_ifb = self._code_ifb_m[receiver][col]
+        phase_ifb = self._phase_ifb_m[receiver][col]
+        pr = rho + clocks_m + tropo + iono + mp_code + eps_code + code_ifb
+        cp = (rho + clocks_m + tropo - iono + mp_phase + eps_phase + phase_ifb) / lam + amb + half
+        dop = -(rho_dot + CLIGHT_M_S * (timing.clock_drift_s_s - dts_dot) + atmo_rate) / lam + eps_dop
         cp_std = pll_thermal_sigma_cyc(cn0)
         clock_reset = timing.jumps != prev_jumps
         if update_state:
             self._last_obs[receiver] = (t.total_ns, timing.jumps)
+        multi: dict[str, Any] = {} if self.layout.gps_only else {
+            "glo_fcn": self._glo_fcn[col].copy(),
+            "signal": np.array([SIGNAL_CODE[int(g)] for g in gnss_arr], dtype="<U2")}
         epoch = ObsEpoch(
-            time=timing.tag, gnss_id=np.full(n, GNSS_GPS, dtype=np.int8), sv_id=prn_arr, pr_m=pr, cp_cyc=cp,
+            time=timing.tag, gnss_id=gnss_arr, sv_id=prn_arr, pr_m=pr, cp_cyc=cp,
             dop_hz=dop, cn0_dbhz=cn0, lock_ms=lock_ms, lli=lli, half_cyc_sub=half_sub, pr_std_m=pr_std,
-            cp_std_cyc=cp_std, clock_reset=bool(clock_reset), leap_s=LEAP_S_2010,
+            cp_std_cyc=cp_std, clock_reset=bool(clock_reset), leap_s=self._leap_s, **multi,
         )
         details = {
             "timing": timing, "receiver_ecef_m": rcv, "receiver_vel_ecef_m_s": rcv_vel, "sv_id": prn_arr,
@@ -621,6 +754,7 @@ class World:
             "t_tx": [r["t_tx"] for r in rows], "tropo_m": tropo, "tropo_model_m": tropo_model,
             "iono_m": iono, "iono_model_m": iono_model, "mp_code_m": mp_code, "mp_phase_m": mp_phase,
             "eps_code_m": eps_code, "eps_phase_m": eps_phase, "eps_dop_hz": eps_dop, "ambiguity_cyc": amb,
-            "half_cycle_cyc": half, "clock_bias_s": b, "freq_l1_hz": FREQ_L1_HZ,
+            "half_cycle_cyc": half, "clock_bias_s": b, "freq_l1_hz": FREQ_L1_HZ, "gnss_id": gnss_arr,
+            "freq_hz": self._freq_hz[col], "lambda_m": lam, "code_ifb_m": code_ifb, "phase_ifb_m": phase_ifb,
         }
         return epoch, details

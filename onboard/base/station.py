@@ -2,19 +2,29 @@
 
 Neither receiver transmits RTCM3 itself. The daemon records the base's raw journal as on the drone (same
 `Recorder`: configuration profile, journal, status) and, from the epochs it decodes, sends corrections over
-the telemetry radio within a byte budget:
+the telemetry radio within a byte budget. With `obs_message` "msm4" (default), "msm5" or "msm7"
+(docs/base-rtcm.md):
 
-    1004 (or 1002) every epoch   — never dropped
-    1006 every `position_interval_s` (10 s)   — dropped second
-    1019 per observed satellite every `ephemeris_interval_s` (30 s)   — dropped first
+    one MSM per constellation of the epoch (107x GPS, 108x GLONASS, 109x Galileo, 111x QZSS, 112x BeiDou),
+        the multiple-message bit on all but the last — every epoch, never dropped (MSM7 → MSM5 → MSM4 when
+        they do not fit the second's budget, counted in `obs_downgraded`)
+    1006 (+ 1033 when `receiver_descriptor` is set) every `position_interval_s` (10 s)
+    1230 (GLONASS code−phase biases: aligned, 0 m) every `glonass_bias_interval_s` while GLONASS is observed
+    1019/1020/1042/1044/1046 per observed satellite: a new issue at once, then every `ephemeris_interval_s`
+        (the ephemerides of every constellation decoded from the base's RXM-SFRBX)
 
-(a token bucket of `radio_budget_bytes_s` with `radio_burst_bytes` of burst, in GPS time of the epochs), or,
-with `relay="ubx"`, a compact raw UBX relay (RXM-RAW/RAWX always, navigation frames within the budget).
+each second's bytes held to `radio_budget_bytes_s` (`onboard.base.schedule`: observations first, then the
+others in the order above while they fit, the rest deferred and counted; the position alone goes over the budget
+when never sent yet or a whole interval overdue, counted in `over_budget_s`: a rover can use nothing without it). With `obs_message` "1004" or "1002"
+(GPS only, the LEA-6T's legacy set): 1004/1002 every epoch, 1006 and 1019 under a token bucket of
+`radio_budget_bytes_s` with `radio_burst_bytes` of burst (`CorrectionScheduler`). Or, with `relay="ubx"`, a
+compact raw UBX relay (RXM-RAW/RAWX always, navigation frames within the budget).
 The base position is `--position` or the mean of single-point positions over `--survey-in` seconds; nothing is
 sent before it is known (a rover cannot use corrections without it). What was sent is also written to
 `radio-tx.rtcm3` (or `.ubx`) in the flight directory.
 
-Pure parts: `CorrectionScheduler`, `SurveyIn`, `BaseCore` (decoded items in, frames out). Shell: `RadioSender`
+Pure parts: `CorrectionScheduler`, `onboard.base.schedule`, `SurveyIn`, `BaseCore` (decoded items and frames in,
+frames out). Shell: `RadioSender`
 (a thread with a bounded queue: a slow or unplugged radio never stalls recording) and `BaseStationFeature`, the
 recorder feature (`onboard.recorder.feature`) that feeds the core from the recorder's frames and decoded items,
 opens the radio when the flight opens and writes `base.json` beside the status snapshot.
@@ -22,6 +32,7 @@ opens the radio when the flight opens and writes `base.json` beside the status s
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
 import queue
@@ -34,20 +45,39 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from onboard.base.schedule import EphemerisRotation, SecondBudget
 from onboard.errors import LinkLost
 from onboard.gnsstime import GpsTime
 from onboard.hw.ports import ByteStream, Clock
 from onboard.receiver.framing import Frame, Protocol
 from onboard.receiver.rtcm import (
+    MSM_SYSTEMS,
     BasePosition,
+    GlonassCodePhaseBias,
+    MsmEncoder,
     encode_base_position,
     encode_ephemeris,
+    encode_glonass_biases,
     encode_gps_observations,
+    encode_receiver_descriptor,
+    msm_with_multiple_message_bit,
 )
+from onboard.receiver.rtcm_nav import encode_nav_message, nav_message_number
+from onboard.receiver.sfrbx import DEFAULT_LEAP_S, decode_sfrbx
 from onboard.recorder.feature import FlightContext, RecorderFeature
 from onboard.rtk.ephemeris import EphemerisStore, satellite_states
+from onboard.rtk.navdecode import NavMessageDecoder
+from onboard.rtk.navstore import AnyEphemeris, BroadcastNavigation, is_healthy, sat_key
 from onboard.rtk.pntpos import pntpos
-from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP, Ephemeris, ObsEpoch
+from onboard.rtk.types import (
+    GNSS_GLONASS,
+    GNSS_GPS,
+    LLI_HALF_CYCLE,
+    LLI_SLIP,
+    Ephemeris,
+    GlonassEphemeris,
+    ObsEpoch,
+)
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +90,11 @@ BASE_STATUS_NAME = "base.json"
 """Written beside the recorder's status snapshot."""
 PRIORITY = {"obs": 0, "position": 1, "ephemeris": 2}
 """Lower sends first and is dropped last; observations are never dropped."""
+OBS_MESSAGES = ("msm4", "msm5", "msm7", "1004", "1002")
+"""`BaseOptions.obs_message` values: MSM of every constellation, or the legacy GPS-only messages (the settings'
+base.observations values, onboard.recorder.settings.BASE_OBSERVATIONS, which a test holds equal)."""
+MSM_ORDER = tuple(MSM_SYSTEMS[n] for n in sorted(MSM_SYSTEMS))
+"""gnssIds in message-number order (GPS, GLONASS, Galileo, QZSS, BeiDou): the MSMs of an epoch go out so."""
 
 
 @dataclass(frozen=True)
@@ -67,13 +102,21 @@ class BaseOptions:
     """What the base sends and how much the radio may carry."""
 
     station_id: int = 0
-    obs_message: int = 1004
+    obs_message: str = "msm4"
+    """One of OBS_MESSAGES (docs/base-rtcm.md: MSM4 of GPS+GLONASS+Galileo+BeiDou fits 1000 B/s with room for
+    the ephemerides; MSM7 adds ~65 %, over the default budget with four constellations)."""
     obs_interval_s: float = 1.0
     """Observations are sent at most this often (the receiver may measure at 5 Hz for the rover profile)."""
     position_interval_s: float = 10.0
     ephemeris_interval_s: float = 30.0
-    radio_budget_bytes_s: float = 600.0
+    glonass_bias_interval_s: float = 10.0
+    """RTCM 1230 (MSM modes, while GLONASS is observed)."""
+    receiver_descriptor: str = ""
+    """Receiver type sent in RTCM 1033 with the position (e.g. "u-blox LEA-M8T"); "" sends no 1033."""
+    radio_budget_bytes_s: float = 1000.0
+    """Bytes per second the base may put on the radio (docs/base-rtcm.md: ~20 % of a 57600-baud SiK link)."""
     radio_burst_bytes: int = 1024
+    """Token-bucket burst of the legacy 1004/1002 mode and the UBX relay (MSM modes hold every second)."""
     relay: str = "rtcm"
     position_ecef_m: tuple[float, float, float] | None = None
     antenna_height_m: float = 0.0
@@ -81,14 +124,21 @@ class BaseOptions:
     survey_elmask_deg: float = 15.0
 
     def __post_init__(self) -> None:
-        if self.obs_message not in (1002, 1004):
-            raise ValueError(f"obs_message must be 1002 or 1004, not {self.obs_message}")
+        if self.obs_message not in OBS_MESSAGES:
+            raise ValueError(f"obs_message must be one of {', '.join(OBS_MESSAGES)}, not {self.obs_message!r}")
         if self.relay not in ("rtcm", "ubx"):
             raise ValueError(f"relay must be 'rtcm' or 'ubx', not {self.relay!r}")
         if self.position_ecef_m is None and self.survey_in_s <= 0 and self.relay == "rtcm":
             raise ValueError("give the base position or a survey-in duration > 0 s")
         if self.radio_budget_bytes_s <= 0 or self.radio_burst_bytes <= 0 or self.obs_interval_s < 0:
             raise ValueError("radio budget and burst must be > 0, obs_interval_s ≥ 0")
+        if min(self.position_interval_s, self.ephemeris_interval_s, self.glonass_bias_interval_s) < 0:
+            raise ValueError("position, ephemeris and GLONASS bias intervals must be ≥ 0 s")
+
+    @property
+    def msm_kind(self) -> int | None:
+        """4, 5 or 7 in an MSM mode, None in the legacy 1004/1002 one."""
+        return int(self.obs_message[3]) if self.obs_message.startswith("msm") else None
 
 
 @dataclass
@@ -177,7 +227,8 @@ class SurveyIn:
 
 
 class BaseCore:
-    """Decoded base receiver items → radio frames (pure). Feed `on_item` (RTCM mode) or `on_frame` (UBX relay)."""
+    """Decoded base receiver items → radio frames (pure). Feed `on_item` with the decoded items and `on_frame`
+    with the receiver's frames (the RXM-SFRBX navigation of every constellation; the UBX relay's frames)."""
 
     def __init__(self, options: BaseOptions) -> None:
         from onboard.rtk.lnav import LnavAssembler
@@ -197,21 +248,37 @@ class BaseCore:
         self.over_budget = False
         self._next_eph_s: dict[int, float] = {}
         self.encode_errors = 0
-        self._lock_track: dict[int, tuple[GpsTime, GpsTime]] = {}
-        self._half_pending: set[int] = set()
-        """PRNs whose carrier phase has an unresolved half cycle: withheld from 1002/1004 until it resolves."""
-        self._arc_start: dict[int, GpsTime] = {}
-        """PRNs whose phase arc restarted at a half-cycle resolution the receiver's lock time does not show."""
+        self._lock_track: dict[tuple[int, int], tuple[GpsTime, GpsTime]] = {}
+        self._half_pending: set[tuple[int, int]] = set()
+        """Satellites whose carrier phase has an unresolved half cycle (withheld from 1002/1004 until it resolves)."""
+        self._arc_start: dict[tuple[int, int], GpsTime] = {}
+        """Satellites whose phase arc restarted at a half-cycle resolution the receiver's lock time does not show."""
+        # MSM modes
+        self.nav = BroadcastNavigation()
+        """Every constellation's ephemerides (from RXM-SFRBX frames and decoded GPS ones)."""
+        self._nav_decoder = NavMessageDecoder(DEFAULT_LEAP_S)
+        self._time: GpsTime | None = None
+        self.budget = SecondBudget(options.radio_budget_bytes_s)
+        self.rotation = EphemerisRotation(options.ephemeris_interval_s)
+        self._msm = MsmEncoder(options.station_id)
+        self._eph_frames: dict[tuple[int, int], tuple[tuple[int, int], bytes]] = {}
+        """Satellite → (issue, frame) of the ephemeris last encoded for it."""
+        self._next_bias_s: float | None = None
+        self.obs_downgraded: dict[str, int] = {}
+        """Epochs whose observations went out as a smaller MSM than configured, to fit the budget (by message)."""
+        self.obs_over_budget_epochs = 0
+        """Epochs whose observations exceeded the second's budget even as MSM4 (sent all the same)."""
 
-    def _add_ephemeris(self, eph: Ephemeris) -> None:
-        if self.store.add(eph):
+    def _add_ephemeris(self, eph: AnyEphemeris) -> None:
+        self.nav.add(eph)
+        if isinstance(eph, Ephemeris) and eph.gnss_id == GNSS_GPS and self.store.add(eph):
             self._next_eph_s.pop(eph.prn, None)  # a new issue goes out at the next chance
 
     def on_item(self, item: Any) -> list[tuple[str, bytes]]:
         """One decoded item (ObsEpoch, Ephemeris, SubframeWords); returns (kind, frame) to send now."""
         from onboard.receiver.decode import SubframeWords, ephemeris_from_subframe
 
-        if isinstance(item, Ephemeris):
+        if isinstance(item, (Ephemeris, GlonassEphemeris)):
             self._add_ephemeris(item)
             return []
         if isinstance(item, SubframeWords):
@@ -222,12 +289,17 @@ class BaseCore:
         if not isinstance(item, ObsEpoch):
             return []
         self._week = item.time.week
+        self._time = item.time
+        if item.leap_s is not None:
+            self._nav_decoder.leap_s = item.leap_s
         if self.position is None:
             self._survey(item)
             if self.position is None:
                 return []
         if self.options.relay == "ubx":
             return []  # the raw frames go out through on_frame
+        if self.options.msm_kind is not None:
+            return self._msm_corrections(item)
         return self._corrections(item)
 
     def _survey(self, epoch: ObsEpoch) -> None:
@@ -244,14 +316,14 @@ class BaseCore:
         o = self.options
         assert self.position is not None
         t_s = epoch.time.total_ns / 1e9
-        epoch = self._with_lock_times(epoch)  # every epoch: a slip in a decimated one still resets the lock time
+        epoch = self._with_lock_times(epoch, msm=False)  # every epoch: a slip in a decimated one resets the lock
         last = self._last_obs_s
         if last is not None and t_s - last < 0.9 * o.obs_interval_s:
             return []  # decimated: the radio carries one epoch per obs_interval_s
         self._last_obs_s = t_s
         due: list[tuple[str, bytes]] = []
         try:
-            due.append(("obs", encode_gps_observations(epoch, o.station_id, o.obs_message)))
+            due.append(("obs", encode_gps_observations(epoch, o.station_id, int(o.obs_message))))
         except ValueError as exc:  # a value outside its RTCM field (corrupt epoch): skip the epoch, count it
             self.encode_errors += 1
             log.warning("epoch %s not encodable: %s", epoch.time, exc)
@@ -283,9 +355,145 @@ class BaseCore:
                 self._next_eph_s[prn] = t_s + o.ephemeris_interval_s
         return sent
 
-    def _with_lock_times(self, epoch: ObsEpoch) -> ObsEpoch:
-        """The GPS part of `epoch` as 1002/1004 can carry it: a lock time for every satellite (RTCM conveys slips
-        only that way) and no phase with an unresolved half cycle (neither message can flag one).
+    def _on_sfrbx(self, payload: bytes) -> None:
+        from onboard.receiver.decode import DecodeError
+
+        assert self._time is not None
+        try:
+            m = decode_sfrbx(payload)
+        except DecodeError:
+            return
+        eph = self._nav_decoder.add(m.gnss_id, m.sv_id, m.sig_id, m.freq_id, m.words, self._time)
+        if eph is not None:
+            self._add_ephemeris(eph)
+
+    def msm_frames(self, epoch: ObsEpoch, kind: int) -> list[bytes]:
+        """One MSM`kind` frame per constellation of `epoch` (MSM_ORDER), the multiple-message bit on all but
+        the last; the encoder's state (phase shifts, lock times) advances."""
+        frames = [f for g in MSM_ORDER if np.any(epoch.gnss_id == g)
+                  if (f := self._msm.encode(epoch, g, kind, more_follow=True)) is not None]
+        if frames:
+            frames[-1] = msm_with_multiple_message_bit(frames[-1], False)
+        return frames
+
+    def _msm_observations(self, epoch: ObsEpoch, t_s: float, reserve_bytes: int) -> list[bytes]:
+        """The epoch's MSMs, in the configured kind or, when they and `reserve_bytes` (the station position when
+        due: a rover without it cannot use them) do not fit the bytes left in this second, the next smaller one
+        (7 → 5 → 4; each tried on a copy of the encoder so only the one sent moves its state)."""
+        want = self.options.msm_kind
+        assert want is not None
+        left = self.budget.left_bytes(t_s) - reserve_bytes
+        kinds = [k for k in (7, 5, 4) if k <= want]
+        base = self._msm
+        for k in kinds:
+            self._msm = copy.deepcopy(base)
+            try:
+                frames = self.msm_frames(epoch, k)
+            except ValueError as exc:  # a value outside its MSM field (corrupt epoch): skip the epoch, count it
+                self._msm = base
+                self.encode_errors += 1
+                log.warning("epoch %s not encodable: %s", epoch.time, exc)
+                return []
+            if sum(len(f) for f in frames) <= left or k == 4:
+                break
+        if k != want:
+            name = f"msm{k}"
+            self.obs_downgraded[name] = self.obs_downgraded.get(name, 0) + 1
+        if sum(len(f) for f in frames) > left:
+            self.obs_over_budget_epochs += 1
+            if not self.over_budget:
+                self.over_budget = True
+                log.warning("observations need %d B in a second (+ %d B of station position), over the radio "
+                            "budget of %.0f B/s even as MSM4: sent anyway, what else is due is deferred; raise "
+                            "the budget or obs_interval_s", sum(len(f) for f in frames), reserve_bytes,
+                            self.options.radio_budget_bytes_s)
+        return frames
+
+    def _ephemeris_due(self, epoch: ObsEpoch, t_s: float, leap_s: int) -> list[tuple[tuple, tuple, bytes]]:
+        """(satellite, issue, frame) of the observed satellites' ephemerides due now (EphemerisRotation)."""
+        current: dict[tuple[int, int], tuple[int, int]] = {}
+        chosen: dict[tuple[int, int], AnyEphemeris] = {}
+        for g, sv in sorted({(int(g), int(v)) for g, v in zip(epoch.gnss_id, epoch.sv_id)}):
+            eph = self.nav.select(g, sv, epoch.time)
+            if eph is None or nav_message_number(eph) is None or not is_healthy(eph):
+                continue
+            current[sat_key(eph)] = (eph.toe.total_ns, eph.iode)
+            chosen[sat_key(eph)] = eph
+        out = []
+        for key in self.rotation.due(t_s, current):
+            issue = current[key]  # type: ignore[index]
+            cached = self._eph_frames.get(key)  # type: ignore[arg-type]
+            if cached is not None and cached[0] == issue:
+                frame = cached[1]
+            else:
+                try:
+                    frame = encode_nav_message(chosen[key], leap_s)  # type: ignore[index]
+                except ValueError as exc:  # a field out of range (a corrupt decode): never sent, counted
+                    self.encode_errors += 1
+                    log.warning("ephemeris %s not encodable: %s", key, exc)
+                    continue
+                self._eph_frames[key] = (issue, frame)  # type: ignore[index]
+            out.append((key, issue, frame))
+        return out
+
+    def _msm_corrections(self, epoch: ObsEpoch) -> list[tuple[str, bytes]]:
+        o = self.options
+        assert self.position is not None
+        t_s = epoch.time.total_ns / 1e9
+        epoch = self._with_lock_times(epoch, msm=True)
+        last = self._last_obs_s
+        if last is not None and t_s - last < 0.9 * o.obs_interval_s:
+            return []
+        self._last_obs_s = t_s
+        optional: list[tuple[str, bytes]] = []
+        position_due = self._next_position_s is None or t_s >= self._next_position_s
+        position = encode_base_position(self.position) if position_due else b""
+        obs = self._msm_observations(epoch, t_s, len(position))
+        if not obs:
+            return []
+        required = [("obs", f) for f in obs]
+        # the position is required (sent over the budget, counted) when never sent yet or overdue by a whole
+        # interval: a rover can use nothing without it
+        overdue = self._next_position_s is None or t_s - self._next_position_s >= o.position_interval_s
+        if position_due:
+            (required if overdue else optional).append(("position", position))
+        if position_due and o.receiver_descriptor:
+            optional.append(("descriptor", encode_receiver_descriptor(o.station_id, o.receiver_descriptor)))
+        bias_due = np.any(epoch.gnss_id == GNSS_GLONASS) and (self._next_bias_s is None or t_s >= self._next_bias_s)
+        if bias_due:
+            optional.append(("glonass_bias", encode_glonass_biases(
+                GlonassCodePhaseBias(o.station_id, True, 0.0, None, None, None))))
+        leap_s = epoch.leap_s if epoch.leap_s is not None else self._nav_decoder.leap_s
+        ephs = self._ephemeris_due(epoch, t_s, leap_s)
+        optional += [("ephemeris", frame) for _, _, frame in ephs]
+        sent = self.budget.offer(t_s, required, optional)
+        sent_ids = {id(f) for _, f in sent}
+        for kind, frame in required + optional:
+            if id(frame) not in sent_ids:
+                continue
+            if kind == "position":
+                self._next_position_s = t_s + o.position_interval_s
+            elif kind == "glonass_bias":
+                self._next_bias_s = t_s + o.glonass_bias_interval_s
+        for key, issue, frame in ephs:
+            if id(frame) in sent_ids:
+                self.rotation.sent(key, issue, t_s)
+        return sent
+
+    def counts(self) -> dict[str, Any]:
+        """What was sent and deferred (JSON-able), from the scheduler of the mode in use."""
+        if self.options.msm_kind is not None and self.options.relay == "rtcm":
+            c = self.budget.counts
+            return {"sent_bytes": c.sent_bytes, "sent": dict(c.sent), "sent_bytes_by_kind": dict(c.sent_bytes_by_kind),
+                    "deferred": dict(c.deferred), "over_budget_s": c.over_budget_s,
+                    "obs_downgraded": dict(self.obs_downgraded)}
+        s = self.scheduler.counts
+        return {"sent_bytes": s.sent_bytes, "sent": dict(s.sent), "deferred": dict(s.deferred)}
+
+    def _with_lock_times(self, epoch: ObsEpoch, msm: bool) -> ObsEpoch:
+        """`epoch` as RTCM can carry it (its GPS part for 1002/1004, every system for MSM): a lock time for every
+        satellite (RTCM conveys slips only that way) and, for 1002/1004, no phase with an unresolved half cycle
+        (neither message can flag one; an MSM flags it in DF420 and keeps the phase).
 
         RXM-RAW (LEA-6T) reports no lock time, only the LLI slip bit: count the time since the satellite was
         first seen, since its last slip or since a gap longer than `LOCK_GAP_S`, so a slip at the base reaches
@@ -294,11 +502,11 @@ class BaseCore:
         phase by half a cycle without a slip, so the lock time restarts there and the rover starts a new arc
         (sent as it was, the rover saw an unflagged half-cycle step in the base phase).
         """
-        gps = epoch.gps_only()
+        gps = epoch if msm else epoch.gps_only()
         lock = gps.lock_ms.copy()
         cp = gps.cp_cyc.copy()
         t = epoch.time
-        for i, prn in enumerate(gps.sv_id.tolist()):
+        for i, prn in enumerate(zip(gps.gnss_id.tolist(), gps.sv_id.tolist())):
             start, last = self._lock_track.get(prn, (t, t))
             half = bool(gps.lli[i] & LLI_HALF_CYCLE) and math.isfinite(cp[i])
             resolved = prn in self._half_pending and not half and math.isfinite(cp[i])
@@ -308,7 +516,8 @@ class BaseCore:
             self._lock_track[prn] = (start, t)
             if half:
                 self._half_pending.add(prn)
-                cp[i] = math.nan
+                if not msm:
+                    cp[i] = math.nan
             elif math.isfinite(cp[i]):
                 self._half_pending.discard(prn)
             if resolved:
@@ -322,11 +531,16 @@ class BaseCore:
         return replace(gps, lock_ms=lock, cp_cyc=cp)
 
     def on_frame(self, frame: Frame, t_s: float) -> list[tuple[str, bytes]]:
-        """UBX relay: raw observation frames always, RTCM 1006 (once the position is known) every
-        `position_interval_s` and navigation frames within the budget; `t_s` any monotonic time (s)."""
+        """A receiver frame. RTCM modes: RXM-SFRBX → `nav` (nothing sent here). UBX relay: raw observation
+        frames always, RTCM 1006 (once the position is known) every `position_interval_s` and navigation frames
+        within the budget; `t_s` any monotonic time (s)."""
         if frame.protocol is not Protocol.UBX:
             return []
         key = (frame.msg_class, frame.msg_id)
+        if self.options.relay != "ubx":
+            if key == (0x02, 0x13) and self._time is not None:
+                self._on_sfrbx(frame.payload)
+            return []
         if key in UBX_OBS:
             due = [("obs", frame.raw)]
             if self.position is not None and (self._next_position_s is None or t_s >= self._next_position_s):
@@ -452,8 +666,10 @@ class BaseStationFeature(RecorderFeature):
         self.sender.start()
 
     def on_frame(self, frame: Frame) -> None:
-        if self.options.relay == "ubx" and self._clock is not None:
-            self._send(self.core.on_frame(frame, self._clock.monotonic_ns() / 1e9))
+        if self.options.relay == "ubx" and self._clock is None:
+            return
+        t_s = self._clock.monotonic_ns() / 1e9 if self._clock is not None else 0.0
+        self._send(self.core.on_frame(frame, t_s))
 
     def on_decoded(self, item: Any) -> None:
         # (In relay mode this only surveys and collects ephemerides; the frames go out from on_frame.)
@@ -467,16 +683,16 @@ class BaseStationFeature(RecorderFeature):
 
     def status(self) -> dict[str, Any]:
         """What the base sends (JSON-able): position, survey-in, bytes and messages sent/deferred, radio state."""
-        c = self.core.scheduler.counts
         pos = self.core.position
         survey = self.core.survey
         return {
             "relay": self.options.relay,
+            "obs_message": self.options.obs_message,
             "budget_bytes_s": self.options.radio_budget_bytes_s,
             "position_ecef_m": None if pos is None else list(pos.arp_ecef_m),
             "survey_in": None if survey is None else {"fixes": survey.count, "spread_m": survey.spread_m,
                                                       "duration_s": survey.duration_s},
-            "sent_bytes": c.sent_bytes, "sent": dict(c.sent), "deferred": dict(c.deferred),
+            **self.core.counts(),
             "radio_open": self.sender is not None and self.sender.radio_open,
             "radio_bytes_written": 0 if self.sender is None else self.sender.bytes_written,
             "queue_drops": 0 if self.sender is None else self.sender.frames_dropped,
@@ -488,6 +704,6 @@ class BaseStationFeature(RecorderFeature):
         if self.sender is None:
             return
         self.sender.stop()
-        c = self.core.scheduler.counts
-        log.info("base: sent %d B (%s), deferred %s, radio wrote %d B, queue drops %d", c.sent_bytes,
-                 c.sent, c.deferred, self.sender.bytes_written, self.sender.frames_dropped)
+        c = self.core.counts()
+        log.info("base: sent %d B (%s), deferred %s, radio wrote %d B, queue drops %d", c["sent_bytes"],
+                 c["sent"], c["deferred"], self.sender.bytes_written, self.sender.frames_dropped)

@@ -75,9 +75,9 @@ def _starts_with(path: Path, magic: bytes) -> bool:
 
 
 def read_observations(path: str | Path, systems: str = "G") -> ObsInput:
-    """RINEX observation file (the satellites of `systems`, RINEX letters), UBX log, or a flight's journal
-    directory (its segments in recording order, e.g. the rover's own flight folder) → ObsInput. Raises
-    InputError when unusable."""
+    """RINEX observation file (the satellites of `systems`, RINEX letters), UBX log (every system it holds), or a
+    flight's journal directory (its segments in recording order, e.g. the rover's own flight folder) → ObsInput.
+    Raises InputError when unusable."""
     path = Path(path)
     if path.is_dir():
         return _read_ubx(path)
@@ -86,8 +86,8 @@ def read_observations(path: str | Path, systems: str = "G") -> ObsInput:
     if is_rinex(path):
         from onboard.formats.rinex_obs import read_rinex_obs
 
-        # only the constellations used: parsing the other systems' fields was a quarter of the GPS engine's
-        # reading (M8P rover + RAWX base 0.065 -> 0.049 s CPU, with the GLW1 CORS base 0.091 -> 0.070 s)
+        # only the systems used: parsing the other systems' fields was a quarter of a GPS run's reading
+        # (M8P rover + RAWX base 0.065 -> 0.049 s CPU, with the GLW1 CORS base 0.091 -> 0.070 s)
         rnx = read_rinex_obs(path, systems=systems)
         return ObsInput(rnx.epochs, [], rnx.header.antenna_position_ecef_m(), "rinex")
     return _read_ubx(path)
@@ -108,24 +108,34 @@ def _read_ubx(path: Path) -> ObsInput:
     return ObsInput(col.epochs, col.ephemerides, pos, "ubx")
 
 
-def read_navigation(paths: Sequence[str | Path], extra: Sequence[Ephemeris] = ()) -> Nav:
-    """Ephemerides (and Klobuchar coefficients) from RINEX nav files plus ephemerides decoded elsewhere."""
-    from onboard.formats.rinex_nav import read_rinex_nav
-    from onboard.rtk.navstore import BroadcastNavigation
-    from onboard.rtk.types import GNSS_GPS, Ephemeris, GlonassEphemeris
+def read_navigation(paths: Sequence[str | Path], extra: Sequence[Ephemeris] = (), systems: str = "G") -> Nav:
+    """Ephemerides (and Klobuchar coefficients) from RINEX nav files plus ephemerides decoded elsewhere.
 
-    gps = [e for e in extra if isinstance(e, Ephemeris) and e.gnss_id == GNSS_GPS]
-    store = EphemerisStore(gps)
-    # the other constellations' (RINEX 3 mixed files, RXM-SFRBX, RTCM): what RtkOptions.systems may use
-    broadcast = BroadcastNavigation(e for e in extra if isinstance(e, GlonassEphemeris) or e.gnss_id != GNSS_GPS)
+    GPS ephemerides go to `Nav.store`; those of the other systems named in `systems` (RINEX letters: R GLONASS,
+    E Galileo, C BeiDou, J QZSS) to `Nav.broadcast` (None when `systems` names no other system)."""
+    from onboard.formats.rinex_nav import read_rinex_nav
+    from onboard.rtk.types import GNSS_GPS
+
+    others = set(systems) - {"G"}
+    gps = [isinstance(e, Ephemeris) and e.gnss_id == GNSS_GPS for e in extra]
+    store = EphemerisStore(e for e, g in zip(extra, gps) if g)
+    broadcast = None
+    if others:  # the other systems' modules load only when asked for (start-up time of a GPS run)
+        from onboard.rtk.gnss import system
+        from onboard.rtk.navstore import BroadcastNavigation, sat_key
+
+        broadcast = BroadcastNavigation(e for e, g in zip(extra, gps)
+                                        if not g and system(sat_key(e)[0]).letter in others)
     iono = None
     for p in paths:
         nav = read_rinex_nav(p)
         for eph in nav.ephemerides:
             store.add(eph)
-        for other in (nav.galileo, nav.beidou, nav.qzss, nav.glonass):
-            for e in other:
-                broadcast.add(e)
+        if broadcast is not None:
+            for letter, ephs in (("R", nav.glonass), ("E", nav.galileo), ("C", nav.beidou), ("J", nav.qzss)):
+                if letter in others:
+                    for other in ephs:
+                        broadcast.add(other)
         if nav.iono_alpha is not None and nav.iono_beta is not None:
             iono = (nav.iono_alpha, nav.iono_beta)
     return Nav(store, iono, broadcast)
@@ -222,7 +232,8 @@ def load_rtk_inputs(rover_path: str | Path, base_path: str | Path, nav_paths: Se
     """Read rover, base and navigation files for a post-processing run and check they can make one.
 
     The base may be RINEX, a UBX log, an RTCM3 stream or a journal folder; `base_pos_ecef_m` overrides its header
-    or stream position; `systems` the constellations read from RINEX files (RtkOptions.systems). Raises `InputError` (unusable files, no base position, no GPS observations, no common
+    or stream position; `systems` (RINEX letters) are the constellations read from RINEX observations and whose
+    navigation data is loaded (epochs without GPS satellites are dropped, as for GPS alone). Raises `InputError` (unusable files, no base position, no GPS observations, no common
     epochs) or `DataRefused` (no ephemeris valid at the observations' time: a navigation file of another day).
     The hints name, in the caller's words, how to give a base position and a navigation file.
     """
@@ -236,7 +247,7 @@ def load_rtk_inputs(rover_path: str | Path, base_path: str | Path, nav_paths: Se
     else:
         # the base may also be an RTCM3 stream or a journal folder (e.g. the rover's radio/ journal)
         base = read_base_observations(base_file, rover.epochs[0].time if rover.epochs else None)
-    nav = read_navigation(nav_paths, rover.ephemerides + base.ephemerides)
+    nav = read_navigation(nav_paths, rover.ephemerides + base.ephemerides, systems)
     if len(nav.store) == 0:
         raise InputError(f"no GPS ephemeris: give {nav_hint} or logs with RXM-SFRB(X)/AID-EPH")
     if base_pos_ecef_m is not None:

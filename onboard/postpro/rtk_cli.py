@@ -40,9 +40,9 @@ log = logging.getLogger(__name__)
 COMMAND = "rtk"
 
 DESCRIPTION = """\
-Post-process a drone's GNSS observations against a base station's (GPS L1 carrier-phase RTK) and write
-one position per rover epoch to an RTKLIB-compatible .pos file (ECEF X/Y/Z in metres by default, or
-latitude/longitude/height with --llh; GPS time). Q is 1 fixed, 2 float, 5 single; epochs without a
+Post-process a drone's GNSS observations against a base station's (L1 carrier-phase RTK; GPS unless
+--systems names more constellations) and write one position per rover epoch to an RTKLIB-compatible .pos
+file (ECEF X/Y/Z in metres by default, or latitude/longitude/height with --llh; GPS time). Q is 1 fixed, 2 float, 5 single; epochs without a
 solution are not written.
 
 Inputs: RINEX 2.11/3.0x observation files (.gz accepted) or UBX logs with RXM-RAW/RXM-RAWX (a flight's
@@ -78,6 +78,9 @@ def add_rtk_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
     p.add_argument("--init-pos", nargs="+", action=xyz, metavar="X,Y,Z",
                    help="surveyed take-off antenna position, ECEF metres (same forms as --base-pos); implies "
                         "--static-start")
+    p.add_argument("--systems", type=_systems, default="G", metavar="LETTERS",
+                   help="constellations used, RINEX letters: G GPS, R GLONASS, E Galileo, C BeiDou, J QZSS (default "
+                        "G; e.g. GR for an M8P, GREJ for an M8T); read from the observation and navigation files")
     p.add_argument("--ar-mode", choices=[m for m in AR_MODES if m != "off"], default="fix-and-hold",
                    help="integer ambiguity resolution: continuous, instantaneous or fix-and-hold (default)")
     p.add_argument("--elmask", type=_elmask_deg, default=15.0, metavar="DEG",
@@ -104,6 +107,15 @@ def _elmask_deg(text: str) -> float:
     return value
 
 
+def _systems(text: str) -> str:
+    """argparse type of --systems: RINEX system letters (upper-cased, repeats dropped), G R E C J only."""
+    letters = "".join(dict.fromkeys(text.strip().upper()))
+    bad = sorted(set(letters) - set("GRECJ"))
+    if not letters or bad:
+        raise argparse.ArgumentTypeError(f"{text!r}: letters of G, R, E, C, J (GPS, GLONASS, Galileo, BeiDou, QZSS)")
+    return letters
+
+
 def rtk_main(args: argparse.Namespace) -> int:
     """Run the command; returns the process exit code (see the module docstring). Prints a summary."""
     inputs = [Path(args.rover), Path(args.base), *(Path(n) for n in args.nav)]
@@ -122,11 +134,11 @@ def rtk_main(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    run = load_rtk_inputs(args.rover, args.base, args.nav, args.base_pos)
+    run = load_rtk_inputs(args.rover, args.base, args.nav, args.base_pos, systems=args.systems)
     rov_gps, bas_gps, nav, base_pos = run.rover, run.base, run.nav, run.base_pos_ecef_m
     try:
-        options = replace(RtkOptions(), elmask_deg=args.elmask, ar_elmask_deg=max(args.elmask, 15.0),
-                          ar_mode=args.ar_mode, static_start=args.static_start or args.init_pos is not None)
+        options = replace(RtkOptions(), systems=args.systems, elmask_deg=args.elmask,
+                          ar_elmask_deg=max(args.elmask, 15.0), ar_mode=args.ar_mode, static_start=args.static_start or args.init_pos is not None)
     except ValueError as exc:  # an option the engine's own checks refuse
         raise InputError(f"options refused by the engine: {exc}") from None
     init_pos = np.array(args.init_pos) if args.init_pos is not None else None
@@ -153,7 +165,7 @@ def _run(args: argparse.Namespace) -> int:
                       f"and the navigation files belong to these observations; nothing written")
     bx, by, bz = base_pos
     info = [
-        "program   : directgeo onboard rtk (GPS L1)",
+        f"program   : directgeo onboard rtk (L1, systems {args.systems})",
         f"inp file  : {args.rover}",
         f"inp file  : {args.base}",
         *(f"inp file  : {n}" for n in args.nav),

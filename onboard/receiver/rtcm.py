@@ -4,7 +4,8 @@ Decoded: GPS observations from 1002/1004 (legacy L1), and MSM4/5/6/7 of GPS, GLO
 (L1-band signals: MSM_L1_SIGNALS) → `ObsEpoch`; base antenna reference point from 1005/1006 → `BasePosition`;
 GPS ephemerides from 1019 → `Ephemeris`; GLONASS code-phase biases 1230 → `GlonassCodePhaseBias`; the GLONASS
 frequency channel of 1020 → `GlonassChannel`.
-Encoded (for `python -m onboard base`): 1002, 1004, 1005, 1006 and 1019 from declarative bit layouts below —
+Encoded (for `python -m onboard base`): 1002, 1004, 1005, 1006, 1019, 1033, 1230 and MSM4/5/7 (`MsmEncoder`)
+from declarative bit layouts below (the other ephemerides: onboard.receiver.rtcm_nav) —
 pyrtcm 1.2.1 parses but cannot build messages, so we pack the bits here and tests parse them back with pyrtcm.
 
 RTCM epochs carry no GPS week: the decoder resolves it from a reference time (the rover's, or the host clock).
@@ -441,7 +442,11 @@ _BODY_1019 = (("DF002", 12, False, 1), ("DF009", 6, False, 1), ("DF076", 10, Fal
               ("DF099", 32, True, 2**-31), ("DF100", 24, True, 2**-43), ("DF101", 8, True, 2**-31),
               ("DF102", 6, False, 1), ("DF103", 1, False, 1), ("DF137", 1, False, 1))
 
-Layout = Sequence[tuple[str, int, bool, float]]
+SIGN_MAGNITUDE = 2
+"""Layout `signed` value of a sign-magnitude field (GLONASS DF111–DF135: sign bit, then the magnitude)."""
+
+Layout = Sequence[tuple[str, int, int, float]]
+"""(field, bits, signed: False/True two's complement or SIGN_MAGNITUDE, scale)."""
 
 
 class BitWriter:
@@ -451,8 +456,14 @@ class BitWriter:
         self._value = 0
         self.bits = 0
 
-    def put(self, value: int, bits: int, signed: bool = False) -> None:
-        """Append `value` in `bits` bits (two's complement when `signed`); raises if it does not fit."""
+    def put(self, value: int, bits: int, signed: int = False) -> None:
+        """Append `value` in `bits` bits (two's complement when `signed`, sign and magnitude when it is
+        SIGN_MAGNITUDE); raises if it does not fit."""
+        if signed == SIGN_MAGNITUDE:
+            if abs(value) >= 1 << (bits - 1):
+                raise ValueError(f"{value} does not fit in {bits} sign-magnitude bits")
+            value = ((1 << (bits - 1)) | -value) if value < 0 else value
+            signed = False
         lo, hi = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
         if not lo <= value <= hi:
             raise ValueError(f"{value} does not fit in {bits} {'signed' if signed else 'unsigned'} bits")
@@ -543,6 +554,45 @@ def encode_ephemeris(eph: Ephemeris) -> bytes:
     return rtcm3_frame(w.to_bytes())
 
 
+
+_BODY_1230 = (("DF002", 12, False, 1), ("DF003", 12, False, 1), ("DF421", 1, False, 1), ("DF001_3", 3, False, 1))
+
+
+def encode_glonass_biases(bias: GlonassCodePhaseBias) -> bytes:
+    """RTCM 1230 frame: the aligned indicator (DF421), the mask of the signals given (L1 C/A, L1 P, L2 C/A,
+    L2 P: the non-None ones) and their code−phase biases (DF423–DF426, 2 cm)."""
+    w = BitWriter()
+    w.put_fields(_BODY_1230, {"DF002": 1230, "DF003": bias.station_id, "DF421": int(bias.aligned), "DF001_3": 0})
+    values = (bias.l1ca_m, bias.l1p_m, bias.l2ca_m, bias.l2p_m)
+    for v in values:
+        w.put(int(v is not None), 1)
+    for v in values:
+        if v is not None:
+            w.put(round(v / 0.02), 16, signed=True)
+    return rtcm3_frame(w.to_bytes())
+
+
+def encode_receiver_descriptor(station_id: int, receiver: str, firmware: str = "", antenna: str = "",
+                               receiver_serial: str = "", antenna_serial: str = "", setup_id: int = 0) -> bytes:
+    """RTCM 1033 frame: antenna and receiver descriptors (ASCII strings of at most 31 characters each)."""
+    w = BitWriter()
+    w.put(1033, 12)
+    w.put(station_id, 12)
+
+    def text(value: str) -> None:
+        raw = value.encode("ascii")
+        if len(raw) > 31:
+            raise ValueError(f"RTCM 1033 descriptor longer than 31 characters: {value!r}")
+        w.put(len(raw), 8)
+        for ch in raw:
+            w.put(ch, 8)
+
+    text(antenna)
+    w.put(setup_id, 8)
+    for value in (antenna_serial, receiver, firmware, receiver_serial):
+        text(value)
+    return rtcm3_frame(w.to_bytes())
+
 # --- MSM encoding ----------------------------------------------------------------------------------------
 
 MSM_SIGNAL_IDS: dict[int, dict[str, int]] = {
@@ -564,6 +614,18 @@ def _indicator_at_most(table: Sequence[float], lock_ms: float) -> int:
 def _df402_from_lock_ms(lock_ms: float) -> int:
     return _indicator_at_most([0.0] + [lock_ms_from_df402(i) for i in range(1, 16)], lock_ms)
 
+
+_DF393_BIT = 12 + 12 + 30
+"""Offset in the payload of the MSM multiple-message bit (after DF002, DF003 and the 30-bit epoch time of every
+system: GLONASS's DF416 + DF034 are 3 + 27 bits)."""
+
+
+def msm_with_multiple_message_bit(frame: bytes, more_follow: bool) -> bytes:
+    """An MSM frame with its multiple-message bit (DF393) set to `more_follow` (CRC recomputed)."""
+    payload = bytearray(frame[3:-3])
+    byte, mask = _DF393_BIT // 8, 0x80 >> (_DF393_BIT % 8)
+    payload[byte] = (payload[byte] | mask) if more_follow else (payload[byte] & ~mask)
+    return rtcm3_frame(bytes(payload))
 
 class MsmEncoder:
     """`ObsEpoch` → RTCM3 MSM4, MSM5 or MSM7 frame of one system (the L1-band signal of each satellite).

@@ -74,6 +74,13 @@ class Settings:
     upload_backoff_min_s: float = 5.0
     upload_backoff_max_s: float = 300.0
     upload_poll_s: float = 5.0
+    base_observations: str = "msm4"
+    base_budget_bytes_s: float = 1000.0
+    base_obs_interval_s: float = 1.0
+    base_position_interval_s: float = 10.0
+    base_ephemeris_interval_s: float = 30.0
+    base_glonass_bias_interval_s: float = 10.0
+    base_receiver_descriptor: str = "auto"
 
 
 RTK_ENGINE = "rtk.engine."
@@ -120,12 +127,21 @@ KEYS: Mapping[str, str] = MappingProxyType(
         "upload.backoff_min_s": "upload_backoff_min_s",
         "upload.backoff_max_s": "upload_backoff_max_s",
         "upload.poll_s": "upload_poll_s",
+        "base.observations": "base_observations",
+        "base.budget_bytes_s": "base_budget_bytes_s",
+        "base.obs_interval_s": "base_obs_interval_s",
+        "base.position_interval_s": "base_position_interval_s",
+        "base.ephemeris_interval_s": "base_ephemeris_interval_s",
+        "base.glonass_bias_interval_s": "base_glonass_bias_interval_s",
+        "base.receiver_descriptor": "base_receiver_descriptor",
     }
 )
 MODELS = ("auto", "lea6t", "m8t")
 MAVLINK_BASE_STREAM = "mavlink"
 """`rtk.base_stream` value: the corrections a ground station injects through the autopilot (GPS_RTCM_DATA)."""
 PIN_FACTORIES = ("lgpio", "mock")
+BASE_OBSERVATIONS = ("msm4", "msm5", "msm7", "1004", "1002")
+"""`base.observations` values (onboard.base.station.OBS_MESSAGES, held equal by a test)."""
 
 
 def _field_types() -> dict[str, Any]:
@@ -190,6 +206,11 @@ BOUNDS: Mapping[str, Bound] = MappingProxyType(
         "upload.backoff_min_s": Bound(0, 3600, " s", True),
         "upload.backoff_max_s": Bound(0, 86400, " s", True),
         "upload.poll_s": Bound(0, 3600, " s", True),
+        "base.budget_bytes_s": Bound(0, 100_000, " B/s", True),
+        "base.obs_interval_s": Bound(0, 3600, " s", True),
+        "base.position_interval_s": Bound(0, 3600, " s", True),
+        "base.ephemeris_interval_s": Bound(0, 3600, " s", True),
+        "base.glonass_bias_interval_s": Bound(0, 3600, " s", True),
         # receiver options the receiver profile does not bound itself
         "receiver.ant_cable_delay_ns": Bound(-32768, 32767, " ns", why="CFG-TP5 holds it in 16 signed bits"),
         "receiver.pulse_len_ms": Bound(0, 3000, " ms", True, "shorter than the camera period, at most 3 s"),
@@ -343,6 +364,11 @@ def validate(s: Settings) -> None:
     """Cross-field checks (ConfigFileError naming the key)."""
     if s.receiver_model not in MODELS:
         raise ConfigFileError(f"receiver.model: must be one of {MODELS}, got {s.receiver_model!r}")
+    if s.base_observations not in BASE_OBSERVATIONS:
+        raise ConfigFileError(f"base.observations: must be one of {BASE_OBSERVATIONS}, got {s.base_observations!r}")
+    if len(s.base_receiver_descriptor) > 31 or not s.base_receiver_descriptor.isascii():
+        raise ConfigFileError(f"base.receiver_descriptor {s.base_receiver_descriptor!r}: at most 31 ASCII "
+                              "characters (RTCM 1033)")
     if s.gpio_pin_factory not in PIN_FACTORIES:
         raise ConfigFileError(f"gpio.pin_factory: must be one of {PIN_FACTORIES}, got {s.gpio_pin_factory!r}")
     if s.port_reopen_max_s < s.port_reopen_min_s:

@@ -18,7 +18,7 @@ import numpy.typing as npt
 
 from onboard.gnsstime import GpsTime
 from onboard.rtk.ephemeris import eph_position_velocity, l1_group_delay_s, sisa_sigma_m, ura_sigma_m
-from onboard.rtk.glonass import ERR_EPH_GLO_M, glonass_position_velocity
+from onboard.rtk.glonass import ERR_EPH_GLO_M, GlonassOrbits, glonass_position_velocity
 from onboard.rtk.gnss import system
 from onboard.rtk.types import GNSS_GALILEO, GNSS_GLONASS, Ephemeris, GlonassEphemeris
 
@@ -69,10 +69,12 @@ class SatelliteState:
     healthy: bool
 
 
-def satellite_state(eph: AnyEphemeris, t_tx: GpsTime) -> SatelliteState:
-    """Position, velocity, clock and variance of `eph`'s satellite at GPS time `t_tx` (either ephemeris kind)."""
+def satellite_state(eph: AnyEphemeris, t_tx: GpsTime, orbits: GlonassOrbits | None = None) -> SatelliteState:
+    """Position, velocity, clock and variance of `eph`'s satellite at GPS time `t_tx` (either ephemeris kind);
+    `orbits` carries GLONASS integrations on from one call to the next (BroadcastNavigation.state)."""
     if isinstance(eph, GlonassEphemeris):
-        pos, vel, clk, drift = glonass_position_velocity(eph, t_tx)
+        pos, vel, clk, drift = (glonass_position_velocity(eph, t_tx) if orbits is None
+                                else orbits.position_velocity(eph, t_tx))
     else:
         pos, vel, clk, drift = eph_position_velocity(eph, t_tx)
         clk -= l1_group_delay_s(eph)
@@ -84,6 +86,7 @@ class BroadcastNavigation:
 
     def __init__(self, ephemerides: Iterable[AnyEphemeris] = ()) -> None:
         self._by_sat: dict[tuple[int, int], list[AnyEphemeris]] = {}
+        self._orbits = GlonassOrbits()
         for eph in ephemerides:
             self.add(eph)
 
@@ -122,6 +125,11 @@ class BroadcastNavigation:
             if dt <= best_dt:
                 best, best_dt = eph, dt
         return best
+
+    def state(self, eph: AnyEphemeris, t_tx: GpsTime) -> SatelliteState:
+        """satellite_state of one of this store's ephemerides, GLONASS orbits integrated on from the last request
+        (epochs in time order cost one Runge–Kutta step each)."""
+        return satellite_state(eph, t_tx, self._orbits)
 
     def glonass_channels(self) -> dict[int, int]:
         """GLONASS slot → frequency channel k, from the latest ephemeris of each slot."""

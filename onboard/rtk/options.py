@@ -63,6 +63,12 @@ class RtkOptions:
     """settled_fix_span_s while the rover moves (Doppler speed above takeoff_speed_m_s, s): a winning epoch in
     motion counts settled_fix_span_s / this as much. Why: a moving antenna's code multipath decorrelates in
     seconds against tens of seconds static, and the float's bias with it."""
+    revalidated_skips_float_check: bool = True
+    """A fix that re-fixes the last validated integers (no set held, at least min_fix_sats satellites of that set
+    tracked without a slip since) is not rejected for lying far from the float position (the Mahalanobis check;
+    its residuals must still fit). Why: after a hold is released the float of a static rover is known to
+    millimetres yet off by the centimetre multipath the hold kept out, and rejects the validated integers until
+    they settle (M8P static with the RAWX base, GPS+GLONASS: 86 s unfixed)."""
     full_set_confirm_epochs: int = 2
     """A first fix on the full candidate set (no satellite dropped by partial AR) needs the same integer set
     winning the ratio test at this many consecutive epochs instead of over confirm_fix_span_s (and, below

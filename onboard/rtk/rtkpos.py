@@ -455,10 +455,11 @@ def _layout_receivers(epochs: list[ObsEpoch], store: EphemerisStore, layout: Slo
     (a GLONASS slot without a known frequency channel has no usable data)."""
     pr, cp, dop, lli = slot_arrays(layout, epochs)
     sats = satellite_states_layout(layout, store, broadcast, [e.time.total_ns for e in epochs], pr)
+    # a satellite's frequency channel does not change over a session: one wavelength array for all epochs
+    lam = wavelengths(layout, epochs, broadcast)
+    lam.flags.writeable = False
     out = []
-    for k, e in enumerate(epochs):
-        lam = wavelengths(layout, [e], broadcast)
-        lam.flags.writeable = False
+    for k in range(len(epochs)):
         has = np.isfinite(pr[k]) & sats[k].ok & np.isfinite(lam)
         out.append(_Receiver(pr[k], cp[k], dop[k], lli[k], sats[k], has, lam))
     return out
@@ -658,8 +659,8 @@ def _watch_standstill(st: RtkState, ctx: EpochContext, valid: npt.NDArray[np.boo
                                 exclude_one=st.static and not ctx.moving)
     slipped = st.standstill.slipped_slot
     if slipped >= 0:
-        log.info("%s: PRN %d slipped while standing (%.2f m over %.0f s without it): its ambiguity restarts", t,
-                 slipped + 1, float(np.linalg.norm(disp.d_m)) if disp is not None else float("nan"),
+        log.info("%s: %s slipped while standing (%.2f m over %.0f s without it): its ambiguity restarts", t,
+                 st.layout.letter(slipped), float(np.linalg.norm(disp.d_m)) if disp is not None else float("nan"),
                  disp.span_s if disp is not None else 0.0)
         _reset_amb(st, np.array([slipped]))
         st.slips += 1
@@ -1306,7 +1307,10 @@ def _exclude_one_phase(st: RtkState, ctx: EpochContext, suspects: npt.NDArray[np
     # a slip the hold absorbed for an epoch or two (a high-leverage satellite, the Doppler test blind in a
     # manoeuvre) biases the prior: leaving out an innocent satellite may then "fit" too, but leaves the
     # slipped one in, with a larger χ² than the true exclusion
-    if len(found) > 1 and found[0][0] * o.fault_exclusion_margin > found[1][0]:
+    if len(found) > 1 and found[0][0] * o.fault_exclusion_margin > found[1][0] \
+            and not (suspects.size == 1 and found[0][1] == int(suspects[0])):
+        # not clearly the best, unless it is the one satellite whose own residual failed: then the data
+        # point at it twice (its misfit, and the best fit without it)
         return -1, (x_prior, p_prior)
     return found[0][1], found[0][2]
 
@@ -1330,6 +1334,9 @@ class _Fix:
     """The same integer set has won the ratio test at every epoch for settled_fix_span_s (see the option)."""
     iono: Arr | None = None
     """The ionosphere states (m) conditioned on the integers, when they are in use."""
+    revalidated: bool = False
+    """No set is held and this one re-fixes the last validated integers on at least min_fix_sats satellites
+    tracked without a slip since (see _agrees_with_validated)."""
 
 
 def _slot_integers(ref: int | npt.NDArray[np.int64], others: npt.NDArray[np.int64], ints: Arr,
@@ -1487,7 +1494,8 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
             iono = None
             if st.iono_on and qia is not None:
                 iono = x[st.nxi:st.nxi + st.ns] - qia @ solve(qa, a - ints)
-            return _Fix(pos, cov, ratio, others, ref, ints, others.size, settled, iono)
+            revalidated = not st.held_prns.any() and _agrees_with_validated(st, ref, others, ints, o.min_fix_sats)
+            return _Fix(pos, cov, ratio, others, ref, ints, others.size, settled, iono, revalidated)
         # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
         # whose ambiguity is still code-level, else mostly the lowest one), not blindly the lowest satellite:
         # one fresh ambiguity would otherwise sink the ratio of a set determined long ago
@@ -1757,7 +1765,7 @@ def _float_update(st: RtkState, ctx: EpochContext) -> None:
                 st.fix_count = 0
                 _udbias(st, rov, bas, ctx.rng_r, ctx.rng_b, use_phase, np.zeros(st.ns, bool), count_lock=False)
                 continue
-            log.debug("%s: phase outlier PRN %d (%.2f m) -> ambiguity reset", ctx.time, slot + 1, dd.v[worst])
+            log.debug("%s: phase outlier %s (%.2f m) -> ambiguity reset", ctx.time, st.layout.letter(slot), dd.v[worst])
             _reset_amb(st, np.array([slot]))
             use_phase[slot] = False
             st.slips += 1
@@ -1793,7 +1801,8 @@ def _check_hold(st: RtkState, ctx: EpochContext) -> None:
         # whether leaving out a single satellite makes the rest fit (fault exclusion) before releasing all
         culprit, fitted = _exclude_one_phase(st, ctx, bad_phase)
         if culprit >= 0:
-            log.info("%s: PRN %d no longer fits the held set: its ambiguity alone restarts", ctx.time, culprit + 1)
+            log.info("%s: %s no longer fits the held set: its ambiguity alone restarts", ctx.time,
+                     st.layout.letter(culprit))
             st.x, st.p = fitted
             st.slips += 1
             _reset_amb(st, np.array([culprit]))
@@ -1847,7 +1856,10 @@ def _resolve(st: RtkState, ctx: EpochContext) -> _Fix | None:
         use_fix[fix.slots] = True
         use_fix[fix.ref] = True
         fix_rows, valid, _ = _phase_fit(st, ctx, xf, use_fix)
-        if (maha <= _CHI2_3DOF_999 or fix.settled) and np.count_nonzero(valid) == valid.size:
+        # a re-fix of validated integers need not lie near the float: after a released hold the float of a
+        # static rover knows its position to millimetres and carries the centimetre multipath the hold kept out
+        if (maha <= _CHI2_3DOF_999 or fix.settled or (fix.revalidated and o.revalidated_skips_float_check)) \
+                and np.count_nonzero(valid) == valid.size:
             break
         log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", ctx.time, maha, bool(valid.all()))
         # a second look at this epoch: without the one satellite whose phase does not fit the fixed solution

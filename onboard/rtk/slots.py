@@ -21,7 +21,7 @@ from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, l1_wavelength_m
 from onboard.rtk.ephemeris import EphemerisStore, SatState, eph_clock_s, satellite_states_batch
 from onboard.rtk.glonass import glonass_clock_s
 from onboard.rtk.gnss import SYSTEMS_BY_LETTER
-from onboard.rtk.navstore import BroadcastNavigation, satellite_state
+from onboard.rtk.navstore import BroadcastNavigation
 from onboard.rtk.types import FCN_NONE, GNSS_GLONASS, GNSS_GPS, GlonassEphemeris, ObsEpoch
 
 SYSTEM_ORDER = "GRECJ"
@@ -166,7 +166,7 @@ def satellite_states_layout(layout: SlotLayout, store: EphemerisStore, nav: Broa
                     continue
                 # the satellite clock at t_rx − pr/c sets the transmission time (one step is < 1 ns off)
                 dts = glonass_clock_s(eph, t0) if isinstance(eph, GlonassEphemeris) else eph_clock_s(eph, t0)
-                s = satellite_state(eph, t0.add_s(-dts))
+                s = nav.state(eph, t0.add_s(-dts))
                 if not s.healthy:
                     continue
                 pos[k, j], vel[k, j], clk[k, j], drift[k, j], var[k, j] = s.pos_m, s.vel_m_s, s.clock_s, \

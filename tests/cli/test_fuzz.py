@@ -285,7 +285,9 @@ def test_base_arguments(position: str | None, survey: str | None, height: str | 
     else:
         assert 0 < args.survey_in <= 86400
     assert 0 <= args.antenna_height <= 100 and 0 <= args.station_id <= 4095
-    assert math.isfinite(args.budget) and args.budget > 0 and 0 < args.obs_interval <= 3600
+    # (not given: None, the [base] settings' value then applies)
+    assert args.budget is None or (math.isfinite(args.budget) and args.budget > 0)
+    assert args.obs_interval is None or 0 < args.obs_interval <= 3600
     assert 1200 <= args.radio_baud <= 4_000_000
 
 

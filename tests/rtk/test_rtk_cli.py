@@ -196,3 +196,34 @@ def test_rtk_says_what_its_ubx_reader_skipped(tmp_path, caplog):
         main(["rtk", "--rover", str(rover), "--base", str(rover), "-o", str(tmp_path / "x.pos")])
     corrupt = [r.getMessage() for r in caplog.records if "hold no valid frame" in r.getMessage()]
     assert corrupt and f"{rover} byte 4996 (492 B)" in corrupt[0]
+
+
+M8P = "gnss/ublox-m8p-galway-2018/rinex/"
+
+
+def test_systems_option_letters(capsys):
+    parser = argparse.ArgumentParser()
+    add_rtk_parser(parser.add_subparsers())
+    base = ["rtk", "--rover", "r", "--base", "b", "-o", "o.pos"]
+    assert parser.parse_args(base).systems == "G"
+    assert parser.parse_args([*base, "--systems", "grG"]).systems == "GR"
+    with pytest.raises(SystemExit):
+        parser.parse_args([*base, "--systems", "GX"])
+    assert "letters of G, R, E, C, J" in capsys.readouterr().err
+
+
+def test_other_systems_observations_and_ephemerides_are_read_when_asked_for(tmp_path):
+    from onboard.postpro.inputs import read_navigation, read_observations
+    from onboard.rtk.types import GNSS_GLONASS, GNSS_GPS
+
+    nav_file = shared_file(M8P + "rover-20181004-1237.nav.gz")
+    gps_only = read_navigation([nav_file])
+    both = read_navigation([nav_file], systems="GR")
+    assert gps_only.broadcast is None
+    assert both.broadcast is not None and len(both.broadcast) > 0
+    assert {g for g, _ in both.broadcast.satellites()} == {GNSS_GLONASS}
+    assert len(both.store) == len(gps_only.store) > 0
+    obs = tmp_path / "rover.obs"
+    _slice_rinex_v3(shared_file(M8P + "rover-20181004-1237.obs.gz"), obs, 3)
+    assert {int(g) for e in read_observations(obs).epochs for g in e.gnss_id} == {GNSS_GPS}
+    assert {int(g) for e in read_observations(obs, "GR").epochs for g in e.gnss_id} == {GNSS_GPS, GNSS_GLONASS}

@@ -42,7 +42,8 @@ def test_scheduler_never_drops_observations_and_drops_ephemerides_before_positio
 def test_core_sends_1004_every_epoch_1006_every_10_s_1019_every_30_s_within_budget() -> None:
     epochs, nav = _base_data()  # 30 s epochs; resample the schedule at 1 Hz by shifting the tags
     ep0 = epochs[0]
-    core = BaseCore(BaseOptions(station_id=3040, position_ecef_m=BASE_3040, radio_budget_bytes_s=600.0))
+    core = BaseCore(BaseOptions(station_id=3040, position_ecef_m=BASE_3040, radio_budget_bytes_s=600.0,
+                                obs_message="1004"))
     for e in nav.ephemerides:
         core.on_item(e)
     sent: list[tuple[float, list[int], int]] = []
@@ -65,10 +66,10 @@ def test_core_sends_1004_every_epoch_1006_every_10_s_1019_every_30_s_within_budg
 def test_tight_budget_keeps_every_observation_and_position_sheds_ephemerides() -> None:
     epochs, nav = _base_data()
     ep0 = epochs[0]
-    obs_size = len(BaseCore(BaseOptions(position_ecef_m=BASE_3040)).on_item(ep0)[0][1])
+    obs_size = len(BaseCore(BaseOptions(position_ecef_m=BASE_3040, obs_message="1004")).on_item(ep0)[0][1])
     # the observations plus 10 B/s: room for 1006 (27 B) every 10 s, not for 1019 (67 B) per satellite per 30 s
     core = BaseCore(BaseOptions(position_ecef_m=BASE_3040, radio_budget_bytes_s=obs_size + 10.0,
-                                radio_burst_bytes=300))
+                                radio_burst_bytes=300, obs_message="1004"))
     for e in nav.ephemerides:
         core.on_item(e)
     count = {1004: 0, 1006: 0, 1019: 0}
@@ -82,7 +83,7 @@ def test_tight_budget_keeps_every_observation_and_position_sheds_ephemerides() -
 
 def test_corrections_decode_back_to_the_epoch_and_position() -> None:
     epochs, _nav = _base_data()
-    core = BaseCore(BaseOptions(station_id=12, position_ecef_m=BASE_3040, obs_message=1002))
+    core = BaseCore(BaseOptions(station_id=12, position_ecef_m=BASE_3040, obs_message="1002"))
     frames = core.on_item(epochs[3])
     msgs = [RTCMReader.parse(f) for _, f in frames]
     obs = next(m for m in msgs if m.identity == "1002")
@@ -118,8 +119,8 @@ def test_survey_in_without_ephemerides_sends_nothing_and_bad_options_are_refused
     assert s.add(t, np.zeros(3)) is None  # one fix is no mean
     with pytest.raises(ValueError, match="survey-in"):
         BaseOptions()
-    with pytest.raises(ValueError, match="1002 or 1004"):
-        BaseOptions(position_ecef_m=BASE_3040, obs_message=1077)
+    with pytest.raises(ValueError, match="msm4, msm5, msm7, 1004, 1002"):
+        BaseOptions(position_ecef_m=BASE_3040, obs_message="1077")
 
 
 def test_cli_registers_base_and_refuses_a_missing_or_bad_position(capsys) -> None:
@@ -127,7 +128,7 @@ def test_cli_registers_base_and_refuses_a_missing_or_bad_position(capsys) -> Non
 
     args = build_parser().parse_args(["base", "--port", "/dev/null", "--radio", "/dev/null",
                                       "--position=-3978241.958,3382840.234,3649900.853", "--budget", "300"])
-    assert args.position == pytest.approx(BASE_3040) and args.budget == 300.0 and args.message == 1004
+    assert args.position == pytest.approx(BASE_3040) and args.budget == 300.0 and args.message is None
     # main() returns the usage error's exit code (2) instead of raising SystemExit
     assert main(["base", "--port", "/dev/null", "--radio", "/dev/null"]) == 2  # neither --position nor --survey-in
     assert main(["base", "--port", "x", "--radio", "y", "--position", "1,2"]) == 2
@@ -145,7 +146,7 @@ def _third_satellite_through_1004(lli_at, lock_ms_at):  # type: ignore[no-untype
     epochs, _ = _base_data()
     ep0 = epochs[0]
     prn = int(ep0.sv_id[2])
-    core = BaseCore(BaseOptions(position_ecef_m=BASE_3040))
+    core = BaseCore(BaseOptions(position_ecef_m=BASE_3040, obs_message="1004"))
     dec = RtcmDecoder()
     decoded = []
     for k in range(40):

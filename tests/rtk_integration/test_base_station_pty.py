@@ -71,7 +71,7 @@ def test_base_station_sends_rtcm_matching_its_journal_within_budget(tmp_path: Pa
     settings = make_settings(tmp_path, port_device=port, port_baud=9600)
     deps = RecorderDeps(open_port=lambda: SerialByteStream(port, 9600, 0.05))
     options = BaseOptions(station_id=42, position_ecef_m=tuple(world.base_ecef_m), radio_budget_bytes_s=BUDGET_B_S,
-                          radio_burst_bytes=BURST_B)
+                          radio_burst_bytes=BURST_B, obs_message="1004")
     station = base_recorder(settings, deps, options, lambda: SerialByteStream(radio_path, 57600, 0.05))
     (base,) = station.features
     assert isinstance(base, BaseStationFeature)
@@ -219,7 +219,7 @@ def test_survey_in_over_the_emulated_base_gates_corrections_and_lands_near_the_a
     thread = threading.Thread(target=lambda: result.setdefault("rc", asyncio.run(station.run())), daemon=True)
     thread.start()
     try:
-        wait_until(lambda: base.core.scheduler.counts.sent.get("obs", 0) >= 5, timeout_s=60,
+        wait_until(lambda: base.core.counts()["sent"].get("obs", 0) >= 5, timeout_s=60,
                    what="survey-in done and corrections flowing")
     finally:
         loop = station._loop
@@ -235,7 +235,7 @@ def test_survey_in_over_the_emulated_base_gates_corrections_and_lands_near_the_a
     msgs = [RTCMReader.parse(f.raw) for f in framer.feed(bytes(radio.written))]
     pos = next(m for m in msgs if m.identity == "1006")
     np.testing.assert_allclose([pos.DF025, pos.DF026, pos.DF027], survey.result_ecef_m, atol=1e-3)
-    first_obs_ms = min(int(m.DF004) for m in msgs if m.identity == "1004")
+    first_obs_ms = min(int(m.DF004) for m in msgs if m.identity == "1074")  # the default MSM4 (GPS world)
     journal = [e.time for e in iter_journal(Path(station.status.flight_dir or "")) if isinstance(e, ObsEpoch)]
-    # nothing was sent during the survey: the first 1004 is at least 20 s after the first fix of the survey
+    # nothing was sent during the survey: the first MSM is at least 20 s after the first fix of the survey
     assert first_obs_ms / 1000.0 - journal[0].tow_s >= 20.0

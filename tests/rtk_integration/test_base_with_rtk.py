@@ -5,7 +5,7 @@
                                  recorder + BaseStationFeature (RTCM3 out to its own radio)           │
                                           + RtkFeature (corrections in) ◄─────────────────────────────┘
 
-Checked on the one recorder that runs both: its radio carries 1004/1006 of its own journal's epochs (base.json
+Checked on the one recorder that runs both: its radio carries MSM4/1006 of its own journal's epochs (base.json
 counts them), its RTK solves against the second base with fixes near the truth (solution.pos, rtk.json), and
 neither feature counted an error.
 """
@@ -91,7 +91,7 @@ def test_a_base_station_that_also_solves_its_own_rtk(tmp_path: Path) -> None:
                             and x, timeout_s=60, what="configuration")
             assert st["config_state"] == "verified", st.get("config_error")
         wait_until(lambda: rtk_feature.rtk.snapshot()["fixed"] >= 20 and
-                   base_feature.core.scheduler.counts.sent.get("obs", 0) >= 20, timeout_s=150,
+                   base_feature.core.counts()["sent"].get("obs", 0) >= 20, timeout_s=150,
                    what="20 fixes and 20 epochs of corrections sent")
     finally:
         codes = [r.stop() for r in runs]
@@ -101,17 +101,18 @@ def test_a_base_station_that_also_solves_its_own_rtk(tmp_path: Path) -> None:
     assert codes == [0, 0]
     flight = Path(own.status.flight_dir or "")
 
-    # the base feature: what went to its radio is its own journal's epochs, as 1004 (+ 1006), all CRC-valid
+    # the base feature: what went to its radio is its own journal's epochs, as MSM4 (the default; one 1074 per
+    # epoch of the GPS world) + 1006, all CRC-valid
     framer = StreamFramer()
     frames = framer.feed(bytes(own_radio.written)) + framer.flush()
     assert frames and all(f.protocol is Protocol.RTCM3 for f in frames) and framer.skipped_bytes == 0
     numbers = [f.msg_id for f in frames]
-    assert numbers.count(1004) >= 20 and 1006 in numbers
+    assert numbers.count(1074) >= 20 and 1006 in numbers
     assert (flight / "radio-tx.rtcm3").read_bytes() == bytes(own_radio.written)
     journal_epochs = [e for e in iter_journal(flight) if isinstance(e, ObsEpoch)]
-    assert numbers.count(1004) <= len(journal_epochs)
+    assert numbers.count(1074) <= len(journal_epochs)
     base_snap = json.loads(own_settings.status_path.with_name(BASE_STATUS_NAME).read_text())
-    assert base_snap["sent"]["obs"] == numbers.count(1004) and base_snap["sent_bytes"] == len(own_radio.written)
+    assert base_snap["sent"]["obs"] == numbers.count(1074) and base_snap["sent_bytes"] == len(own_radio.written)
 
     # the RTK feature: corrections from the second base journaled as received, fixes on the truth
     assert b"".join(iter_journal_bytes(flight / RADIO_DIR))

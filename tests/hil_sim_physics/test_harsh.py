@@ -1,0 +1,114 @@
+"""The harsh rover environment (walking under trees) against the statistics it was fitted to.
+
+The simulated rover's observations go through the same estimator (hil_sim.obs_stats) as the real M8P walk; the
+refit must land within the stated bounds of HARSH (the real walk's fit, docs/hil-sim-error-model.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hil_sim.obs_stats import fit_environment, stream_losses, tracking_stats
+from hil_sim.rtk_scenarios import HARSH_RADIO_LOSS, radio_drops
+from hil_sim.scenario import HARSH, RoverEnvironment, Scenario
+from hil_sim.world import World
+from onboard.rtk.types import GNSS_GLONASS, GNSS_GPS
+
+M8P = Path(__file__).resolve().parents[3] / "shared" / "data" / "gnss" / "ublox-m8p-galway-2018"
+MEASURED_CODE_SIGMA_AT_45_M = 0.79
+"""What the estimator returns on the real walk (HARSH.code_sigma_ref_m is the input that reproduces it)."""
+
+
+def _harsh_world(duration_s: float, seed: int = 5) -> World:
+    return World(Scenario.multi("gr-2012", duration_s=duration_s, seed=seed, rover_environment=HARSH))
+
+
+@pytest.mark.slow
+def test_harsh_scenario_statistics_are_within_bounds_of_the_fitted_ones() -> None:
+    world = _harsh_world(1200.0)
+    sc = world.scenario
+    n = 1190
+    eps = [world.observe("rover", sc.start.add_s(k)) for k in range(n)]
+    pos = np.array([world.truth(sc.start.add_s(k))["antenna_ecef_m"] for k in range(n)])
+    stats = tracking_stats(eps, world.broadcast_navigation(), pos, (GNSS_GPS, GNSS_GLONASS))
+    fit = fit_environment(stats, HARSH.phase_sigma_ref_m)
+    assert fit.lli_slips_per_h == pytest.approx(HARSH.lli_slips_per_h, rel=0.35)
+    assert HARSH.unflagged_slips_per_h / 2 <= fit.unflagged_slips_per_h <= 2 * HARSH.unflagged_slips_per_h
+    assert fit.outage_mean_s == pytest.approx(HARSH.outage_mean_s, rel=0.3)
+    assert fit.half_cycle_resolve_s == pytest.approx(HARSH.half_cycle_resolve_s, rel=0.3)
+    for u_sim, u_fit in zip(fit.unavailability[:3], HARSH.unavailability[:3], strict=True):
+        assert abs(u_sim - u_fit) < 0.05
+    assert fit.cn0_horizon_dbhz == pytest.approx(HARSH.cn0_horizon_dbhz, abs=1.5)
+    assert fit.cn0_zenith_dbhz == pytest.approx(HARSH.cn0_zenith_dbhz, abs=1.5)
+    assert fit.cn0_sigma_dbhz == pytest.approx(HARSH.cn0_sigma_dbhz, abs=0.5)
+    assert fit.code_sigma_ref_m == pytest.approx(MEASURED_CODE_SIGMA_AT_45_M, rel=0.15)
+    assert fit.glonass_code_factor == pytest.approx(HARSH.glonass_code_factor, rel=0.2)
+    # the open-sky base is untouched by the rover's environment
+    base = [world.observe("base", sc.start.add_s(k)) for k in range(0, n, 1)]
+    base_st = tracking_stats(base, world.broadcast_navigation(), world.base_ecef_m, (GNSS_GPS,))[GNSS_GPS]
+    assert base_st.lli_slips_per_h < 2.0 and base_st.avail_by_el["20-30"] == 1.0
+
+
+def test_blockage_follows_the_unavailability_and_outage_length() -> None:
+    env = RoverEnvironment(unavailability=(0.3, 0.3, 0.3, 0.3, 0.3), outage_mean_s=4.0)
+    world = World(Scenario.default(duration_s=1200.0, rover_environment=env, seed=3))
+    blocked = world._blocked["rover"][:, world.cols]
+    el = world._el_grid_rover[:, world.cols]
+    x = np.arange(blocked.shape[0]) * world._fast.dt_s / world._slow.dt_s
+    el_f = np.stack([np.interp(x, np.arange(el.shape[0]), el[:, j]) for j in range(el.shape[1])], axis=1)
+    up = np.degrees(el_f) >= 10.0
+    assert blocked[up].mean() == pytest.approx(0.3, abs=0.03)
+    assert not blocked[np.degrees(el_f) < 9.0].any()  # below the first band: never blocked
+    runs = []
+    for j in range(blocked.shape[1]):
+        b = np.concatenate(([0], blocked[:, j].astype(int), [0]))
+        edges = np.flatnonzero(np.diff(b))
+        runs += list(edges[1::2] - edges[::2])
+    assert np.mean(runs) == pytest.approx(4.0, rel=0.15)
+    # every reacquisition is a new arc: the epoch after an outage starts its lock time afresh
+    ep_prev = None
+    restarts = 0
+    for k in range(200, 320):
+        ep = world.observe("rover", world.start.add_s(k))
+        if ep_prev is not None:
+            seen = set(ep_prev.sv_id.tolist())
+            for i, sv in enumerate(ep.sv_id.tolist()):
+                if sv not in seen and ep.lock_ms[i] < 1500.0:
+                    restarts += 1
+        ep_prev = ep
+    assert restarts > 20
+
+
+def test_radio_loss_model_reproduces_its_gilbert_parameters() -> None:
+    lost = radio_drops(20_000, *HARSH_RADIO_LOSS, seed=2)
+    st = stream_losses(np.flatnonzero(~lost).astype(float))
+    assert st["p_loss_after_ok"] == pytest.approx(HARSH_RADIO_LOSS[0], abs=0.02)
+    assert st["p_loss_after_loss"] == pytest.approx(HARSH_RADIO_LOSS[1], abs=0.02)
+
+
+@pytest.mark.skipif(not M8P.is_dir(), reason="needs ../shared/data/gnss/ublox-m8p-galway-2018 (not redistributable)")
+def test_harsh_is_the_fit_of_the_real_walk() -> None:
+    from hil_sim.constellations import read_navigation
+    from onboard.formats.rinex_obs import read_rinex_obs
+    from onboard.rtk.navstore import BroadcastNavigation
+
+    walk = read_rinex_obs(M8P / "rinex/rover-20181004-1532.obs.gz")
+    ephs, _, _ = read_navigation([M8P / p for p in ("rinex/rover-20181004-1532.nav.gz",
+                                                    "rinex/base-20181004-1452.nav.gz", "cors-glw1/glw1277p.18n.gz",
+                                                    "cors-glw1/glw1277p.18g.gz")])
+    stats = tracking_stats(walk.epochs, BroadcastNavigation(ephs), walk.header.approx_pos_ecef_m,
+                           (GNSS_GPS, GNSS_GLONASS))
+    fit = fit_environment(stats, HARSH.phase_sigma_ref_m)
+    for f in dataclasses.fields(RoverEnvironment):
+        a, b = getattr(fit, f.name), getattr(HARSH, f.name)
+        if f.name == "code_sigma_ref_m":
+            assert a == pytest.approx(MEASURED_CODE_SIGMA_AT_45_M, abs=0.01)
+        elif isinstance(b, tuple):
+            assert np.allclose(a, b, atol=0.01 if f.name == "unavailability" else 0.05), f.name
+        else:
+            assert math.isclose(a, b, abs_tol=0.06), (f.name, a, b)
