@@ -141,7 +141,7 @@ def read_navigation(paths: Sequence[str | Path], extra: Sequence[Ephemeris] = ()
     return Nav(store, iono, broadcast)
 
 
-def read_base_observations(path: str | Path, reference: GpsTime | None) -> ObsInput:
+def read_base_observations(path: str | Path, reference: GpsTime | None, systems: str = "G") -> ObsInput:
     """Base input for `onboard rtk`: RINEX, UBX log, RTCM3 stream or mixed UBX/RTCM3 log → `ObsInput`.
 
     `reference` (normally the rover's first epoch time) resolves the GPS week of RTCM epochs; without it a
@@ -153,7 +153,7 @@ def read_base_observations(path: str | Path, reference: GpsTime | None) -> ObsIn
 
     path = Path(path)
     if path.is_dir():  # a journal directory: the rover's radio journal (<flight>/radio) or a base flight
-        return _read_journal_dir(path, reference)
+        return _read_journal_dir(path, reference, systems)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
     head = read_head_bytes(path, 65536)
@@ -162,12 +162,12 @@ def read_base_observations(path: str | Path, reference: GpsTime | None) -> ObsIn
     from onboard.receiver.framing import Protocol
     from onboard.receiver.rtcm import RTCM_GPS_OBS
     if b"RINEX VERSION" in head[:200]:
-        return read_observations(path)
+        return read_observations(path, systems)
     from onboard.receiver.decode import iter_file_bytes
 
     counts = count_protocols(head)
     if not counts.get(Protocol.RTCM3):
-        return read_observations(path)
+        return read_observations(path, systems)
     if reference is None:
         raise InputError(f"{path}: an RTCM3 stream carries no GPS week; a rover time reference is needed")
     rtcm = collect_rtcm(iter_file_bytes(path), reference)
@@ -188,10 +188,12 @@ def read_base_observations(path: str | Path, reference: GpsTime | None) -> ObsIn
         raise InputError(f"{path}: RTCM3 stream without GPS observations (messages: "
                          f"{sorted(rtcm.messages) or 'none'}; GPS observation messages: {gps_msgs})")
     ephs = rtcm.ephemerides + (ubx.ephemerides if ubx is not None else [])
+    if systems != "G":  # every system's epochs, reassembled per epoch time (a lost message leaves a half one)
+        return ObsInput([b.obs for b in rtcm.gnss_epochs], ephs, pos, "rtcm3")
     return ObsInput(rtcm.epochs, ephs, pos, "rtcm3")
 
 
-def _read_journal_dir(path: Path, reference: GpsTime | None) -> ObsInput:
+def _read_journal_dir(path: Path, reference: GpsTime | None, systems: str = "G") -> ObsInput:
     """Base input from a journal directory (segments in order, torn tail tolerated): RTCM3 or UBX inside."""
     from onboard.logger.journal import iter_journal_bytes
     from onboard.receiver.base_epochs import collect_rtcm, count_protocols
@@ -206,7 +208,8 @@ def _read_journal_dir(path: Path, reference: GpsTime | None) -> ObsInput:
         rtcm = collect_rtcm([data], reference)
         if rtcm.epochs:
             pos = rtcm.base_position.phase_centre_ecef_m if rtcm.base_position is not None else None
-            return ObsInput(rtcm.epochs, rtcm.ephemerides, pos, "rtcm3")
+            epochs = rtcm.epochs if systems == "G" else [b.obs for b in rtcm.gnss_epochs]
+            return ObsInput(epochs, rtcm.ephemerides, pos, "rtcm3")
     col = collect(iter([data]))
     if not col.epochs:
         raise InputError(f"{path}: journal without base observations (RTCM3 1002/1004/1074/1077 or UBX RXM-RAW(X))")
@@ -246,7 +249,7 @@ def load_rtk_inputs(rover_path: str | Path, base_path: str | Path, nav_paths: Se
         base = read_observations(base_file, systems)  # without loading the RTCM3 decoders (start-up time)
     else:
         # the base may also be an RTCM3 stream or a journal folder (e.g. the rover's radio/ journal)
-        base = read_base_observations(base_file, rover.epochs[0].time if rover.epochs else None)
+        base = read_base_observations(base_file, rover.epochs[0].time if rover.epochs else None, systems)
     nav = read_navigation(nav_paths, rover.ephemerides + base.ephemerides, systems)
     if len(nav.store) == 0:
         raise InputError(f"no GPS ephemeris: give {nav_hint} or logs with RXM-SFRB(X)/AID-EPH")

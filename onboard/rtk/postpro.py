@@ -78,11 +78,17 @@ def check_base_position(base: Sequence[ObsEpoch], nav: NavData, base_pos_ecef_m:
 
 
 def pair_epochs(rover: Sequence[ObsEpoch], base: Sequence[ObsEpoch], tolerance_s: float = 0.025,
-                max_age_s: float = 30.0) -> list[ObsEpoch | None]:
+                max_age_s: float = 30.0, systems: frozenset[int] | None = None) -> list[ObsEpoch | None]:
     """For each rover epoch, the latest base epoch with t_base ≤ t_rover + tolerance (None when none or
     older than `max_age_s`). Base epochs without GPS observations are skipped (a lossy RTCM link can deliver
-    GLONASS-only epochs)."""
+    GLONASS-only epochs); with `systems` (u-blox gnssIds of the engine's constellations), so are the epochs
+    that lack one of them which the base sends elsewhere in `base` (a half epoch: the engine evaluates a base
+    epoch at its one time, so the whole epoch before it is carried forward instead; see
+    onboard.receiver.base_epochs.pairing_base_epoch)."""
     usable = [b for b in base if len(b.gps_only()) > 0]
+    if systems is not None:
+        sent = frozenset().union(*(b.systems() for b in base)) & systems
+        usable = [b for b in usable if sent <= b.systems()]
     usable.sort(key=lambda b: b.time)
     keys = [b.time.total_ns for b in usable]
     tol_ns = round(tolerance_s * 1e9)
@@ -250,7 +256,9 @@ def postprocess(rover: Sequence[ObsEpoch], base: Sequence[ObsEpoch], nav: NavDat
     if base_pos_ecef_m is not None:
         check_base_position(base, nav, base_pos_ecef_m, options)
     rov = sorted(rover, key=lambda e: e.time)
-    paired = pair_epochs(rov, base, options.pair_tolerance_s, options.max_age_s)
+    layout = slot_layout(options.systems)
+    paired = pair_epochs(rov, base, options.pair_tolerance_s, options.max_age_s,
+                         None if layout.gps_only else frozenset(layout.first_slot))
     if direction == "forward":
         sols, st = run_filter(rov, paired, nav, base_pos_ecef_m, options, False, init_pos_ecef_m, progress)
         return sols, [st]
