@@ -28,6 +28,7 @@ harsh cases, seed 1; about 40 s of CPU per scenario and seed). Needs pyrtklib5 (
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import tempfile
 from collections.abc import Callable, Sequence
@@ -199,7 +200,7 @@ def main() -> int:
             opts = RtkOptions(systems=case.systems.upper())
             rsys = args.rtklib_systems or rtklib_systems(case)
             if args.keep:
-                out_dir = args.keep / f"{case.name.split(':')[0].replace(' ', '_')}-s{seed}"
+                out_dir = args.keep / f"{re.sub(r'[^a-z0-9]+', '-', case.name.lower()).strip('-')}-s{seed}"
                 out_dir.mkdir(parents=True, exist_ok=True)
                 rows = run_demo5(data, case, out_dir, rsys, args.rtklib_dynamics)
             else:
