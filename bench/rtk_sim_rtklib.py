@@ -160,6 +160,20 @@ def row(case: SimCase, engine: str, r: dict[str, Any]) -> str:
             f"{r['max cm']:5.1f}cm")
 
 
+def summary(runs: Sequence[dict[str, Any]]) -> str:
+    """One engine's figures over seeds: airborne and all-epoch fix % (min / median / mean), median first fix,
+    wrong fixes summed (and the share of the fixed epochs they are)."""
+    air = np.array([r["air fix %"] for r in runs], float)
+    all_ = np.array([r["fix %"] for r in runs], float)
+    first = np.array([r["first fix s"] for r in runs], float)
+    wrong = sum(r["wrong"] for r in runs)
+    fixed = sum(r["fixed"] for r in runs)
+    ff = f"{np.median(first[np.isfinite(first)]):.0f}" if np.isfinite(first).any() else "-"
+    return (f"air % {np.nanmin(air):.1f} / {np.nanmedian(air):.1f} / {np.nanmean(air):.1f}, all % "
+            f"{np.min(all_):.1f} / {np.median(all_):.1f} / {np.mean(all_):.1f}, 1st fix {ff} s, wrong {wrong} of "
+            f"{fixed} fixed ({100 * wrong / max(fixed, 1):.1f} %) in {sum(1 for r in runs if r['wrong'])} seeds")
+
+
 def cases(only: list[str] | None) -> list[SimCase]:
     """bench/rtk_sim.py's CASES (plus the harsh rover with a loss-free base, the real walk bench's base) whose
     name contains one of `only`; default nominal and the harsh ones."""
@@ -192,6 +206,7 @@ def main() -> int:
           "15 deg mask; the same RINEX-exported rover + RTCM-received base epochs")
     print(HEADER)
     print("-" * len(HEADER))
+    runs: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for base_case in chosen:
         for seed in args.seeds:
             case = replace(base_case, seed=seed, systems=args.systems, world=args.world)
@@ -207,8 +222,13 @@ def main() -> int:
                 with tempfile.TemporaryDirectory() as tmp:
                     rows = run_demo5(data, case, Path(tmp), rsys, args.rtklib_dynamics)
             demo5 = score_demo5(data, rows, opts.pair_tolerance_s)
-            print(row(case, f"ours {case.systems}", ours))
-            print(row(case, f"demo5 {systems_label(rsys)}", demo5), flush=True)
+            for engine, r in ((f"ours {case.systems}", ours), (f"demo5 {systems_label(rsys)}", demo5)):
+                print(row(case, engine, r), flush=True)
+                runs.setdefault((case.name, engine), []).append(r)
+    if len(args.seeds) > 1:
+        print(f"\nover seeds {args.seeds[0]}-{args.seeds[-1]} ({len(args.seeds)}):")
+        for (name, engine), rs in runs.items():
+            print(f"{name:32s} {engine:16s} {summary(rs)}")
     return 0
 
 

@@ -98,3 +98,11 @@ def test_rinex_export_reads_back(tmp_path: Path) -> None:
     base_back = read_rinex_obs(base_path)
     assert [e.time.diff_s(T0) for e in base_back.epochs] == pytest.approx([-0.008, 1.992])
     np.testing.assert_allclose(base_back.header.approx_pos_ecef_m, data.base_pos_ecef_m, atol=1e-4)
+
+
+def test_summary_over_seeds() -> None:
+    runs = [{"air fix %": 20.0, "fix %": 30.0, "first fix s": 10.0, "wrong": 2, "fixed": 100},
+            {"air fix %": 60.0, "fix %": 50.0, "first fix s": float("nan"), "wrong": 0, "fixed": 0},
+            {"air fix %": 40.0, "fix %": 70.0, "first fix s": 30.0, "wrong": 3, "fixed": 150}]
+    assert mod.summary(runs) == ("air % 20.0 / 40.0 / 40.0, all % 30.0 / 50.0 / 50.0, 1st fix 20 s, wrong 5 of 250 "
+                                 "fixed (2.0 %) in 2 seeds")
