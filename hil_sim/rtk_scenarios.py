@@ -69,7 +69,8 @@ class SimCase:
     """Radio dropouts [start, end): the base's RTCM frames of these seconds never reach the rover."""
     baseline_m: float | None = None
     undetected_slips_per_h: float | None = None
-    """Per satellite and receiver (ErrorModel.slip_undetected_rate_per_h; default 0.02)."""
+    """Per satellite and receiver (ErrorModel.slip_undetected_rate_per_h; default 0.02); with `harsh` also the
+    rover environment's slips without LLI (RoverEnvironment.unflagged_slips_per_h; HARSH 2.6)."""
     max_sats: int | None = None
     known_start: bool = False
     seed: int = 1
@@ -113,7 +114,8 @@ def scenario_for(case: SimCase, model: str) -> Any:
     if case.baseline_m is not None:
         over["base_offset_enu_m"] = Scenario.base_offset_for(case.baseline_m)
     if case.harsh:
-        over["rover_environment"] = HARSH
+        over["rover_environment"] = HARSH if case.undetected_slips_per_h is None else \
+            replace(HARSH, unflagged_slips_per_h=case.undetected_slips_per_h)
     sc = Scenario.multi(case.world, model, systems=case.systems, **over) if case.multi else \
         Scenario.default(model, **over)
     if case.undetected_slips_per_h is not None:

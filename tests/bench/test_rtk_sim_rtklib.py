@@ -106,3 +106,13 @@ def test_summary_over_seeds() -> None:
             {"air fix %": 40.0, "fix %": 70.0, "first fix s": 30.0, "wrong": 3, "fixed": 150}]
     assert mod.summary(runs) == ("air % 20.0 / 40.0 / 40.0, all % 30.0 / 50.0 / 50.0, 1st fix 20 s, wrong 5 of 250 "
                                  "fixed (2.0 %) in 2 seeds")
+
+
+def test_undetected_slips_of_a_harsh_case_set_the_rover_environment_too() -> None:
+    from hil_sim.rtk_scenarios import SimCase, scenario_for
+    from hil_sim.scenario import HARSH
+
+    assert scenario_for(SimCase("h", "", harsh=True), "m8t").rover_environment == HARSH
+    sc = scenario_for(SimCase("h", "", harsh=True, undetected_slips_per_h=0.5), "m8t")
+    assert sc.rover_environment.unflagged_slips_per_h == 0.5 and sc.errors.slip_undetected_rate_per_h == 0.5
+    assert sc.rover_environment.lli_slips_per_h == HARSH.lli_slips_per_h
