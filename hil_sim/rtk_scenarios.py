@@ -69,7 +69,8 @@ class SimCase:
     """Radio dropouts [start, end): the base's RTCM frames of these seconds never reach the rover."""
     baseline_m: float | None = None
     undetected_slips_per_h: float | None = None
-    """Per satellite and receiver (ErrorModel.slip_undetected_rate_per_h; default 0.02)."""
+    """Per satellite and receiver (ErrorModel.slip_undetected_rate_per_h; default 0.02); with `harsh` also the
+    rover environment's slips without LLI (RoverEnvironment.unflagged_slips_per_h; HARSH 2.6)."""
     max_sats: int | None = None
     known_start: bool = False
     seed: int = 1
@@ -113,7 +114,8 @@ def scenario_for(case: SimCase, model: str) -> Any:
     if case.baseline_m is not None:
         over["base_offset_enu_m"] = Scenario.base_offset_for(case.baseline_m)
     if case.harsh:
-        over["rover_environment"] = HARSH
+        over["rover_environment"] = HARSH if case.undetected_slips_per_h is None else \
+            replace(HARSH, unflagged_slips_per_h=case.undetected_slips_per_h)
     sc = Scenario.multi(case.world, model, systems=case.systems, **over) if case.multi else \
         Scenario.default(model, **over)
     if case.undetected_slips_per_h is not None:
@@ -208,9 +210,47 @@ def _simulate_multi(case: SimCase, world: Any, rover: list[ObsEpoch], base_decod
                    world.truth, init, sum(len(b) for b in radio), lost)
 
 
-def evaluate(case: SimCase, model: str, options: RtkOptions | None = None) -> dict[str, Any]:
-    """Simulate and solve `case`: the figures `bench/rtk_sim.py` prints (and per-epoch q, err_m, armed, age_s)."""
-    data = simulate(case, model)
+def base_age_s(rover: list[ObsEpoch], base: list[ObsEpoch], pair_tolerance_s: float) -> np.ndarray:
+    """Age (s) of the newest base epoch at each rover epoch in time order (inf before the first base epoch);
+    rover tags are receiver time, within 1 ms of GPS time: a base epoch up to `pair_tolerance_s` later counts."""
+    base_times = np.array(sorted(b.time.total_ns for b in base), dtype=np.int64)
+    rov_ns = np.array(sorted(r.time.total_ns for r in rover), dtype=np.int64)
+    i = np.searchsorted(base_times, rov_ns + round(pair_tolerance_s * 1e9), side="right") - 1
+    return np.where(i >= 0, (rov_ns - base_times[np.maximum(i, 0)]) / 1e9, np.inf)
+
+
+def score_epochs(q: np.ndarray, err_m: np.ndarray, armed: np.ndarray, age_s: np.ndarray,
+                 t_s: np.ndarray) -> dict[str, Any]:
+    """The matrix's figures of one run from per-epoch arrays: solution quality `q` (0 where none), 3D error
+    from the true antenna `err_m` (m, NaN where no solution), motors `armed`, base age `age_s` and time `t_s`
+    (s after the first epoch). Airborne: armed with base data at most STALE_S old; wrong: Q=1 > 10 cm in 3D
+    over all epochs (stale ones included)."""
+    stale = age_s > STALE_S
+    fixed = q == Q_FIX
+    air = armed & ~stale
+    e = err_m[fixed]
+    return {
+        "epochs": len(q),
+        "solved": int(np.sum(q > 0)),
+        "fixed": int(fixed.sum()),
+        "airborne": int(air.sum()),
+        "air fix %": 100.0 * float(fixed[air].mean()) if air.any() else float("nan"),
+        "fix %": 100.0 * float(fixed.mean()) if len(q) else 0.0,
+        "3D RMS cm": 100 * float(np.sqrt(np.mean(e**2))) if e.size else float("nan"),
+        "max cm": 100 * float(e.max()) if e.size else float("nan"),
+        "wrong": int(np.sum(fixed & (err_m > 0.10))),
+        "stale wrong": int(np.sum(fixed & stale & (err_m > 0.10))),
+        "first fix s": float(t_s[int(np.argmax(fixed))]) if fixed.any() else float("nan"),
+        "stale": int(stale.sum()),
+        "stale fixed": int(np.sum(fixed & stale)),
+    }
+
+
+def evaluate(case: SimCase, model: str, options: RtkOptions | None = None,
+             data: SimData | None = None) -> dict[str, Any]:
+    """Simulate (unless `data`, the simulation of `case`, is given) and solve `case`: the figures
+    `bench/rtk_sim.py` prints (and per-epoch q, err_m, armed, age_s)."""
+    data = data or simulate(case, model)
     opts = options or (RtkOptions(systems=case.systems.upper()) if case.multi else RtkOptions())
     if data.init_pos_ecef_m is not None:
         opts = replace(opts, static_start=True)
@@ -218,30 +258,13 @@ def evaluate(case: SimCase, model: str, options: RtkOptions | None = None) -> di
     sols, stats = postprocess(data.rover, data.base, data.nav, data.base_pos_ecef_m, opts, "forward",
                               data.init_pos_ecef_m)
     cpu = time.process_time() - t_run
-    base_times = np.array(sorted(b.time.total_ns for b in data.base))
     q = np.array([s.q for s in sols])
     err = np.array([np.linalg.norm(s.pos_ecef_m - data.truth(s.time)["antenna_ecef_m"]) for s in sols])
     armed = np.array([bool(data.truth(s.time)["armed"]) for s in sols])
-    # age of the newest base epoch at each rover epoch (rover tags: receiver time, within 1 ms of GPS time)
-    rov_ns = np.array([r.time.total_ns for r in sorted(data.rover, key=lambda e: e.time)])
-    i = np.searchsorted(base_times, rov_ns + round(opts.pair_tolerance_s * 1e9), side="right") - 1
-    age = np.where(i >= 0, (rov_ns - base_times[np.maximum(i, 0)]) / 1e9, np.inf)
-    stale = age > STALE_S
-    fixed = q == Q_FIX
-    air = armed & ~stale
-    e = err[fixed]
+    age = base_age_s(data.rover, data.base, opts.pair_tolerance_s)
+    t_s = np.array([s.time.diff_s(sols[0].time) for s in sols])
     return {
-        "epochs": len(sols),
-        "airborne": int(air.sum()),
-        "air fix %": 100.0 * float(fixed[air].mean()) if air.any() else float("nan"),
-        "fix %": 100.0 * float(fixed.mean()) if len(sols) else 0.0,
-        "3D RMS cm": 100 * float(np.sqrt(np.mean(e**2))) if e.size else float("nan"),
-        "max cm": 100 * float(e.max()) if e.size else float("nan"),
-        "wrong": int(np.sum(fixed & (err > 0.10))),
-        "stale wrong": int(np.sum(fixed & stale & (err > 0.10))),
-        "first fix s": float(sols[int(np.argmax(fixed))].time.diff_s(sols[0].time)) if fixed.any() else float("nan"),
-        "stale": int(stale.sum()),
-        "stale fixed": int(np.sum(fixed & stale)),
+        **score_epochs(q, err, armed, age, t_s),
         "slips": sum(s.slips for s in stats),
         "float restarts": sum(s.float_restarts for s in stats),
         "us/epoch": 1e6 * cpu / max(len(sols), 1),
