@@ -20,10 +20,11 @@ class RtkOptions:
 
     systems: str = "G"
     """Constellations used, as RINEX letters (G GPS, R GLONASS, E Galileo, C BeiDou, J QZSS): "G" is the
-    LEA-6T's GPS L1, "GREJ" the M8T's. Double differences are formed within each constellation."""
-    fix_systems: str = "GREJC"
-    """Constellations whose ambiguities are fixed (of those used); the others stay float. GLONASS is fixed as
-    RTKLIB demo5's gloarmode=on: it assumes both receivers of one type (inter-frequency biases cancel)."""
+    LEA-6T's GPS L1, "GREJ" the M8T's. Double differences are formed within each constellation, and every
+    constellation used has its ambiguities fixed: GLONASS as RTKLIB demo5's gloarmode=on, which assumes both
+    receivers of one type (their inter-frequency biases cancel); with a base of another type leave R out.
+    Why no float-only constellation: its float ambiguities absorb the error of a wrong integer set of the
+    others and hide it from every residual test (docs/rtk-defaults.md)."""
     elmask_deg: float = 15.0
     ar_elmask_deg: float = 15.0
     hold_elmask_deg: float = 15.0
@@ -255,10 +256,8 @@ class RtkOptions:
             raise ValueError(f"ar_mode must be one of {AR_MODES}, not {self.ar_mode!r}")
         if not 0.0 <= self.elmask_deg < 90.0:
             raise ValueError(f"elmask_deg out of range: {self.elmask_deg}")
-        for name in ("systems", "fix_systems"):
-            bad = set(getattr(self, name)) - set("GRECJ")
-            if bad or (name == "systems" and not self.systems):
-                raise ValueError(f"{name} must be letters of G, R, E, C, J, not {getattr(self, name)!r}")
+        if not self.systems or set(self.systems) - set("GRECJ"):
+            raise ValueError(f"systems must be letters of G, R, E, C, J, not {self.systems!r}")
         if self.ratio_threshold < 1.0:
             raise ValueError("ratio_threshold must be ≥ 1")
 
@@ -266,7 +265,6 @@ class RtkOptions:
 # TOML key → (field, converter). Keys carry RTKLIB-like names; units convert here, at the boundary.
 TOML_KEYS: dict[str, tuple[str, Any]] = {
     "systems": ("systems", str),
-    "fix_systems": ("fix_systems", str),
     "elevation_mask_deg": ("elmask_deg", float),
     "ar_elevation_mask_deg": ("ar_elmask_deg", float),
     "ar_mode": ("ar_mode", str),

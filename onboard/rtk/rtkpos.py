@@ -29,7 +29,6 @@ from onboard.gnsstime import GpsTime
 from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
 from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, satellite_states_batch
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
-from onboard.rtk.gnss import SYSTEMS_BY_LETTER
 from onboard.rtk.linsolve import LinAlgError, solve
 from onboard.rtk.mlambda import LambdaError, LambdaResult, mlambda
 from onboard.rtk.models import CodeScatter, iono_mapping, median_of_few, phase_variance_m2, saastamoinen_m
@@ -286,8 +285,6 @@ class RtkState:
     """layout.n: the number of slots."""
     nxi: int = NXI
     """NX0 + ns: the size of the state without ionosphere states and the index of the first one."""
-    fixable: npt.NDArray[np.bool_] | None = None
-    """Slots whose ambiguities may be fixed (RtkOptions.fix_systems), None for all."""
     x: Arr = field(default_factory=lambda: np.zeros(NXI))
     p: Arr = field(default_factory=lambda: np.zeros((NXI, NXI)))
     initialized: bool = False
@@ -362,9 +359,6 @@ def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkStat
             old = getattr(st, name)
             setattr(st, name, np.full(n, old[0], old.dtype))
         st.code_scatter = CodeScatter(mean_m=np.full(n, np.nan), count=np.zeros(n))
-    fixable = np.isin(layout.gnss_id, [SYSTEMS_BY_LETTER[c].gnss_id for c in options.fix_systems])
-    if not fixable.all():
-        st.fixable = fixable
     st.static = options.static_start
     st.init_pos_ecef_m = None if init_pos_ecef_m is None else np.asarray(init_pos_ecef_m, float)
     return st
@@ -1839,8 +1833,6 @@ def _resolve(st: RtkState, ctx: EpochContext) -> _Fix | None:
     # ambiguities seeded from a surveyed take-off point are known, not guessed from the code: no lock wait
     locked = (st.lock > o.min_lock_epochs) | st.known_amb
     cand = use_phase & (el >= math.radians(o.ar_elmask_deg)) & ~ctx.half & locked & (amb_var > 0)
-    if st.fixable is not None:
-        cand &= st.fixable  # constellations left float (RtkOptions.fix_systems)
     fix = _resamb_lambda(st, ctx, cand)
     for _try in range(FIX_TRIES):
         if fix is None:
