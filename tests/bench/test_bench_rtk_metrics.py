@@ -3,31 +3,19 @@ RTKLIB's navsys mask (the benchmark itself needs RTKLIB's bindings and the real 
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from onboard.rtk.geodesy import enu_to_ecef
+from tests.bench.bench_modules import load_bench
 
-BENCH = Path(__file__).resolve().parents[2] / "bench"
 REF = np.array([3774088.9931, -601661.8217, 5089321.3853])
 
 
-def _load(name: str):  # type: ignore[no-untyped-def]
-    spec = importlib.util.spec_from_file_location(f"bench_{name}_under_test", BENCH / f"{name}.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod
-    spec.loader.exec_module(mod)
-    return mod
-
-
-bench_rtk = _load("bench_rtk")
-rtklib_driver = _load("rtklib_driver")
+bench_rtk = load_bench("bench_rtk")
+rtklib_driver = load_bench("rtklib_driver")
 
 
 def _rows(offsets_enu_m: list[tuple[float, float, float]], q: list[int], tow0: float = 1000.0) -> np.ndarray:

@@ -4,8 +4,6 @@ World are not run here)."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -15,20 +13,9 @@ from hil_sim.rtk_scenarios import SimData, base_age_s, score_epochs
 from onboard.formats.rinex_obs import read_rinex_obs
 from onboard.gnsstime import GpsTime
 from onboard.rtk.types import FCN_NONE, GNSS_GLONASS, GNSS_GPS, LLI_SLIP, ObsEpoch
+from tests.bench.bench_modules import load_bench
 
-BENCH = Path(__file__).resolve().parents[2] / "bench"
-
-
-def _load(name: str):  # type: ignore[no-untyped-def]
-    spec = importlib.util.spec_from_file_location(f"bench_{name}_under_test", BENCH / f"{name}.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod
-    spec.loader.exec_module(mod)
-    return mod
-
-
-mod = _load("rtk_sim_rtklib")
+mod = load_bench("rtk_sim_rtklib")
 T0 = GpsTime(1712, 266_400 * 1_000_000_000)
 
 
