@@ -1,4 +1,5 @@
-"""GPS L1 relative positioning: Kalman filter on double differences, MLAMBDA, fix-and-hold.
+"""L1 relative positioning (GPS, and GLONASS/Galileo/BeiDou/QZSS with RtkOptions.systems): Kalman filter on
+double differences within each constellation, MLAMBDA, fix-and-hold.
 
 Follows RTKLIB rtkpos.c relpos(): time update of the rover position/velocity (udpos) and of the
 single-difference ambiguities (udbias, with slip detection), zero-difference residuals (zdres), double
@@ -9,9 +10,11 @@ solution (Mahalanobis distance) and post-fit residuals; a held fix that stops fi
 must rest on at least `min_fix_sats` satellites; known-point initialisation
 (Daakir et al. 2015 eq. 2) and a static mode until take-off.
 
-State vector: x[0:3] rover position (ECEF m), x[3:6] velocity (m/s), x[6+prn-1] SD ambiguity of GPS `prn`
-(rover − base, cycles), and, while the baseline is in the band of RtkOptions.iono_min/max_baseline_km,
-x[38+prn-1] the SD vertical L1 ionospheric delay of `prn` (rover − base, m; see _udion). Pure: no I/O, no clock.
+State vector: x[0:3] rover position (ECEF m), x[3:6] velocity (m/s), x[6+slot] SD ambiguity of each satellite
+slot (rover − base, cycles of its own carrier; slots: onboard.rtk.slots, GPS `prn` at slot prn − 1), and, while the
+baseline is in the band of RtkOptions.iono_min/max_baseline_km, x[6+n+slot] the SD vertical GPS-L1 ionospheric
+delay of the slot's satellite (rover − base, m; see _udion), n the number of slots (32 for GPS alone). Pure: no
+I/O, no clock.
 """
 
 from __future__ import annotations
