@@ -790,13 +790,10 @@ class ReceiverCore:
                 if eph is None:
                     continue
                 ck = (prn, frame_start.total_ns // NS_PER_S)
-                if ck not in self._frame_cache:
-                    try:
-                        self._frame_cache[ck] = lnav.encode_subframes_transmitted(eph, frame_start.tow_ns / NS_PER_S)
-                    except lnav.LnavError as exc:
-                        log.warning("PRN %d: cannot encode subframes (%s)", prn, exc)
-                        continue
-                words30 = self._frame_cache[ck][sf_id - 1]
+                frame = self._lnav_frame(ck, eph, frame_start, f"PRN {prn}")
+                if frame is None:
+                    continue
+                words30 = frame[sf_id - 1]
                 seen = self._subframes_seen.setdefault(prn, set())
                 seen.add((ck[1], sf_id))
                 if all((ck[1], s) in seen for s in (1, 2, 3)):
@@ -856,6 +853,18 @@ class ReceiverCore:
                     self.stats.subframes_out += 1
         return out
 
+    def _lnav_frame(self, key: tuple[int, int], eph: Ephemeris, frame_start: GpsTime, who: str
+                    ) -> list[list[int]] | None:
+        """Subframes 1–3 (as transmitted) of the LNAV frame starting at `frame_start`, encoded once per `key`
+        (satellite, frame start s); None, with a warning naming `who`, when the ephemeris cannot be encoded."""
+        if key not in self._frame_cache:
+            try:
+                self._frame_cache[key] = lnav.encode_subframes_transmitted(eph, frame_start.tow_ns / NS_PER_S)
+            except lnav.LnavError as exc:
+                log.warning("%s: cannot encode subframes (%s)", who, exc)
+                return None
+        return self._frame_cache[key]
+
     def _qzss_subframes(self, sf_id: int, frame_start: GpsTime, chn0: int) -> list[bytes]:
         """RXM-SFRBX subframe `sf_id` (1–3) of the frame starting at `frame_start` for every tracked QZSS
         satellite: the L1 C/A LNAV format of GPS (IS-QZSS-PNT), its broadcast ephemeris from the world."""
@@ -867,15 +876,10 @@ class ReceiverCore:
             eph = self._qzss_ephs.get(sv)
             if eph is None:
                 continue
-            ck = (1000 + sv, frame_start.total_ns // NS_PER_S)
-            if ck not in self._frame_cache:
-                try:
-                    self._frame_cache[ck] = lnav.encode_subframes_transmitted(eph, frame_start.tow_ns / NS_PER_S)
-                except lnav.LnavError as exc:
-                    log.warning("QZSS %d: cannot encode subframes (%s)", sv, exc)
-                    continue
-            data = enc.rxm_sfrbx(chn0 + chn, sv, lnav.sfrbx_from_transmitted(self._frame_cache[ck][sf_id - 1]),
-                                 gnss_id=GNSS_QZSS)
+            frame = self._lnav_frame((1000 + sv, frame_start.total_ns // NS_PER_S), eph, frame_start, f"QZSS {sv}")
+            if frame is None:
+                continue
+            data = enc.rxm_sfrbx(chn0 + chn, sv, lnav.sfrbx_from_transmitted(frame[sf_id - 1]), gnss_id=GNSS_QZSS)
             if self._send(out, data):
                 self.stats.subframes_out += 1
         return out

@@ -67,6 +67,11 @@ def _rk4_step(x: State, h: float, acc: tuple[float, float, float]) -> State:
             x[5] + (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5]) * w)
 
 
+def _clock_offset_s(geph: GlonassEphemeris, dt_s: float) -> float:
+    """The broadcast clock −τn + γn·dt (s), `dt_s` seconds after tb on the system time scale."""
+    return -geph.tau_n_s + geph.gamma_n * dt_s
+
+
 def _integrate(x: State, dt: float, acc: tuple[float, float, float]) -> State:
     """`x` carried over `dt` s (either sign) in RK4 steps of at most STEP_S, the last one shortened."""
     h = -STEP_S if dt < 0.0 else STEP_S
@@ -107,8 +112,7 @@ class GlonassOrbits:
             self._last.pop(next(iter(self._last)))
         self._last[key] = (dt, x)
         x1 = _rk4_step(x, dt_s, geph.acc_m_s2)
-        c0 = -geph.tau_n_s + geph.gamma_n * dt
-        c1 = -geph.tau_n_s + geph.gamma_n * (dt + dt_s)
+        c0, c1 = _clock_offset_s(geph, dt), _clock_offset_s(geph, dt + dt_s)
         p0, p1 = np.array(x[:3]), np.array(x1[:3])
         return p0, (p1 - p0) / dt_s, c0, (c1 - c0) / dt_s
 
@@ -119,8 +123,8 @@ def glonass_clock_s(geph: GlonassEphemeris, t: GpsTime) -> float:
     dt0 = t.diff_s(geph.toe)
     dt = dt0
     for _ in range(2):
-        dt = dt0 - (-geph.tau_n_s + geph.gamma_n * dt)
-    return -geph.tau_n_s + geph.gamma_n * dt
+        dt = dt0 - _clock_offset_s(geph, dt)
+    return _clock_offset_s(geph, dt)
 
 
 def glonass_position(geph: GlonassEphemeris, t: GpsTime) -> tuple[npt.NDArray[np.float64], float]:
@@ -128,7 +132,7 @@ def glonass_position(geph: GlonassEphemeris, t: GpsTime) -> tuple[npt.NDArray[np
     clock −τn + γn·(t − tb) without iteration; GLONASS broadcasts no relativistic term to add)."""
     x = glonass_state(geph, t)
     dt = t.diff_s(geph.toe)
-    return x[:3].copy(), -geph.tau_n_s + geph.gamma_n * dt
+    return x[:3].copy(), _clock_offset_s(geph, dt)
 
 
 def glonass_position_velocity(

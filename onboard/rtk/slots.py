@@ -20,7 +20,7 @@ from onboard.gnsstime import GpsTime
 from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, l1_wavelength_m
 from onboard.rtk.ephemeris import EphemerisStore, SatState, eph_clock_s, satellite_states_batch
 from onboard.rtk.glonass import glonass_clock_s
-from onboard.rtk.gnss import SYSTEMS_BY_LETTER
+from onboard.rtk.gnss import SYSTEMS_BY_LETTER, sat_id, system
 from onboard.rtk.navstore import BroadcastNavigation
 from onboard.rtk.types import FCN_NONE, GNSS_GLONASS, GNSS_GPS, GlonassEphemeris, ObsEpoch
 
@@ -60,17 +60,14 @@ class SlotLayout:
         """Slot of each (gnssId, svId) entry, −1 where the layout has none (another system, a number out of range)."""
         out = np.full(gnss_id.shape[0], -1, np.int64)
         for g, first in self.first_slot.items():
-            sysd = SYSTEMS_BY_LETTER[_LETTER[g]]
+            sysd = system(g)
             m = (gnss_id == g) & (sv_id >= sysd.sv_min) & (sv_id <= sysd.sv_max)
             out[m] = first + sv_id[m].astype(np.int64) - sysd.sv_min
         return out
 
     def letter(self, slot: int) -> str:
         """RINEX id of a slot ("G05", "R07")."""
-        return f"{_LETTER[int(self.gnss_id[slot])]}{int(self.sv_id[slot]):02d}"
-
-
-_LETTER = {s.gnss_id: s.letter for s in SYSTEMS_BY_LETTER.values()}
+        return sat_id(int(self.gnss_id[slot]), int(self.sv_id[slot]))
 
 
 @functools.lru_cache(maxsize=16)
