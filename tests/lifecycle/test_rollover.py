@@ -138,9 +138,15 @@ def test_real_time_rtk_starts_again_in_the_next_flight(tmp_path: Path) -> None:
         first = rtk.rtk
         spy.close("landed")
         wait_until(lambda: len(spy.calls) >= 3, 10, "roll-over")
-        assert rtk.rtk is not first and rtk.rtk.flight_dir is not None
+
+        def fresh_service_running() -> bool:
+            # the spy sees the new flight before the RTK feature (features run in order): wait for the latter
+            svc = rtk.rtk
+            return (svc is not first and svc.flight_dir is not None and bool(svc._threads)
+                    and all(t.is_alive() for t in svc._threads))
+
+        wait_until(fresh_service_running, 10, "the next flight's RTK service running")
         assert rtk.rtk.flight_dir.name == spy.calls[2][1][0]
-        assert all(t.is_alive() for t in rtk.rtk._threads)
     finally:
         assert rec.stop() == 0
     flights = sorted((tmp_path / "data").glob("flight-*"))
