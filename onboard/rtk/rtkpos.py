@@ -1114,13 +1114,18 @@ def _dd_pairs(st: RtkState, idx: npt.NDArray[np.int64], el: Arr) -> tuple[npt.ND
         ref = _reference_slot(idx, el)
         others = idx[idx != ref]
         return others, np.full(others.size, ref, np.int64)
-    g = st.layout.group[idx]
-    refs = np.empty_like(idx)
-    for gv in np.unique(g).tolist():
-        m = g == gv
-        refs[m] = _reference_slot(idx[m], el)
-    keep = idx != refs
-    return idx[keep], refs[keep]
+    # per group the first slot of highest elevation, as argmax picks it (a NaN first, as argmax's NaN): a pass
+    # over the few slots in Python costs less than a mask per group
+    slots, groups, els = idx.tolist(), st.layout.group[idx].tolist(), el[idx].tolist()
+    best: dict[int, tuple[float, int]] = {}
+    for s, gv, e in zip(slots, groups, els, strict=True):
+        b = best.get(gv)
+        if b is None or e > b[0] or (math.isnan(e) and not math.isnan(b[0])):
+            best[gv] = (e, s)
+    refs = [best[gv][1] for gv in groups]
+    pairs = [(s, r) for s, r in zip(slots, refs, strict=True) if s != r]
+    return (np.array([s for s, _ in pairs], np.int64).reshape(-1),
+            np.array([r for _, r in pairs], np.int64).reshape(-1))
 
 
 def _sd_terms(st: RtkState, ctx: EpochContext, x: Arr) -> tuple[Arr, Arr, Arr, tuple[Arr, Arr] | None]:
