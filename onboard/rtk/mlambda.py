@@ -133,10 +133,11 @@ def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list
             lam = dj1 * l10 / delta
             d[j] = eta * dj1
             d[j1] = delta
-            for c in range(j):
-                cc = cols[c]
-                a0, a1 = cc[j], cc[j1]
-                cc[j] = -l10 * a0 + a1
+            neg_l10 = -l10  # -l10 * a0 is (-l10) * a0
+            for cc in cols[:j]:
+                a0 = cc[j]
+                a1 = cc[j1]
+                cc[j] = neg_l10 * a0 + a1
                 cc[j1] = eta * a0 + lam * a1
             # rows > j + 1 of columns j and j + 1 swap with the lists; rows j, j + 1: 1, λ and 0, 1 (unit triangle)
             cj1 = cols[j1]
