@@ -120,8 +120,9 @@ class GlonassOrbits:
         self._last[key] = (dt, x)
         x1 = _rk4_step(x, dt_s, geph.acc_m_s2)
         c0, c1 = _clock_offset_s(geph, dt), _clock_offset_s(geph, dt + dt_s)
-        p0, p1 = np.array(x[:3]), np.array(x1[:3])
-        return p0, (p1 - p0) / dt_s, c0, (c1 - c0) / dt_s
+        # the velocity's forward difference on floats: numpy's element-wise (p1 − p0) / dt_s, without its calls
+        vel = np.array([(x1[0] - x[0]) / dt_s, (x1[1] - x[1]) / dt_s, (x1[2] - x[2]) / dt_s])
+        return np.array(x[:3]), vel, c0, (c1 - c0) / dt_s
 
 
 def glonass_clock_s(geph: GlonassEphemeris, t: GpsTime) -> float:
