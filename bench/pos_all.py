@@ -2,7 +2,9 @@
 
 `python bench/pos_all.py OUTDIR [--jobs 2]` runs `python -m onboard rtk` (as a user would) on the six datasets of
 `bench/bench_rtk.py` forward, plus backward and combined on the M8P walk and the lossy RTCM base, and the M8P base's
-raw RTCM3 stream as `--base`: ten runs, one `<name>.pos` each. Compare two folders with
+raw RTCM3 stream as `--base` (GPS only: eleven runs), then the same directions with each set's wider
+constellation sets (`Dataset.systems`: GPS+GLONASS on the three M8P sets, GPS+Galileo+QZSS on GEONET 3034:
+eight runs), one `<name>.pos` each. Compare two folders with
 `python bench/compare_pos.py BEFORE AFTER` (a refactoring must leave every file byte-identical: `cmp`).
 Needs `../shared/data`.
 """
@@ -20,7 +22,7 @@ from bench_rtk import DATASETS, M8P, PROJECT
 
 
 def runs() -> list[tuple[str, list[str]]]:
-    """(name, onboard rtk arguments without -o) for the ten runs."""
+    """(name, onboard rtk arguments without -o) for the nineteen runs (the GPS-only eleven first)."""
     out: list[tuple[str, list[str]]] = []
     for i, ds in enumerate(DATASETS):
         args = ["--rover", str(ds.rover), "--base", str(ds.base)]
@@ -35,6 +37,20 @@ def runs() -> list[tuple[str, list[str]]]:
     rover = M8P / "rinex/rover-20181004-1237.obs.gz"
     out.append(("rtcm3-stream", ["--rover", str(rover), "--base", str(M8P / "rtcm3/base-20181004-1236.rtcm3.gz"),
                                  "--nav", str(M8P / "rinex/rover-20181004-1237.nav.gz")]))
+    for i, ds in enumerate(DATASETS):
+        args = ["--rover", str(ds.rover), "--base", str(ds.base)]
+        for nav in ds.navs:
+            args += ["--nav", str(nav)]
+        if ds.base_pos:
+            args.append(f"--base-pos={ds.base_pos}")
+        for systems in ds.systems:
+            if systems == "G":
+                continue
+            sys_args = [*args, f"--systems={systems}"]
+            out.append((f"set{i}-{systems}-forward", sys_args))
+            if "walk" in ds.name or "lossy" in ds.name:
+                out.append((f"set{i}-{systems}-backward", [*sys_args, "--direction", "backward"]))
+                out.append((f"set{i}-{systems}-combined", [*sys_args, "--direction", "combined"]))
     return out
 
 

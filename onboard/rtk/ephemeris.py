@@ -124,43 +124,47 @@ def eph_position(eph: Ephemeris, t: GpsTime) -> tuple[npt.NDArray[np.float64], f
     satellites (PRN 1–5, 59–63) are rotated from their −5° inclined frame (B1I ICD 5.2.4.12). The frame is
     the system's (WGS 84, GTRF, CGCS2000: equal at the centimetre level). The clock bias includes the
     relativistic eccentricity term, not the group delay (apply −TGD for L1 C/A: l1_group_delay_s).
+    Scalar math (libm, as numpy's float64 loops here: the same numbers, measured to the bit): numpy's scalar
+    calls cost a microsecond each, and this runs twice per satellite and epoch beside GPS's batch.
     """
     k = KEPLER_GPS if eph.gnss_id == GNSS_GPS else kepler_constants(eph.gnss_id)
     mu, omega_e = k.mu_m3_s2, k.omega_e_rad_s
     toe_s = eph.toe_s if eph.gnss_id == GNSS_GPS else toe_system_tow_s(eph)
     tk = t.diff_s(eph.toe)
     a = eph.sqrt_a * eph.sqrt_a
-    n = np.sqrt(mu / (a * a * a)) + eph.delta_n_rad_s
+    n = math.sqrt(mu / (a * a * a)) + eph.delta_n_rad_s
     mk = eph.m0_rad + n * tk
     ek = mk
     for _ in range(30):
-        e_next = mk + eph.e * np.sin(ek)
+        e_next = mk + eph.e * math.sin(ek)
         if abs(e_next - ek) < 1e-14:
             ek = e_next
             break
         ek = e_next
-    sin_e, cos_e = np.sin(ek), np.cos(ek)
-    u = np.arctan2(np.sqrt(1.0 - eph.e * eph.e) * sin_e, cos_e - eph.e) + eph.omega_rad
+    sin_e, cos_e = math.sin(ek), math.cos(ek)
+    one_e2 = 1.0 - eph.e * eph.e
+    # NaN for a nonsensical e ≥ 1 as np.sqrt gave (math.sqrt would raise)
+    u = math.atan2((math.sqrt(one_e2) if one_e2 >= 0.0 else math.nan) * sin_e, cos_e - eph.e) + eph.omega_rad
     r = a * (1.0 - eph.e * cos_e)
     inc = eph.i0_rad + eph.idot_rad_s * tk
-    sin2u, cos2u = np.sin(2.0 * u), np.cos(2.0 * u)
+    sin2u, cos2u = math.sin(2.0 * u), math.cos(2.0 * u)
     u += eph.cus_rad * sin2u + eph.cuc_rad * cos2u
     r += eph.crs_m * sin2u + eph.crc_m * cos2u
     inc += eph.cis_rad * sin2u + eph.cic_rad * cos2u
-    x, y = r * np.cos(u), r * np.sin(u)
+    x, y = r * math.cos(u), r * math.sin(u)
     if eph.gnss_id == GNSS_BEIDOU and is_beidou_geo(eph.prn):
         # GEO: the node in inertial space (no −Ω̇e·tk), then the CGCS2000 rotation by Ω̇e·tk after the −5° tilt
         omega = eph.omega0_rad + eph.omega_dot_rad_s * tk - omega_e * toe_s
-        cos_o, sin_o, cos_i = np.cos(omega), np.sin(omega), np.cos(inc)
-        xg, yg, zg = x * cos_o - y * cos_i * sin_o, x * sin_o + y * cos_i * cos_o, y * np.sin(inc)
-        sin_r, cos_r = np.sin(omega_e * tk), np.cos(omega_e * tk)
+        cos_o, sin_o, cos_i = math.cos(omega), math.sin(omega), math.cos(inc)
+        xg, yg, zg = x * cos_o - y * cos_i * sin_o, x * sin_o + y * cos_i * cos_o, y * math.sin(inc)
+        sin_r, cos_r = math.sin(omega_e * tk), math.cos(omega_e * tk)
         pos = np.array([xg * cos_r + yg * sin_r * _COS_M5 + zg * sin_r * _SIN_M5,
                         -xg * sin_r + yg * cos_r * _COS_M5 + zg * cos_r * _SIN_M5,
                         -yg * _SIN_M5 + zg * _COS_M5])
     else:
         omega = eph.omega0_rad + (eph.omega_dot_rad_s - omega_e) * tk - omega_e * toe_s
-        cos_o, sin_o, cos_i = np.cos(omega), np.sin(omega), np.cos(inc)
-        pos = np.array([x * cos_o - y * cos_i * sin_o, x * sin_o + y * cos_i * cos_o, y * np.sin(inc)])
+        cos_o, sin_o, cos_i = math.cos(omega), math.sin(omega), math.cos(inc)
+        pos = np.array([x * cos_o - y * cos_i * sin_o, x * sin_o + y * cos_i * cos_o, y * math.sin(inc)])
     dts = eph_clock_s(eph, t) + k.f_rel_s_sqrt_m * eph.e * eph.sqrt_a * sin_e
     return pos, float(dts)
 

@@ -30,41 +30,48 @@ State = tuple[float, float, float, float, float, float]
 the arithmetic (30 RK4 steps for |t − tb| = 30 min)."""
 
 
-def _derivative(x: State, acc: tuple[float, float, float]) -> State:
-    """d/dt of the state in the rotating PZ-90 frame (m/s, m/s²)."""
-    x0, x1, x2, v0, v1, v2 = x
+_J2_TERM = 1.5 * J2_GLO * MU_GLO_M3_S2 * RE_GLO_M * RE_GLO_M
+"""3/2·J2·μ·ae² (m⁵/s²), evaluated left to right as the expression it replaces."""
+_OMG2 = OMEGA_E_GLO_RAD_S * OMEGA_E_GLO_RAD_S
+_2OMG = 2.0 * OMEGA_E_GLO_RAD_S
+
+
+def _acceleration(x0: float, x1: float, x2: float, v0: float, v1: float, v2: float,
+                  acc: tuple[float, float, float]) -> tuple[float, float, float]:
+    """Acceleration (m/s²) at position (x0, x1, x2) m and velocity (v0, v1, v2) m/s in the rotating PZ-90 frame:
+    the second half of the state's derivative (the first is the velocity itself)."""
     r2 = x0 * x0 + x1 * x1 + x2 * x2
     if r2 <= 0.0:
-        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        return (0.0, 0.0, 0.0)
     r3 = r2 * math.sqrt(r2)
-    omg = OMEGA_E_GLO_RAD_S
-    omg2 = omg * omg
-    a = 1.5 * J2_GLO * MU_GLO_M3_S2 * RE_GLO_M * RE_GLO_M / r2 / r3  # 3/2 J2 μ ae² / r⁵
+    a = _J2_TERM / r2 / r3  # 3/2 J2 μ ae² / r⁵
     b = 5.0 * x2 * x2 / r2
     c = -MU_GLO_M3_S2 / r3 - a * (1.0 - b)
-    return (v0, v1, v2,
-            (c + omg2) * x0 + 2.0 * omg * v1 + acc[0],
-            (c + omg2) * x1 - 2.0 * omg * v0 + acc[1],
+    return ((c + _OMG2) * x0 + _2OMG * v1 + acc[0],
+            (c + _OMG2) * x1 - _2OMG * v0 + acc[1],
             (c - 2.0 * a) * x2 + acc[2])
 
 
-def _step(x: State, k: State, h: float) -> State:
-    """x + k·h."""
-    return (x[0] + k[0] * h, x[1] + k[1] * h, x[2] + k[2] * h, x[3] + k[3] * h, x[4] + k[4] * h, x[5] + k[5] * h)
-
-
 def _rk4_step(x: State, h: float, acc: tuple[float, float, float]) -> State:
-    k1 = _derivative(x, acc)
-    k2 = _derivative(_step(x, k1, h / 2.0), acc)
-    k3 = _derivative(_step(x, k2, h / 2.0), acc)
-    k4 = _derivative(_step(x, k3, h), acc)
-    w = h / 6.0
-    return (x[0] + (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]) * w,
-            x[1] + (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]) * w,
-            x[2] + (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2]) * w,
-            x[3] + (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3]) * w,
-            x[4] + (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4]) * w,
-            x[5] + (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5]) * w)
+    """`x` carried over one Runge–Kutta step of `h` s. The four derivatives k1..k4 are (velocity, acceleration)
+    pairs: k1 = (v, a(x)), k2 = (w, b) at x + k1·h/2, k3 = (u, c) at x + k2·h/2, k4 = (t, d) at x + k3·h; the
+    components as scalars (tuples of six cost more in packing than the arithmetic)."""
+    x0, x1, x2, v0, v1, v2 = x
+    h2 = h / 2.0
+    a0, a1, a2 = _acceleration(x0, x1, x2, v0, v1, v2, acc)
+    w0, w1, w2 = v0 + a0 * h2, v1 + a1 * h2, v2 + a2 * h2
+    b0, b1, b2 = _acceleration(x0 + v0 * h2, x1 + v1 * h2, x2 + v2 * h2, w0, w1, w2, acc)
+    u0, u1, u2 = v0 + b0 * h2, v1 + b1 * h2, v2 + b2 * h2
+    c0, c1, c2 = _acceleration(x0 + w0 * h2, x1 + w1 * h2, x2 + w2 * h2, u0, u1, u2, acc)
+    t0, t1, t2 = v0 + c0 * h, v1 + c1 * h, v2 + c2 * h
+    d0, d1, d2 = _acceleration(x0 + u0 * h, x1 + u1 * h, x2 + u2 * h, t0, t1, t2, acc)
+    wt = h / 6.0
+    return (x0 + (v0 + 2.0 * w0 + 2.0 * u0 + t0) * wt,
+            x1 + (v1 + 2.0 * w1 + 2.0 * u1 + t1) * wt,
+            x2 + (v2 + 2.0 * w2 + 2.0 * u2 + t2) * wt,
+            v0 + (a0 + 2.0 * b0 + 2.0 * c0 + d0) * wt,
+            v1 + (a1 + 2.0 * b1 + 2.0 * c1 + d1) * wt,
+            v2 + (a2 + 2.0 * b2 + 2.0 * c2 + d2) * wt)
 
 
 def _clock_offset_s(geph: GlonassEphemeris, dt_s: float) -> float:
@@ -113,8 +120,9 @@ class GlonassOrbits:
         self._last[key] = (dt, x)
         x1 = _rk4_step(x, dt_s, geph.acc_m_s2)
         c0, c1 = _clock_offset_s(geph, dt), _clock_offset_s(geph, dt + dt_s)
-        p0, p1 = np.array(x[:3]), np.array(x1[:3])
-        return p0, (p1 - p0) / dt_s, c0, (c1 - c0) / dt_s
+        # the velocity's forward difference on floats: numpy's element-wise (p1 − p0) / dt_s, without its calls
+        vel = np.array([(x1[0] - x[0]) / dt_s, (x1[1] - x[1]) / dt_s, (x1[2] - x[2]) / dt_s])
+        return np.array(x[:3]), vel, c0, (c1 - c0) / dt_s
 
 
 def glonass_clock_s(geph: GlonassEphemeris, t: GpsTime) -> float:

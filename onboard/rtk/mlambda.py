@@ -89,7 +89,12 @@ def _unpack_columns(cols: list[int], n: int) -> Arr:
 
 
 def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list[float]], list[float], Arr]:
-    """reduction() on lists, in place on `lmat` and `d`; returns (L, D, Z).
+    """reduction() on lists, in place on `d`; returns (L, D, Z), L row-major as `lmat` (which it leaves alone).
+
+    L is worked on by columns (cols[c][r] = L[r][c]): a Gauss transform updates column j from column i, and a
+    permutation's swap of columns j and j + 1 below row j + 1 is a swap of two list items (their entries on rows
+    j and j + 1 are the triangle's known 1, 0 and the new λ); only the permutation's update of rows j and j + 1
+    runs across the columns. The same operations on the same numbers as RTKLIB's row-by-row code.
 
     Z is exact integer arithmetic whatever its representation: each column is one Python integer holding the
     column's entries as 64-bit digits (Σᵣ Z[r, c]·2^(64·r), negative entries borrowing from the next digit,
@@ -97,44 +102,51 @@ def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list
     (the six bench sets: 13 transforms per call, n = 6.6 on average) and a permutation swaps two list items.
 
     The integer Gauss transformation (RTKLIB gauss()) and the permutation (RTKLIB perm()) are inlined: on a
-    poorly determined float (M8P walk) the loop runs 37 times per call with 19 permutations."""
+    poorly determined float (M8P walk, GPS+GLONASS) the loop runs 150 times per call with 75 permutations."""
     n = len(d)
+    cols = [list(c) for c in zip(*lmat)]
     zc = [1 << (_DIGIT_BITS * c) for c in range(n)]
     j = n - 2
     k = n - 2
     while j >= 0:
+        cj = cols[j]
         if j <= k:
             for i in range(j + 1, n):
-                x = lmat[i][j]
+                x = cj[i]
                 # round(x) == 0 exactly for |x| ≤ ½ (round half to even): most entries, no round() call
                 if -0.5 <= x <= 0.5:
                     continue
                 mu = round(x)
-                lmat[i][j] = x - mu  # L[i][i] = 1 exactly: mu·1 = mu
+                cj[i] = x - mu  # L[i][i] = 1 exactly: mu·1 = mu
+                ci = cols[i]
                 for kk in range(i + 1, n):
-                    row = lmat[kk]
-                    row[j] -= mu * row[i]
+                    cj[kk] -= mu * ci[kk]
                 zc[j] -= mu * zc[i]
         j1 = j + 1
-        lj1 = lmat[j1]
-        l10 = lj1[j]
+        l10 = cj[j1]
         dj1 = d[j1]
-        delta = d[j] + l10 ** 2 * dj1
+        dj = d[j]
+        delta = dj + l10 ** 2 * dj1
         if delta + 1e-6 < dj1:
             # permute ambiguities j and j + 1 (RTKLIB perm()); Z by columns: a swap of two list items
-            lj = lmat[j]
-            eta = d[j] / delta
+            eta = dj / delta
             lam = dj1 * l10 / delta
             d[j] = eta * dj1
             d[j1] = delta
-            for c in range(j):
-                a0, a1 = lj[c], lj1[c]
-                lj[c] = -l10 * a0 + a1
-                lj1[c] = eta * a0 + lam * a1
-            lj1[j] = lam
-            for c in range(j1 + 1, n):
-                row = lmat[c]
-                row[j], row[j1] = row[j1], row[j]
+            neg_l10 = -l10  # -l10 * a0 is (-l10) * a0
+            for cc in cols[:j]:
+                a0 = cc[j]
+                a1 = cc[j1]
+                cc[j] = neg_l10 * a0 + a1
+                cc[j1] = eta * a0 + lam * a1
+            # rows > j + 1 of columns j and j + 1 swap with the lists; rows j, j + 1: 1, λ and 0, 1 (unit triangle)
+            cj1 = cols[j1]
+            cj1[j] = 1.0
+            cj1[j1] = lam
+            cj[j] = 0.0
+            cj[j1] = 1.0
+            cols[j] = cj1
+            cols[j1] = cj
             zc[j], zc[j1] = zc[j1], zc[j]
             # RTKLIB restarts at j = n − 2; the tests above j + 1 would repeat exactly (their d and L entries are
             # untouched by the permutation and by the transforms since, which only change columns ≤ j + 1):
@@ -143,7 +155,7 @@ def _reduction_lists(lmat: list[list[float]], d: list[float]) -> tuple[list[list
             j = j1 if j1 < n - 1 else n - 2
         else:
             j -= 1
-    return lmat, d, _unpack_columns(zc, n)
+    return [list(r) for r in zip(*cols)], d, _unpack_columns(zc, n)
 
 
 def search(lmat_a: Arr, d_a: Arr, zs_a: Arr, m: int = 2) -> tuple[Arr, Arr]:

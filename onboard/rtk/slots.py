@@ -120,11 +120,16 @@ def slot_arrays(layout: SlotLayout, epochs: list[ObsEpoch]) -> tuple[Arr, Arr, A
     shape = (len(epochs), layout.n)
     pr, cp, dop = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
     lli = np.zeros(shape, np.uint8)
-    for k, e in enumerate(epochs):
-        s = layout.slots_of(e.gnss_id, e.sv_id)
-        m = s >= 0
-        s = s[m]
-        pr[k, s], cp[k, s], dop[k, s], lli[k, s] = e.pr_m[m], e.cp_cyc[m], e.dop_hz[m], e.lli[m]
+    if not epochs:
+        return pr, cp, dop, lli
+    # every epoch's entries in one scatter (each epoch's in its own order, as one scatter per epoch)
+    s = layout.slots_of(np.concatenate([e.gnss_id for e in epochs]), np.concatenate([e.sv_id for e in epochs]))
+    m = s >= 0
+    at = (np.repeat(np.arange(len(epochs)), [len(e) for e in epochs])[m], s[m])
+    pr[at] = np.concatenate([e.pr_m for e in epochs])[m]
+    cp[at] = np.concatenate([e.cp_cyc for e in epochs])[m]
+    dop[at] = np.concatenate([e.dop_hz for e in epochs])[m]
+    lli[at] = np.concatenate([e.lli for e in epochs])[m]
     return pr, cp, dop, lli
 
 
