@@ -87,7 +87,7 @@ def run_seeds(seeds: list[int], only: list[str] | None = None, models: tuple[str
     print(f"hil_sim flights, seeds {seeds[0]}-{seeds[-1]} ({len(seeds)}){_sky(start_hour)}, directgeo onboard.rtk "
           f"forward, {sky}, 15 deg mask, fix-and-hold, max age 30 s")
     head = (f"{'scenario':30s} {'model':6s} {'air % min':>9s} {'median':>7s} {'mean':>6s} {'wrong':>6s}  "
-            "seeds with wrong fixes / first fix s (median)")
+            "seeds with wrong fixes / first fix s (median) (the seed of the min)")
     print(head)
     print("-" * len(head))
     for case, model in _runs(only, models):
@@ -98,8 +98,9 @@ def run_seeds(seeds: list[int], only: list[str] | None = None, models: tuple[str
         firsts = np.array([r["first fix s"] for r in runs.values()], float)
         first = float(np.median(firsts[np.isfinite(firsts)])) if np.isfinite(firsts).any() else float("nan")
         bad = ", ".join(f"s{k}: {v}" for k, v in wrong.items()) or "none"
+        worst = seeds[int(np.nanargmin(air))] if np.isfinite(air).any() else seeds[0]
         print(f"{case.name:30s} {model:6s} {np.nanmin(air):9.1f} {np.nanmedian(air):7.1f} {np.nanmean(air):6.1f} "
-              f"{sum(wrong.values()):6d}  {bad} / {first:.0f}", flush=True)
+              f"{sum(wrong.values()):6d}  {bad} / {first:.0f} (lowest: s{worst})", flush=True)
 
 
 def _seed_range(text: str) -> list[int]:
