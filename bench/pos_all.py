@@ -21,36 +21,38 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_rtk import DATASETS, M8P, PROJECT
 
 
+def _dataset_args(ds) -> list[str]:  # type: ignore[no-untyped-def]
+    """`onboard rtk` input arguments of a bench_rtk dataset."""
+    args = ["--rover", str(ds.rover), "--base", str(ds.base)]
+    for nav in ds.navs:
+        args += ["--nav", str(nav)]
+    if ds.base_pos:
+        args.append(f"--base-pos={ds.base_pos}")
+    return args
+
+
+def _directions(name: str, args: list[str], both_ways: bool) -> list[tuple[str, list[str]]]:
+    """The forward run, and backward and combined when `both_ways`."""
+    out = [(f"{name}-forward", args)]
+    if both_ways:
+        out += [(f"{name}-backward", [*args, "--direction", "backward"]),
+                (f"{name}-combined", [*args, "--direction", "combined"])]
+    return out
+
+
 def runs() -> list[tuple[str, list[str]]]:
     """(name, onboard rtk arguments without -o) for the nineteen runs (the GPS-only eleven first)."""
     out: list[tuple[str, list[str]]] = []
     for i, ds in enumerate(DATASETS):
-        args = ["--rover", str(ds.rover), "--base", str(ds.base)]
-        for nav in ds.navs:
-            args += ["--nav", str(nav)]
-        if ds.base_pos:
-            args.append(f"--base-pos={ds.base_pos}")
-        out.append((f"set{i}-forward", args))
-        if "walk" in ds.name or "lossy" in ds.name:
-            out.append((f"set{i}-backward", [*args, "--direction", "backward"]))
-            out.append((f"set{i}-combined", [*args, "--direction", "combined"]))
+        out += _directions(f"set{i}", _dataset_args(ds), "walk" in ds.name or "lossy" in ds.name)
     rover = M8P / "rinex/rover-20181004-1237.obs.gz"
     out.append(("rtcm3-stream", ["--rover", str(rover), "--base", str(M8P / "rtcm3/base-20181004-1236.rtcm3.gz"),
                                  "--nav", str(M8P / "rinex/rover-20181004-1237.nav.gz")]))
     for i, ds in enumerate(DATASETS):
-        args = ["--rover", str(ds.rover), "--base", str(ds.base)]
-        for nav in ds.navs:
-            args += ["--nav", str(nav)]
-        if ds.base_pos:
-            args.append(f"--base-pos={ds.base_pos}")
         for systems in ds.systems:
-            if systems == "G":
-                continue
-            sys_args = [*args, f"--systems={systems}"]
-            out.append((f"set{i}-{systems}-forward", sys_args))
-            if "walk" in ds.name or "lossy" in ds.name:
-                out.append((f"set{i}-{systems}-backward", [*sys_args, "--direction", "backward"]))
-                out.append((f"set{i}-{systems}-combined", [*sys_args, "--direction", "combined"]))
+            if systems != "G":
+                out += _directions(f"set{i}-{systems}", [*_dataset_args(ds), f"--systems={systems}"],
+                                   "walk" in ds.name or "lossy" in ds.name)
     return out
 
 
