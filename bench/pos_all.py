@@ -18,10 +18,10 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_rtk import DATASETS, M8P, PROJECT
+from bench_rtk import DATASETS, M8P, PROJECT, Dataset
 
 
-def _dataset_args(ds) -> list[str]:  # type: ignore[no-untyped-def]
+def _dataset_args(ds: Dataset) -> list[str]:
     """`onboard rtk` input arguments of a bench_rtk dataset."""
     args = ["--rover", str(ds.rover), "--base", str(ds.base)]
     for nav in ds.navs:
