@@ -70,6 +70,13 @@ class RtkOptions:
     its residuals must still fit). Why: after a hold is released the float of a static rover is known to
     millimetres yet off by the centimetre multipath the hold kept out, and rejects the validated integers until
     they settle (M8P static with the RAWX base, GPS+GLONASS: 86 s unfixed)."""
+    confirm_across_set_changes: bool = True
+    """A first-fix candidate keeps its confirmation (first win, consecutive wins, settled fraction) when the next
+    winning set differs only by satellites joining, leaving or a new reference, its integers equal the
+    candidate's on every satellite both hold (at least min_fix_sats; up to one constant per constellation, the
+    reference). Why: under trees satellites come and go every few seconds, and a confirmation that restarts
+    with each of them never reaches its span while the same integers keep winning (M8P walk, GPS+GLONASS:
+    runs of 36 epochs at most, first fix 400 s; with it, 162 s)."""
     full_set_confirm_epochs: int = 2
     """A first fix on the full candidate set (no satellite dropped by partial AR) needs the same integer set
     winning the ratio test at this many consecutive epochs instead of over confirm_fix_span_s (and, below
@@ -193,6 +200,20 @@ class RtkOptions:
     every satellite; a quiet epoch shows a smaller slip."""
     slip_threshold_min_cyc: float = 0.5
     """Floor of that adaptive threshold (cycles): half a cycle, the smallest jump a receiver makes."""
+    tdcp_slip_test: bool = True
+    """While a fix is held, the rover's slips are judged by its time-differenced phase (onboard.rtk.tdcp_slips:
+    the displacement and clock fitted to every satellite's phase change, a slipped satellite left as a residual)
+    instead of the Doppler prediction, wherever six satellites the Doppler test clears, or more, decide it (its
+    suspects are judged against their fit); LLI always counts. Why: the Doppler, read once per epoch, misses the
+    antenna motion between epochs (a walker's steps, a drone's vibration and turns) by decimetres, and a burst
+    of its false slips leaves the hold on a few satellites whose fixed position is 10-20 cm off (M8P walk under
+    trees, GPS+GLONASS). Not before a fix: there its false alarms only restart floats that correlated code has
+    misled, and clearing them or adding the small slips it misses exposed wrong first fixes of small full sets
+    (docs/rtk-defaults.md)."""
+    tdcp_slip_threshold_cyc: float = 0.35
+    """Deletion residual (cycles) beyond which the time-differenced phase test declares a slip: above the
+    phase noise and multipath change of one epoch (99th percentile 0.17 cycle on the M8P static set, 0.88 under
+    trees with the real slips), below the half cycle of the smallest receiver jump."""
     outlier_gate_sigma: float = 6.0
     """Innovation gate of the float update (innovation σ from H·P·Hᵀ + R): a row beyond it is an outlier, the
     worst one is removed and the update re-run."""
@@ -282,6 +303,9 @@ TOML_KEYS: dict[str, tuple[str, Any]] = {
     "max_outage_epochs": ("max_outage_epochs", int),
     "static_start": ("static_start", bool),
     "takeoff_speed_m_s": ("takeoff_speed_m_s", float),
+    "tdcp_slip_test": ("tdcp_slip_test", bool),
+    "tdcp_slip_threshold_cyc": ("tdcp_slip_threshold_cyc", float),
+    "confirm_across_set_changes": ("confirm_across_set_changes", bool),
     "standstill": ("standstill", bool),
     "standstill_window_s": ("standstill_window_s", float),
     "standstill_min_s": ("standstill_min_s", float),

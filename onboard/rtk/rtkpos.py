@@ -47,6 +47,8 @@ from onboard.rtk.slots import (
     wavelengths,
 )
 from onboard.rtk.standstill import StandstillMonitor
+from onboard.rtk.tdcp_slips import MIN_SATS as TDCP_MIN_SATS
+from onboard.rtk.tdcp_slips import tdcp_slips
 from onboard.rtk.types import LLI_HALF_CYCLE, LLI_SLIP, Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, ObsEpoch, Solution
 
 log = logging.getLogger(__name__)
@@ -173,6 +175,9 @@ class PendingFix(NamedTuple):
     settled_fraction: float
     """How far it has settled: wins weighted by time over settled_fix_span_s (static) or settled_fix_span_moving_s
     (moving); 1 = settled."""
+    slot_ints: Arr
+    """Its integers per slot (_slot_integers): how a set with a satellite more or less is told the same
+    (RtkOptions.confirm_across_set_changes)."""
 
 
 _NO_F: Arr = np.zeros(0)
@@ -298,6 +303,13 @@ class RtkState:
     prev_cp_r: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
     prev_dop_r: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
     prev_time_r: GpsTime | None = None
+    prev_sat_pos_r: Arr = field(default_factory=lambda: np.zeros((NSAT, 3)))
+    """Per slot, its satellite's ECEF position (m) at the rover epoch of prev_cp_r (the time-differenced phase
+    test's other end)."""
+    prev_sat_clk_r: Arr = field(default_factory=lambda: np.zeros(NSAT))
+    """Per slot, its satellite's clock bias (s) then."""
+    prev_sat_ok_r: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
+    """Per slot, whether an ephemeris gave that position and clock."""
     prev_phase_r: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(NSAT, bool))
     """Slots with rover phase at the previous rover epoch (a gap without a Doppler bridge is a slip)."""
     last_t_r_ns: npt.NDArray[np.int64] = field(default_factory=lambda: np.full(NSAT, _NO_TIME_NS, np.int64))
@@ -361,9 +373,11 @@ def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkStat
         st.layout, st.ns, st.nxi = layout, n, NX0 + n
         st.x, st.p = np.zeros(NX0 + n), np.zeros((NX0 + n, NX0 + n))
         for name in ("lock", "outage", "half_cycle", "prev_cp_r", "prev_dop_r", "prev_phase_r", "last_t_r_ns",
-                     "prev_zb", "held_prns", "known_amb", "validated_int", "pending_slip"):
+                     "prev_zb", "held_prns", "known_amb", "validated_int", "pending_slip", "prev_sat_clk_r",
+                     "prev_sat_ok_r"):
             old = getattr(st, name)
             setattr(st, name, np.full(n, old[0], old.dtype))
+        st.prev_sat_pos_r = np.zeros((n, 3))
         st.code_scatter = CodeScatter(mean_m=np.full(n, np.nan), count=np.zeros(n))
     st.static = options.static_start
     st.init_pos_ecef_m = None if init_pos_ecef_m is None else np.asarray(init_pos_ecef_m, float)
@@ -759,7 +773,13 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
                     spread = MAD_TO_SIGMA * median_of_few(np.abs(d[clean]))
                     thr_cyc = min(thr_cyc, max(o.slip_threshold_min_cyc, o.slip_outlier_factor * spread))
                 thr = thr_cyc * np.maximum(1.0, np.abs(dt_all))  # NaN (never seen) only where not ok
-                slip |= ok & (np.abs(d) > thr)
+                by_doppler = ok & (np.abs(d) > thr)
+                if held and o.tdcp_slip_test:
+                    # where the phase itself decides (six satellites the Doppler clears, or more), the Doppler's
+                    # motion-blind verdict gives way: its suspects are judged against the others' fit
+                    tested, by_phase = _tdcp_slips(st, rov, t_r, common & ~slip, by_doppler)
+                    by_doppler = np.where(tested, by_phase, by_doppler)
+                slip |= by_doppler
                 bridged = ok
         # a phase gap the Doppler could not bridge: receivers do not always flag a loss of lock inside the
         # gap (the Septentrio rover of GEONET 3034 comes back a whole cycle off with LLI 0), so the continuity
@@ -853,11 +873,42 @@ def _correction_rate(o: RtkOptions, hist: list[tuple[GpsTime, Arr]], base_cp_cyc
     return ok, slope
 
 
+def _tdcp_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, usable: npt.NDArray[np.bool_],
+                suspects: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
+    """(slots the time-differenced phase test judged, their slip flags): the phase change since the previous
+    rover epoch of each `usable` slot seen there, against its satellite's motion and clock from the ephemeris
+    (onboard.rtk.tdcp_slips; `suspects` judged against the others' fit). Nothing judged when the test cannot
+    decide."""
+    none = np.zeros(st.ns, bool)
+    prev = st.prev_time_r
+    if prev is None or abs(t_r.diff_s(prev)) > SLIP_TEST_MAX_GAP_S:
+        return none, none
+    k = usable & (st.last_t_r_ns == prev.total_ns) & rov.sats.ok & st.prev_sat_ok_r & np.isfinite(rov.cp_cyc)
+    if np.count_nonzero(k) < TDCP_MIN_SATS:
+        return none, none
+    # both epochs' ranges from one receiver position: the receiver's displacement is one of the unknowns
+    pos = st.x[:3]
+    r_now, los = _geometry(rov, pos)
+    j = k.nonzero()[0]
+    y = np.full(st.ns, np.nan)
+    r_prev = geometric_range(st.prev_sat_pos_r[j], pos)[0]
+    y[j] = rov.lam[j] * (rov.cp_cyc[j] - st.prev_cp_r[j]) - (r_now[j] - r_prev) \
+        + CLIGHT_M_S * (rov.sats.clock_s[j] - st.prev_sat_clk_r[j])
+    flags = tdcp_slips(y, los, rov.lam, k, st.options.tdcp_slip_threshold_cyc, suspects)
+    if flags is None:
+        return none, none
+    return k, flags
+
+
 def _remember_rover(st: RtkState, rov: _Receiver, t_r: GpsTime) -> None:
-    """Keep this rover epoch's phase/Doppler for the next epoch's slip tests."""
+    """Keep this rover epoch's phase/Doppler (and the satellites' positions and clocks, for the time-differenced
+    phase test) for the next epoch's slip tests."""
     have = np.isfinite(rov.cp_cyc) & np.isfinite(rov.dop_hz)
     st.prev_cp_r[have] = rov.cp_cyc[have]
     st.prev_dop_r[have] = rov.dop_hz[have]
+    st.prev_sat_pos_r[have] = rov.sats.pos_m[have]
+    st.prev_sat_clk_r[have] = rov.sats.clock_s[have]
+    st.prev_sat_ok_r[have] = rov.sats.ok[have]
     st.last_t_r_ns[have] = t_r.total_ns
     st.prev_time_r = t_r
     st.prev_phase_r = np.isfinite(rov.cp_cyc)
@@ -1471,13 +1522,17 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
             seen_candidate = True
             full = _drop == 0
             key = (ref_key, tuple(others.tolist()), tuple(np.rint(res.fixed[:, 0]).astype(int).tolist()))
-            if st.pending_fix is None or st.pending_fix.key != key:
-                st.pending_fix = PendingFix(key, t, 0, t, 0.0)
-            _, since, wins, last, progress = st.pending_fix
+            slot_ints = _slot_integers(ref, others, res.fixed[:, 0], st.ns)
+            pf = st.pending_fix
+            # the same integers with a satellite more or less, or another reference, go on confirming
+            if pf is None or (pf.key != key and not (o.confirm_across_set_changes and _same_integers(
+                    pf.slot_ints, slot_ints, o.min_fix_sats, _groups(st)))):
+                pf = PendingFix(key, t, 0, t, 0.0, slot_ints)
+            _, since, wins, last, progress, _ = pf
             if o.settled_fix_span_s > 0:
                 # the code multipath the float leans on decorrelates within seconds once the rover moves
                 progress += abs(t.diff_s(last)) / (o.settled_fix_span_moving_s if ctx.moving else o.settled_fix_span_s)
-            st.pending_fix = PendingFix(key, since, wins + 1, t, progress)
+            st.pending_fix = PendingFix(key, since, wins + 1, t, progress, slot_ints)
             span = abs(t.diff_s(since))
             settled = o.settled_fix_span_s > 0 and progress >= 1.0 - 1e-9
             # correlated code multipath biases the float for about its correlation time: clean code waits less

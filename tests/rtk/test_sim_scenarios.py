@@ -244,7 +244,8 @@ def test_a_one_cycle_rover_slip_under_a_held_fix_is_caught_by_the_doppler() -> N
 @pytest.mark.slow
 def test_a_slip_the_hold_absorbed_is_excluded_not_an_innocent_satellite() -> None:
     # seed 15, undetected slips 2/h: rover PRN 17 slips -1 cycle (no LLI) at 317.3 s in a manoeuvre. With the
-    # fixed Doppler threshold alone (slip_outlier_factor = 0) the test sees 0.83 < 0.85 cycle and, a
+    # fixed Doppler threshold alone (slip_outlier_factor = 0, no time-differenced phase test) the test sees
+    # 0.83 < 0.85 cycle and, a
     # high-leverage satellite, it pulls the held position 22 cm for two epochs without any residual failing. At
     # 320 s PRN 22 misfits; leaving out PRN 22 fits the pulled position, but leaving out PRN 17 fits better
     # (smaller post-fit χ²). Taking the lone suspect held the wrong set for the rest of the flight (281 wrong
@@ -255,11 +256,15 @@ def test_a_slip_the_hold_absorbed_is_excluded_not_an_innocent_satellite() -> Non
     from onboard.rtk.options import RtkOptions
 
     case = SimCase("test", "", duration_s=600.0, undetected_slips_per_h=2.0, seed=15)
-    r = evaluate(case, "m8t", replace(RtkOptions(), slip_outlier_factor=0.0))
+    r = evaluate(case, "m8t", replace(RtkOptions(), slip_outlier_factor=0.0, tdcp_slip_test=False))
     wrong = np.flatnonzero((r["q"] == Q_FIX) & (r["err_m"] > 0.10))
     assert wrong.tolist() == [318, 319]
     assert r["air fix %"] >= 99.0
-    # the Doppler test against the other satellites' spread at that epoch catches the slip itself
+    # the Doppler test against the other satellites' spread at that epoch catches the slip itself, and so does
+    # the time-differenced phase, each without the other
+    for options in (replace(RtkOptions(), tdcp_slip_test=False), replace(RtkOptions(), slip_outlier_factor=0.0)):
+        r = evaluate(case, "m8t", options)
+        assert r["wrong"] == 0 and r["air fix %"] >= 99.0
     r = evaluate(case, "m8t")
     assert r["wrong"] == 0 and r["air fix %"] >= 99.0
 
