@@ -1524,10 +1524,13 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
             key = (ref_key, tuple(others.tolist()), tuple(np.rint(res.fixed[:, 0]).astype(int).tolist()))
             slot_ints = _slot_integers(ref, others, res.fixed[:, 0], st.ns)
             pf = st.pending_fix
-            # the same integers with a satellite more or less, or another reference, go on confirming
             if pf is None or (pf.key != key and not (o.confirm_across_set_changes and _same_integers(
                     pf.slot_ints, slot_ints, o.min_fix_sats, _groups(st)))):
                 pf = PendingFix(key, t, 0, t, 0.0, slot_ints)
+            elif pf.key != key:
+                # the same integers with a satellite more or less, or another reference: its time spans go on,
+                # its count of consecutive wins (full_set_confirm_epochs: of one and the same set) starts again
+                pf = pf._replace(wins=0)
             _, since, wins, last, progress, _ = pf
             if o.settled_fix_span_s > 0:
                 # the code multipath the float leans on decorrelates within seconds once the rover moves
