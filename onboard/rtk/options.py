@@ -74,9 +74,10 @@ class RtkOptions:
     """A first-fix candidate keeps its confirmation spans (first win, settled fraction; not its count of
     consecutive wins, which full_set_confirm_epochs reads of one and the same set) when the next winning set
     differs only by satellites joining, leaving or a new reference, its integers equal the candidate's on every
-    satellite both hold (at least min_fix_sats; up to one constant per constellation, the reference). Why: under trees satellites come and go every few seconds, and a confirmation that restarts
-    with each of them never reaches its span while the same integers keep winning (M8P walk, GPS+GLONASS:
-    runs of 36 epochs at most, first fix 400 s; with it, 162 s)."""
+    satellite both hold (at least min_fix_sats; up to one constant per constellation, the reference). Why:
+    under trees satellites come and go every few seconds, and a confirmation that restarts with each of them
+    never reaches its span while the same integers keep winning (M8P walk, GPS+GLONASS: runs of 36 epochs at
+    most, first fix 400 s; with it, 162 s)."""
     full_set_confirm_epochs: int = 2
     """A first fix on the full candidate set (no satellite dropped by partial AR) needs the same integer set
     winning the ratio test at this many consecutive epochs instead of over confirm_fix_span_s (and, below
