@@ -777,8 +777,16 @@ def _rover_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, common: npt.NDArray
                 if held and o.tdcp_slip_test:
                     # where the phase itself decides (six satellites the Doppler clears, or more), the Doppler's
                     # motion-blind verdict gives way: its suspects are judged against the others' fit
-                    tested, by_phase = _tdcp_slips(st, rov, t_r, common & ~slip, by_doppler)
+                    tested, by_phase = _tdcp_slips(st, rov, t_r, common & ~slip, by_doppler,
+                                                   o.tdcp_slip_threshold_cyc)
                     by_doppler = np.where(tested, by_phase, by_doppler)
+                elif not held and o.tdcp_float_slip_threshold_cyc > 0:
+                    # before a fix the phase test only adds the whole-cycle slips under the Doppler's threshold
+                    # (a float that absorbs one fits no integer set for minutes); the Doppler's false alarms
+                    # stay, since clearing them exposed wrong first fixes (docs/rtk-defaults.md)
+                    tested, by_phase = _tdcp_slips(st, rov, t_r, common & ~slip, by_doppler,
+                                                   o.tdcp_float_slip_threshold_cyc)
+                    by_doppler |= tested & by_phase
                 slip |= by_doppler
                 bridged = ok
         # a phase gap the Doppler could not bridge: receivers do not always flag a loss of lock inside the
@@ -874,7 +882,8 @@ def _correction_rate(o: RtkOptions, hist: list[tuple[GpsTime, Arr]], base_cp_cyc
 
 
 def _tdcp_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, usable: npt.NDArray[np.bool_],
-                suspects: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
+                suspects: npt.NDArray[np.bool_], threshold_cyc: float
+                ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
     """(slots the time-differenced phase test judged, their slip flags): the phase change since the previous
     rover epoch of each `usable` slot seen there, against its satellite's motion and clock from the ephemeris
     (onboard.rtk.tdcp_slips; `suspects` judged against the others' fit). Nothing judged when the test cannot
@@ -894,7 +903,7 @@ def _tdcp_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, usable: npt.NDArray[
     r_prev = geometric_range(st.prev_sat_pos_r[j], pos)[0]
     y[j] = rov.lam[j] * (rov.cp_cyc[j] - st.prev_cp_r[j]) - (r_now[j] - r_prev) \
         + CLIGHT_M_S * (rov.sats.clock_s[j] - st.prev_sat_clk_r[j])
-    flags = tdcp_slips(y, los, rov.lam, k, st.options.tdcp_slip_threshold_cyc, suspects)
+    flags = tdcp_slips(y, los, rov.lam, k, threshold_cyc, suspects)
     if flags is None:
         return none, none
     return k, flags
