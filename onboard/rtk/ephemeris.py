@@ -2,14 +2,14 @@
 Galileo, BeiDou and QZSS too, with their constants: eph_position).
 
 Follows IS-GPS-200 20.3.3.4.3, the Galileo OS SIS ICD 5.1.1, the BeiDou B1I ICD 5.2.4 and RTKLIB ephemeris.c
-eph2pos()/eph2clk()/satposs() (read to check constants). The batched engine path (satellite_states*) and
-EphemerisStore are GPS only today.
+eph2pos()/eph2clk()/satposs() (read to check constants). EphemerisStore holds GPS; the batched evaluation
+(table_states over an EphTable) serves it and the other Keplerian systems of onboard.rtk.navstore alike.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -212,7 +212,7 @@ class EphemerisStore:
     def __init__(self, ephemerides: Iterable[Ephemeris] = ()) -> None:
         self._by_prn: dict[int, list[Ephemeris]] = {}
         self._toe_ns: dict[int, list[int]] = {}  # toe (ns since the GPS epoch) of each _by_prn entry
-        self._table: _EphTable | None = None
+        self._table: EphTable | None = None
         for eph in ephemerides:
             self.add(eph)
 
@@ -261,11 +261,11 @@ class EphemerisStore:
         """Every held ephemeris, by PRN then toe."""
         return [e for prn in sorted(self._by_prn) for e in self._by_prn[prn]]
 
-    def table(self) -> _EphTable:
+    def table(self) -> EphTable:
         """Every held ephemeris as parameter arrays for the batched evaluation (rebuilt after add())."""
         table = getattr(self, "_table", None)  # a store unpickled from an older version has none
         if table is None:
-            table = self._table = _EphTable.of(self._by_prn)
+            table = self._table = EphTable.of(self._by_prn)
         return table
 
 
@@ -274,16 +274,18 @@ _EPH_FIELDS = ("sqrt_a", "e", "i0_rad", "omega0_rad", "omega_rad", "m0_rad", "de
                "af2_s_s2", "tgd_s")
 
 
-def _batch_position(p: npt.NDArray[np.float64], tk: npt.NDArray[np.float64],
-                    toe_s: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """eph_position() for many ephemerides at once (rows of `p` in _EPH_FIELDS order): ECEF positions (n,3)
-    and the relativistic clock term (n,) (s)."""
+def _batch_position(p: npt.NDArray[np.float64], tk: npt.NDArray[np.float64], toe_s: npt.NDArray[np.float64],
+                    k: _ColumnConstants, iterations: int = 12
+                    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """eph_position() for many ephemerides at once (rows of `p` in _EPH_FIELDS order, `k` their systems'
+    constants per column): ECEF positions (n,3) and the relativistic clock term (n,) (s). `iterations` of the
+    fixed-point Kepler equation: the error shrinks by e per step (GPS e < 0.03: 12 give < 1e-18)."""
     (sqrt_a, ecc, i0, omega0, omega_arg, m0, dn, omega_dot, idot, cuc, cus, crc, crs, cic, cis) = p[:15]
     a = sqrt_a * sqrt_a
-    n = np.sqrt(MU_GPS_M3_S2 / (a * a * a)) + dn
+    n = np.sqrt(k.mu / (a * a * a)) + dn
     mk = m0 + n * tk
     ek = mk.copy()
-    for _ in range(12):  # fixed-point Kepler: error shrinks by e (< 0.03) per step, e¹² < 1e-18
+    for _ in range(iterations):
         ek = mk + ecc * np.sin(ek)
     sin_e, cos_e = np.sin(ek), np.cos(ek)
     u = np.arctan2(np.sqrt(1.0 - ecc * ecc) * sin_e, cos_e - ecc) + omega_arg
@@ -294,64 +296,129 @@ def _batch_position(p: npt.NDArray[np.float64], tk: npt.NDArray[np.float64],
     r = r + crs * sin2u + crc * cos2u
     inc = inc + cis * sin2u + cic * cos2u
     x, y = r * np.cos(u), r * np.sin(u)
-    omega = omega0 + (omega_dot - OMEGA_E_RAD_S) * tk - OMEGA_E_RAD_S * toe_s
+    omega_e = k.omega_e
+    omega = omega0 + (omega_dot - omega_e) * tk - omega_e * toe_s
     cos_o, sin_o, cos_i = np.cos(omega), np.sin(omega), np.cos(inc)
     pos = np.stack([x * cos_o - y * cos_i * sin_o, x * sin_o + y * cos_i * cos_o, y * np.sin(inc)], axis=1)
-    return pos, F_REL_S_SQRT_M * ecc * sqrt_a * sin_e
+    if k.geo is not None and k.geo.any():
+        # BeiDou GEO (eph_position): the node in inertial space, then the CGCS2000 rotation after the −5° tilt
+        g = k.geo
+        om_e, tkg = np.broadcast_to(omega_e, tk.shape)[g], tk[g]
+        omg = omega0[g] + omega_dot[g] * tkg - om_e * toe_s[g]
+        cos_o, sin_o, cos_i, sin_i = np.cos(omg), np.sin(omg), np.cos(inc[g]), np.sin(inc[g])
+        xk, yk = x[g], y[g]
+        xg, yg, zg = xk * cos_o - yk * cos_i * sin_o, xk * sin_o + yk * cos_i * cos_o, yk * sin_i
+        sin_r, cos_r = np.sin(om_e * tkg), np.cos(om_e * tkg)
+        pos[g] = np.stack([xg * cos_r + yg * sin_r * _COS_M5 + zg * sin_r * _SIN_M5,
+                           -xg * sin_r + yg * cos_r * _COS_M5 + zg * cos_r * _SIN_M5,
+                           -yg * _SIN_M5 + zg * _COS_M5], axis=1)
+    return pos, k.f_rel * ecc * sqrt_a * sin_e
+
+
+@dataclass(frozen=True)
+class _ColumnConstants:
+    """Kepler constants per table column (arrays (N,), or scalars for a one-system table): `mu`, `omega_e`,
+    `f_rel` as KeplerConstants; `geo` the BeiDou GEO columns (None: none)."""
+
+    mu: npt.NDArray[np.float64] | float
+    omega_e: npt.NDArray[np.float64] | float
+    f_rel: npt.NDArray[np.float64] | float
+    geo: npt.NDArray[np.bool_] | None = None
+
+    def take(self, c: npt.NDArray[np.int64]) -> _ColumnConstants:
+        """The constants of columns `c` (twice over for the two points of a forward difference: see callers)."""
+        def pick(v: npt.NDArray[np.float64] | float) -> npt.NDArray[np.float64] | float:
+            return v[c] if isinstance(v, np.ndarray) else v
+        return _ColumnConstants(pick(self.mu), pick(self.omega_e), pick(self.f_rel),
+                                None if self.geo is None else self.geo[c])
 
 
 @dataclass
-class _EphTable:
-    """A store's ephemerides as columns: `params` (19, N) parameter rows in _EPH_FIELDS order, `toe_s` (N,) toe
-    seconds of week, `toe_ns`/`toc_ns` (N,) toe/toc in ns since the GPS epoch, `ura_var_m2` (N,), `healthy`
-    (N,); per PRN p (0 = none), `by_prn_col[p]` its columns by toe as EphemerisStore keeps them, padded with −1,
-    and `by_prn_toe_ns[p]` their toe, padded with a time no epoch comes near."""
+class EphTable:
+    """Keplerian ephemerides as columns for the batched evaluation: `params` (19, N) parameter rows in
+    _EPH_FIELDS order (the last: the group delay the L1-band user subtracts), `toe_s` (N,) toe seconds of week
+    of the ephemeris's own time system, `toe_ns`/`toc_ns` (N,) toe/toc in ns since the GPS epoch, `var_m2` (N,)
+    the accuracy index's variance, `healthy` (N,), `consts` the Kepler constants per column; per satellite row
+    r (0 = none; a PRN for GPS), `by_prn_col[r]` its columns by toe, padded with −1, `by_prn_toe_ns[r]` their
+    toe, padded with a time no epoch comes near, and `max_age_s[r]` the largest |t − toe| its system uses."""
 
     params: npt.NDArray[np.float64]
     toe_s: npt.NDArray[np.float64]
     toe_ns: npt.NDArray[np.int64]
     toc_ns: npt.NDArray[np.int64]
-    ura_var_m2: npt.NDArray[np.float64]
+    var_m2: npt.NDArray[np.float64]
     healthy: npt.NDArray[np.bool_]
+    consts: _ColumnConstants
     by_prn_col: npt.NDArray[np.int64]
     by_prn_toe_ns: npt.NDArray[np.int64]
+    max_age_s: npt.NDArray[np.float64]
+    kepler_iterations: int = 12
 
     @staticmethod
-    def of(by_prn: dict[int, list[Ephemeris]]) -> _EphTable:
+    def of(by_row: dict[int, list[Ephemeris]], max_age_s: dict[int, float] | None = None,
+           healthy_if: Callable[[Ephemeris], bool] | None = None, sigma_m: Callable[[Ephemeris], float] | None = None
+           ) -> EphTable:
+        """The table of ephemerides by satellite row (each list by toe). GPS PRNs as rows (EphemerisStore): the
+        GPS constants, URA, health 0, TGD, MAX_EPH_AGE_S. Otherwise (`max_age_s` per row given: any Keplerian
+        system) each column's system's constants, the L1-band group delay, `healthy_if` and `sigma_m` of each
+        ephemeris (onboard.rtk.navstore's), and the Kepler equation iterated until it converges for the QZSS
+        IGSO orbits' e ≈ 0.08 too (20 steps)."""
+        gps = max_age_s is None
         ephs: list[Ephemeris] = []
-        width = max((len(v) for v in by_prn.values()), default=0) or 1
-        top = max(max(by_prn, default=0), 32) + 1
+        width = max((len(v) for v in by_row.values()), default=0) or 1
+        top = max(max(by_row, default=0), 32) + 1
         cols = np.full((top, width), -1, np.int64)
         toes = np.full((top, width), _FAR_NS, np.int64)
-        for prn in sorted(by_prn):
-            k = len(by_prn[prn])
-            cols[prn, :k] = np.arange(len(ephs), len(ephs) + k)
-            toes[prn, :k] = [e.toe.total_ns for e in by_prn[prn]]
-            ephs.extend(by_prn[prn])
-        return _EphTable(np.array([[getattr(e, f) for e in ephs] for f in _EPH_FIELDS]).reshape(len(_EPH_FIELDS), -1),
-                         np.array([e.toe_s for e in ephs], float), np.array([e.toe.total_ns for e in ephs], np.int64),
-                         np.array([e.toc.total_ns for e in ephs], np.int64),
-                         np.array([ura_sigma_m(e.ura_index) ** 2 for e in ephs], float),
-                         np.array([e.health == 0 for e in ephs], bool), cols, toes)
+        ages = np.full(top, MAX_EPH_AGE_S)
+        for row in sorted(by_row):
+            k = len(by_row[row])
+            cols[row, :k] = np.arange(len(ephs), len(ephs) + k)
+            toes[row, :k] = [e.toe.total_ns for e in by_row[row]]
+            if max_age_s is not None:
+                ages[row] = max_age_s[row]
+            ephs.extend(by_row[row])
+        params = np.array([[getattr(e, f) for e in ephs] for f in _EPH_FIELDS[:-1]]
+                          + [[e.tgd_s if gps else l1_group_delay_s(e) for e in ephs]]).reshape(len(_EPH_FIELDS), -1)
+        if gps:
+            consts = _ColumnConstants(MU_GPS_M3_S2, OMEGA_E_RAD_S, F_REL_S_SQRT_M)
+            var = np.array([ura_sigma_m(e.ura_index) ** 2 for e in ephs], float)
+            healthy = np.array([e.health == 0 for e in ephs], bool)
+            toe_s = np.array([e.toe_s for e in ephs], float)
+        else:
+            ks = [kepler_constants(e.gnss_id) for e in ephs]
+            consts = _ColumnConstants(np.array([k.mu_m3_s2 for k in ks], float),
+                                      np.array([k.omega_e_rad_s for k in ks], float),
+                                      np.array([k.f_rel_s_sqrt_m for k in ks], float),
+                                      np.array([e.gnss_id == GNSS_BEIDOU and is_beidou_geo(e.prn) for e in ephs],
+                                               bool))
+            if healthy_if is None or sigma_m is None:
+                raise ValueError("a table of several systems needs each ephemeris' health and accuracy")
+            var = np.array([sigma_m(e) ** 2 for e in ephs], float)
+            healthy = np.array([healthy_if(e) for e in ephs], bool)
+            toe_s = np.array([toe_system_tow_s(e) for e in ephs], float)
+        return EphTable(params, toe_s, np.array([e.toe.total_ns for e in ephs], np.int64),
+                        np.array([e.toc.total_ns for e in ephs], np.int64), var, healthy, consts, cols, toes, ages,
+                        12 if gps else 20)
 
 
 _FAR_NS = 2**62
 """A toe (ns) no receiver time comes within MAX_EPH_AGE_S of (year ~2100 + 100; the difference stays in int64)."""
 
 
-def _select_columns(table: _EphTable, prns: npt.NDArray[np.int16], t_ns: npt.NDArray[np.int64],
+def _select_columns(table: EphTable, rows: npt.NDArray[np.int16], t_ns: npt.NDArray[np.int64],
                     have: npt.NDArray[np.bool_]) -> npt.NDArray[np.int64]:
     """EphemerisStore.select_ns for every (epoch, satellite) at once: the table column of the ephemeris whose
-    toe is nearest `t_ns` (E, n) within MAX_EPH_AGE_S, the later one on a tie; −1 where none or not `have`."""
+    toe is nearest `t_ns` (E, n) within its system's largest age, the later one on a tie; −1 where none or not
+    `have`. `rows` (n,): each satellite's table row (a PRN for GPS)."""
     col = np.full(t_ns.shape, -1, np.int64)
     ep, sat = have.nonzero()
-    prn = prns[sat].astype(np.int64)
+    prn = rows[sat].astype(np.int64)
     known = (prn >= 0) & (prn < table.by_prn_col.shape[0])
     ep, sat, prn = ep[known], sat[known], prn[known]
     # |t − toe| in s as select_ns computes it (ns difference, then ÷ 1e9: exact below 2^53 ns)
     dt = np.abs(t_ns[ep, sat][:, None] - table.by_prn_toe_ns[prn]) / NS_PER_S
     last = dt.shape[1] - 1 - np.argmin(dt[:, ::-1], axis=1)  # the later of equally near toes
-    near = dt[np.arange(ep.size), last] <= MAX_EPH_AGE_S
+    near = dt[np.arange(ep.size), last] <= table.max_age_s[prn]
     col[ep[near], sat[near]] = table.by_prn_col[prn[near], last[near]]
     return col
 
@@ -365,6 +432,17 @@ def satellite_states_batch(store: EphemerisStore, prns: npt.ArrayLike, t_rx_ns: 
     prn_arr = np.asarray(prns, dtype=np.int16)
     t_rx = np.asarray(t_rx_ns, dtype=np.int64)
     pr = np.asarray(pr_m, dtype=float).reshape(t_rx.shape[0], prn_arr.shape[0])
+    pos, vel, clk, drift, var, ok = table_states(store.table() if len(store) else None, prn_arr, t_rx, pr)
+    return [SatState(prn_arr, pos[k], vel[k], clk[k], drift[k], var[k], ok[k]) for k in range(pr.shape[0])]
+
+
+def table_states(table: EphTable | None, rows: npt.NDArray[np.int16], t_rx: npt.NDArray[np.int64],
+                 pr: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], ...]:
+    """Satellite states at transmission (t_rx − pr/c − satellite clock, as RTKLIB satposs) of the satellites
+    of table `rows` (n,) at E epochs: receiver times `t_rx` (E,) ns since the GPS epoch, pseudoranges `pr`
+    (E, n) m. Arrays (position (E, n, 3) m, velocity (E, n, 3) m/s, clock (E, n) s incl. relativity and minus
+    the group delay, drift (E, n) s/s, ephemeris variance (E, n) m², ok (E, n)); not ok where no healthy
+    ephemeris is held (everywhere with no table)."""
     n_ep, n = pr.shape
     pos = np.zeros((n_ep, n, 3))
     vel = np.zeros((n_ep, n, 3))
@@ -373,49 +451,52 @@ def satellite_states_batch(store: EphemerisStore, prns: npt.ArrayLike, t_rx_ns: 
     var = np.zeros((n_ep, n))
     ok = np.zeros((n_ep, n), dtype=bool)
     have = np.isfinite(pr)
-    if have.any() and len(store):
-        table = store.table()
-        # ephemeris choice at t_rx − pr/c (GpsTime.add_s's rounding to the ns: half to even, as round())
-        t_tx_ns = t_rx[:, None] + np.rint(np.where(have, -pr, 0.0) / CLIGHT_M_S * NS_PER_S).astype(np.int64)
-        col = _select_columns(table, prn_arr, t_tx_ns, have)
-        use = col >= 0
-        use[use] = table.healthy[col[use]]
-        ep, sat = use.nonzero()
-        if ep.size:
-            c = col[ep, sat]
-            m = c.size
-            p = table.params[:, c]
-            af0, af1, af2, tgd = p[15], p[16], p[17], p[18]
-            t_ep = t_rx[ep]
-            rx_toe = (t_ep - table.toe_ns[c]) / 1e9
-            rx_toc = (t_ep - table.toc_ns[c]) / 1e9
-            tau = pr[ep, sat] / CLIGHT_M_S
+    if table is None or not have.any():
+        return pos, vel, clk, drift, var, ok
+    # ephemeris choice at t_rx − pr/c (GpsTime.add_s's rounding to the ns: half to even, as round())
+    t_tx_ns = t_rx[:, None] + np.rint(np.where(have, -pr, 0.0) / CLIGHT_M_S * NS_PER_S).astype(np.int64)
+    col = _select_columns(table, rows, t_tx_ns, have)
+    use = col >= 0
+    use[use] = table.healthy[col[use]]
+    ep, sat = use.nonzero()
+    if not ep.size:
+        return pos, vel, clk, drift, var, ok
+    c = col[ep, sat]
+    m = c.size
+    p = table.params[:, c]
+    af0, af1, af2, tgd = p[15], p[16], p[17], p[18]
+    t_ep = t_rx[ep]
+    rx_toe = (t_ep - table.toe_ns[c]) / 1e9
+    rx_toc = (t_ep - table.toc_ns[c]) / 1e9
+    tau = pr[ep, sat] / CLIGHT_M_S
 
-            def clock(dt: npt.NDArray[np.float64], k: int) -> npt.NDArray[np.float64]:
-                a0, a1, a2 = af0[:k], af1[:k], af2[:k]
-                for _ in range(2):  # as eph_clock_s: the polynomial evaluated at t − dts
-                    dt = dt - (a0 + a1 * dt + a2 * dt * dt)
-                return a0 + a1 * dt + a2 * dt * dt
+    def clock(dt: npt.NDArray[np.float64], k: int) -> npt.NDArray[np.float64]:
+        a0, a1, a2 = af0[:k], af1[:k], af2[:k]
+        for _ in range(2):  # as eph_clock_s: the polynomial evaluated at t − dts
+            dt = dt - (a0 + a1 * dt + a2 * dt * dt)
+        return a0 + a1 * dt + a2 * dt * dt
 
-            off = -tau - clock(rx_toc - tau, m)  # t_tx − t_rx (s)
-            step = 1e-3
-            # both points of the velocity/drift difference in one vectorised pass (columns m.. are t + step)
-            p2 = np.concatenate([p, p], axis=1)
-            af0, af1, af2 = p2[15], p2[16], p2[17]
-            tk0 = rx_toe + off
-            toe_s = table.toe_s[c]
-            p01, rel01 = _batch_position(p2, np.concatenate([tk0, tk0 + step]), np.concatenate([toe_s, toe_s]))
-            t0 = rx_toc + off
-            c01 = clock(np.concatenate([t0, t0 + step]), 2 * m) + rel01
-            p0, p1 = p01[:m], p01[m:]
-            c0, c1 = c01[:m], c01[m:]
-            pos[ep, sat] = p0
-            vel[ep, sat] = (p1 - p0) / step
-            clk[ep, sat] = c0 - tgd
-            drift[ep, sat] = (c1 - c0) / step
-            var[ep, sat] = table.ura_var_m2[c]
-            ok[ep, sat] = True
-    return [SatState(prn_arr, pos[k], vel[k], clk[k], drift[k], var[k], ok[k]) for k in range(n_ep)]
+    off = -tau - clock(rx_toc - tau, m)  # t_tx − t_rx (s)
+    step = 1e-3
+    # both points of the velocity/drift difference in one vectorised pass (columns m.. are t + step)
+    c2 = np.concatenate([c, c])
+    p2 = table.params[:, c2]
+    af0, af1, af2 = p2[15], p2[16], p2[17]
+    tk0 = rx_toe + off
+    toe_s = table.toe_s[c2]
+    p01, rel01 = _batch_position(p2, np.concatenate([tk0, tk0 + step]), toe_s, table.consts.take(c2),
+                                 table.kepler_iterations)
+    t0 = rx_toc + off
+    c01 = clock(np.concatenate([t0, t0 + step]), 2 * m) + rel01
+    p0, p1 = p01[:m], p01[m:]
+    c0, c1 = c01[:m], c01[m:]
+    pos[ep, sat] = p0
+    vel[ep, sat] = (p1 - p0) / step
+    clk[ep, sat] = c0 - tgd
+    drift[ep, sat] = (c1 - c0) / step
+    var[ep, sat] = table.var_m2[c]
+    ok[ep, sat] = True
+    return pos, vel, clk, drift, var, ok
 
 
 def satellite_states(

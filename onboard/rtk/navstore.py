@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from onboard.gnsstime import GpsTime
-from onboard.rtk.ephemeris import eph_position_velocity, l1_group_delay_s, sisa_sigma_m, ura_sigma_m
+from onboard.rtk.ephemeris import EphTable, eph_position_velocity, l1_group_delay_s, sisa_sigma_m, ura_sigma_m
 from onboard.rtk.glonass import ERR_EPH_GLO_M, GlonassOrbits, glonass_position_velocity
 from onboard.rtk.gnss import system
 from onboard.rtk.types import GNSS_GALILEO, GNSS_GLONASS, Ephemeris, GlonassEphemeris
@@ -87,6 +87,7 @@ class BroadcastNavigation:
     def __init__(self, ephemerides: Iterable[AnyEphemeris] = ()) -> None:
         self._by_sat: dict[tuple[int, int], list[AnyEphemeris]] = {}
         self._orbits = GlonassOrbits()
+        self._kepler: tuple[EphTable, dict[tuple[int, int], int]] | None = None
         for eph in ephemerides:
             self.add(eph)
 
@@ -99,9 +100,11 @@ class BroadcastNavigation:
                 if old == eph:
                     return False
                 lst[i] = eph
+                self._kepler = None
                 return True
         lst.append(eph)
         lst.sort(key=lambda e: e.toe)
+        self._kepler = None  # the batched evaluation's table is rebuilt on next use
         return True
 
     def __len__(self) -> int:
@@ -125,6 +128,27 @@ class BroadcastNavigation:
             if dt <= best_dt:
                 best, best_dt = eph, dt
         return best
+
+    def kepler_table(self) -> tuple[EphTable, dict[tuple[int, int], int]]:
+        """The Keplerian ephemerides (every system but GLONASS) as one table for the batched evaluation
+        (onboard.rtk.ephemeris.table_states), and each satellite's row in it by (gnssId, svId); the candidates
+        `select` would weigh (Galileo: I/NAV only when the satellite has any), with its system's largest age."""
+        if getattr(self, "_kepler", None) is None:  # (a store unpickled from an older version has none)
+            rows: dict[tuple[int, int], int] = {}
+            by_row: dict[int, list[Ephemeris]] = {}
+            ages: dict[int, float] = {}
+            for key in sorted(self._by_sat):
+                if key[0] == GNSS_GLONASS:
+                    continue
+                ephs = [e for e in self._by_sat[key] if isinstance(e, Ephemeris)]
+                if key[0] == GNSS_GALILEO:
+                    ephs = [e for e in ephs if e.code_on_l2 & _INAV_SOURCES] or ephs
+                if ephs:
+                    rows[key] = row = len(rows) + 1
+                    by_row[row], ages[row] = ephs, system(key[0]).max_eph_age_s
+            self._kepler = (EphTable.of(by_row, ages, is_healthy, ephemeris_sigma_m), rows)
+        assert self._kepler is not None
+        return self._kepler
 
     def state(self, eph: AnyEphemeris, t_tx: GpsTime) -> SatelliteState:
         """satellite_state of one of this store's ephemerides, GLONASS orbits integrated on from the last request

@@ -18,7 +18,7 @@ import numpy.typing as npt
 
 from onboard.gnsstime import GpsTime
 from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, l1_wavelength_m
-from onboard.rtk.ephemeris import EphemerisStore, SatState, eph_clock_s, satellite_states_batch
+from onboard.rtk.ephemeris import EphemerisStore, SatState, satellite_states_batch, table_states
 from onboard.rtk.glonass import glonass_clock_s
 from onboard.rtk.gnss import SYSTEMS_BY_LETTER, sat_id, system
 from onboard.rtk.navstore import BroadcastNavigation
@@ -137,8 +137,9 @@ def satellite_states_layout(layout: SlotLayout, store: EphemerisStore, nav: Broa
                             t_rx_ns: list[int], pr_m: Arr) -> list[SatState]:
     """Satellite states (at transmission: t_rx − pr/c − satellite clock, as RTKLIB satposs) on every slot of E
     epochs: receiver times `t_rx_ns` (E,) in ns since the GPS epoch, pseudoranges `pr_m` (E, n). GPS from the
-    vectorised GPS store (the GPS-only engine's numbers), the other constellations from `nav` one satellite
-    at a time; not ok where no healthy ephemeris is held."""
+    vectorised GPS store (the GPS-only engine's numbers), Galileo, BeiDou and QZSS from `nav`'s Keplerian table
+    in one pass as well, GLONASS one satellite at a time (its orbits integrated on from epoch to epoch); not ok
+    where no healthy ephemeris is held."""
     n_ep, n = pr_m.shape
     prns = layout.sv_id
     g0 = layout.first_slot.get(GNSS_GPS)
@@ -158,21 +159,29 @@ def satellite_states_layout(layout: SlotLayout, store: EphemerisStore, nav: Broa
             pos[k, g0:g0 + 32], vel[k, g0:g0 + 32], clk[k, g0:g0 + 32] = s.pos_m, s.vel_m_s, s.clock_s
             drift[k, g0:g0 + 32], var[k, g0:g0 + 32], ok[k, g0:g0 + 32] = s.drift_s_s, s.var_m2, s.ok
     if nav is not None and len(nav):
-        other = layout.gnss_id != GNSS_GPS
+        kep = (layout.gnss_id != GNSS_GPS) & (layout.gnss_id != GNSS_GLONASS)
+        if kep.any():
+            # Galileo, BeiDou, QZSS: every epoch and satellite in one pass, as GPS
+            table, rows = nav.kepler_table()
+            j = kep.nonzero()[0]
+            row = np.array([rows.get((int(g), int(v)), 0) for g, v in zip(layout.gnss_id[j], prns[j])], np.int16)
+            kpos, kvel, kclk, kdrift, kvar, kok = table_states(table, row, np.asarray(t_rx_ns, np.int64),
+                                                               pr_m[:, j])
+            pos[:, j], vel[:, j], clk[:, j], drift[:, j], var[:, j], ok[:, j] = kpos, kvel, kclk, kdrift, kvar, kok
+        glo = layout.gnss_id == GNSS_GLONASS
         for k in range(n_ep):
             t_rx = GpsTime.from_total_ns(int(t_rx_ns[k]))
-            for j in np.flatnonzero(other & np.isfinite(pr_m[k])).tolist():
+            for j in np.flatnonzero(glo & np.isfinite(pr_m[k])).tolist():
                 t0 = t_rx.add_s(-float(pr_m[k, j]) / CLIGHT_M_S)
-                eph = nav.select(int(layout.gnss_id[j]), int(prns[j]), t0)
-                if eph is None:
+                eph = nav.select(GNSS_GLONASS, int(prns[j]), t0)
+                if not isinstance(eph, GlonassEphemeris):
                     continue
                 # the satellite clock at t_rx − pr/c sets the transmission time (one step is < 1 ns off)
-                dts = glonass_clock_s(eph, t0) if isinstance(eph, GlonassEphemeris) else eph_clock_s(eph, t0)
-                s = nav.state(eph, t0.add_s(-dts))
-                if not s.healthy:
+                sat = nav.state(eph, t0.add_s(-glonass_clock_s(eph, t0)))
+                if not sat.healthy:
                     continue
-                pos[k, j], vel[k, j], clk[k, j], drift[k, j], var[k, j] = s.pos_m, s.vel_m_s, s.clock_s, \
-                    s.drift_s_s, s.var_m2
+                pos[k, j], vel[k, j], clk[k, j], drift[k, j], var[k, j] = sat.pos_m, sat.vel_m_s, sat.clock_s, \
+                    sat.drift_s_s, sat.var_m2
                 ok[k, j] = True
     return [SatState(prns, pos[k], vel[k], clk[k], drift[k], var[k], ok[k]) for k in range(n_ep)]
 

@@ -52,6 +52,51 @@ def test_store_selects_nearest_inav_galileo_and_evaluates_each_system() -> None:
     assert store.select(GNSS_GALILEO, 8, t.add_s(3 * 86400)) is None
 
 
+def test_kepler_table_states_equal_the_per_satellite_evaluation() -> None:
+    # Galileo (I/NAV preferred, SISA, BGD), QZSS (2 h age) and a BeiDou GEO row (the Galileo E08 orbit relabelled
+    # C03: its −5° frame and rotation) through the batched table, against select + clock + satellite_state per
+    # satellite and epoch, as the engine evaluated them before (transmission time rounded to the ns there)
+    from onboard.rtk.consts import CLIGHT_M_S
+    from onboard.rtk.ephemeris import EphemerisStore, eph_clock_s
+    from onboard.rtk.slots import satellite_states_layout, slot_layout
+    from onboard.rtk.types import GNSS_BEIDOU
+
+    nav = read_rinex_nav(shared_file(SEPT_NAV))
+    geo = [dataclasses.replace(e, gnss_id=GNSS_BEIDOU, prn=3) for e in nav.galileo if e.prn == 8]
+    store = BroadcastNavigation([*nav.galileo, *nav.qzss, *geo])
+    layout = slot_layout("ECJ")
+    t_start = min(e.toe for e in nav.qzss)
+    epochs = [t_start.add_s(s) for s in range(0, 4 * 3600, 600)]
+    rng = np.random.default_rng(7)
+    pr = rng.uniform(2.0e7, 2.6e7, (len(epochs), layout.n))
+    pr[rng.random(pr.shape) < 0.2] = np.nan
+    states = satellite_states_layout(layout, EphemerisStore(), store, [t.total_ns for t in epochs], pr)
+    checked = 0
+    for k, t in enumerate(epochs):
+        for j in range(layout.n):
+            g, sv = int(layout.gnss_id[j]), int(layout.sv_id[j])
+            eph = None if np.isnan(pr[k, j]) else store.select(g, sv, t.add_s(-pr[k, j] / CLIGHT_M_S))
+            want = None
+            if eph is not None:
+                t0 = t.add_s(-pr[k, j] / CLIGHT_M_S)
+                want = satellite_state(eph, t0.add_s(-eph_clock_s(eph, t0)))
+            s = states[k]
+            if want is None or not want.healthy:
+                assert not s.ok[j]
+                continue
+            assert s.ok[j]
+            np.testing.assert_allclose(s.pos_m[j], want.pos_m, rtol=0, atol=1e-5)  # the ns rounding: ~2 µm
+            # a 1 ms forward difference: the per-satellite Kepler loop stops at 1e-14 rad, ~0.3 µm of position
+            np.testing.assert_allclose(s.vel_m_s[j], want.vel_m_s, rtol=0, atol=1e-3)
+            assert s.clock_s[j] == pytest.approx(want.clock_s, abs=1e-13)
+            assert s.drift_s_s[j] == pytest.approx(want.drift_s_s, abs=1e-15)
+            assert s.var_m2[j] == want.var_m2
+            checked += 1
+    assert checked > 200
+    assert {int(layout.gnss_id[j]) for k in range(len(epochs)) for j in np.flatnonzero(states[k].ok)} == {
+        GNSS_GALILEO, GNSS_QZSS, GNSS_BEIDOU}
+
+
 def test_store_glonass_age_channels_and_health() -> None:
     glo = read_rinex_nav(shared_file(GLO_NAV)).glonass
     store = BroadcastNavigation(glo)
