@@ -111,8 +111,14 @@ class GlonassOrbits:
     def position_velocity(self, geph: GlonassEphemeris, t: GpsTime, dt_s: float = 1e-3
                           ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], float, float]:
         """As glonass_position_velocity (velocity and drift by a forward difference over `dt_s`)."""
+        p, v, c0, drift = self.position_velocity_at(geph, t.diff_s(geph.toe), dt_s)
+        return np.array(p), np.array(v), c0, drift
+
+    def position_velocity_at(self, geph: GlonassEphemeris, dt: float, dt_s: float = 1e-3
+                             ) -> tuple[tuple[float, float, float], tuple[float, float, float], float, float]:
+        """position_velocity at `dt` s after tb (GPS time scale), as plain floats: position (m), velocity
+        (m/s), clock bias (s), drift (s/s)."""
         key = (geph.slot, geph.toe.total_ns, geph.iode)
-        dt = t.diff_s(geph.toe)
         start, x = 0.0, (*geph.pos_m, *geph.vel_m_s)
         hit = self._last.get(key)
         if hit is not None and abs(dt - hit[0]) < abs(dt):
@@ -126,17 +132,20 @@ class GlonassOrbits:
         x0, x1, x2, v0, v1, v2 = x
         a0, a1, a2 = _acceleration(x0, x1, x2, v0, v1, v2, geph.acc_m_s2)
         h2 = dt_s / 2.0
-        vel = np.array([v0 + a0 * h2, v1 + a1 * h2, v2 + a2 * h2])
-        return np.array(x[:3]), vel, c0, (c1 - c0) / dt_s
+        return (x0, x1, x2), (v0 + a0 * h2, v1 + a1 * h2, v2 + a2 * h2), c0, (c1 - c0) / dt_s
 
 
 def glonass_clock_s(geph: GlonassEphemeris, t: GpsTime) -> float:
     """Satellite clock bias (s) for `t` read on the satellite clock: −τn + γn·(t_sys − tb) with t_sys = t − bias
     solved by two fixed-point steps (as RTKLIB 2.4.3 geph2clk)."""
-    dt0 = t.diff_s(geph.toe)
-    dt = dt0
+    return glonass_clock_at_s(geph, t.diff_s(geph.toe))
+
+
+def glonass_clock_at_s(geph: GlonassEphemeris, dt0_s: float) -> float:
+    """glonass_clock_s for a time `dt0_s` s after tb read on the satellite clock."""
+    dt = dt0_s
     for _ in range(2):
-        dt = dt0 - _clock_offset_s(geph, dt)
+        dt = dt0_s - _clock_offset_s(geph, dt)
     return _clock_offset_s(geph, dt)
 
 

@@ -16,9 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from onboard.gnsstime import GpsTime
+from onboard.gnsstime import NS_PER_S, GpsTime
 from onboard.rtk.ephemeris import EphTable, eph_position_velocity, l1_group_delay_s, sisa_sigma_m, ura_sigma_m
-from onboard.rtk.glonass import ERR_EPH_GLO_M, GlonassOrbits, glonass_position_velocity
+from onboard.rtk.glonass import ERR_EPH_GLO_M, GlonassOrbits, glonass_clock_at_s, glonass_position_velocity
 from onboard.rtk.gnss import system
 from onboard.rtk.types import GNSS_GALILEO, GNSS_GLONASS, Ephemeris, GlonassEphemeris
 
@@ -149,6 +149,31 @@ class BroadcastNavigation:
             self._kepler = (EphTable.of(by_row, ages, is_healthy, ephemeris_sigma_m), rows)
         assert self._kepler is not None
         return self._kepler
+
+    def glonass_states(self, slot: int, t0_ns: npt.NDArray[np.int64], out: tuple[npt.NDArray[np.float64], ...],
+                       ok: npt.NDArray[np.bool_]) -> None:
+        """States of GLONASS `slot` at the instants `t0_ns` (m,) (ns since the GPS epoch; receiver time − pr/c),
+        epochs in time order, written into `out` = (position (m, 3) m, velocity (m, 3), clock (m,) s, drift
+        (m,), variance (m,) m²) and `ok` (m,) where a healthy ephemeris is held: as select, the broadcast
+        clock at that instant setting the transmission time (one fixed-point step is < 1 ns off), and state,
+        for each instant, without their per-call objects (the orbits integrated on from epoch to epoch)."""
+        ephs = [e for e in self._by_sat.get((GNSS_GLONASS, slot), []) if isinstance(e, GlonassEphemeris)]
+        if not ephs or not t0_ns.size:
+            return
+        toe = np.array([e.toe.total_ns for e in ephs], np.int64)
+        dt = np.abs(t0_ns[:, None] - toe[None, :]) / NS_PER_S  # as select: |t − toe| in s
+        last = (len(ephs) - 1 - np.argmin(dt[:, ::-1], axis=1)).tolist()  # the later of equally near toes
+        near = (dt[np.arange(t0_ns.size), last] <= system(GNSS_GLONASS).max_eph_age_s).tolist()
+        pos, vel, clk, drift, var = out
+        for i, (t0, k, use) in enumerate(zip(t0_ns.tolist(), last, near, strict=True)):
+            eph = ephs[k]
+            if not use or eph.health != 0:
+                continue
+            toe_ns = eph.toe.total_ns
+            t_tx = t0 + round(-glonass_clock_at_s(eph, (t0 - toe_ns) / NS_PER_S) * NS_PER_S)  # GpsTime.add_s
+            pos[i], vel[i], clk[i], drift[i] = self._orbits.position_velocity_at(eph, (t_tx - toe_ns) / NS_PER_S)
+            var[i] = ERR_EPH_GLO_M ** 2
+            ok[i] = True
 
     def state(self, eph: AnyEphemeris, t_tx: GpsTime) -> SatelliteState:
         """satellite_state of one of this store's ephemerides, GLONASS orbits integrated on from the last request

@@ -16,13 +16,12 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from onboard.gnsstime import GpsTime
+from onboard.gnsstime import NS_PER_S
 from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, l1_wavelength_m
 from onboard.rtk.ephemeris import EphemerisStore, SatState, satellite_states_batch, table_states
-from onboard.rtk.glonass import glonass_clock_s
 from onboard.rtk.gnss import SYSTEMS_BY_LETTER, sat_id, system
 from onboard.rtk.navstore import BroadcastNavigation
-from onboard.rtk.types import FCN_NONE, GNSS_GLONASS, GNSS_GPS, GlonassEphemeris, ObsEpoch
+from onboard.rtk.types import FCN_NONE, GNSS_GLONASS, GNSS_GPS, ObsEpoch
 
 SYSTEM_ORDER = "GRECJ"
 """Order of the constellations' slot blocks (GPS first: its slots are those of the GPS-only engine)."""
@@ -168,21 +167,18 @@ def satellite_states_layout(layout: SlotLayout, store: EphemerisStore, nav: Broa
             kpos, kvel, kclk, kdrift, kvar, kok = table_states(table, row, np.asarray(t_rx_ns, np.int64),
                                                                pr_m[:, j])
             pos[:, j], vel[:, j], clk[:, j], drift[:, j], var[:, j], ok[:, j] = kpos, kvel, kclk, kdrift, kvar, kok
-        glo = layout.gnss_id == GNSS_GLONASS
-        for k in range(n_ep):
-            t_rx = GpsTime.from_total_ns(int(t_rx_ns[k]))
-            for j in np.flatnonzero(glo & np.isfinite(pr_m[k])).tolist():
-                t0 = t_rx.add_s(-float(pr_m[k, j]) / CLIGHT_M_S)
-                eph = nav.select(GNSS_GLONASS, int(prns[j]), t0)
-                if not isinstance(eph, GlonassEphemeris):
-                    continue
-                # the satellite clock at t_rx − pr/c sets the transmission time (one step is < 1 ns off)
-                sat = nav.state(eph, t0.add_s(-glonass_clock_s(eph, t0)))
-                if not sat.healthy:
-                    continue
-                pos[k, j], vel[k, j], clk[k, j], drift[k, j], var[k, j] = sat.pos_m, sat.vel_m_s, sat.clock_s, \
-                    sat.drift_s_s, sat.var_m2
-                ok[k, j] = True
+        t_rx = np.asarray(t_rx_ns, np.int64)
+        for j in np.flatnonzero(layout.gnss_id == GNSS_GLONASS).tolist():
+            k = np.flatnonzero(np.isfinite(pr_m[:, j]))
+            if not k.size:
+                continue
+            # t_rx − pr/c as GpsTime.add_s rounds it (half to even, as round())
+            t0 = t_rx[k] + np.rint(-pr_m[k, j] / CLIGHT_M_S * NS_PER_S).astype(np.int64)
+            out = (pos[k, j], vel[k, j], clk[k, j], drift[k, j], var[k, j])
+            got = ok[k, j]
+            nav.glonass_states(int(prns[j]), t0, out, got)
+            pos[k, j], vel[k, j], clk[k, j], drift[k, j], var[k, j] = out
+            ok[k, j] = got
     return [SatState(prns, pos[k], vel[k], clk[k], drift[k], var[k], ok[k]) for k in range(n_ep)]
 
 

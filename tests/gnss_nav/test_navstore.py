@@ -133,3 +133,36 @@ def test_glonass_orbits_carried_on_epoch_to_epoch_agree_with_integration_from_tb
             worst_v = max(worst_v, float(np.linalg.norm(carried.vel_m_s - fresh.vel_m_s)))
             assert carried.clock_s == pytest.approx(fresh.clock_s, abs=1e-15)
         assert worst_m < 1e-3 and worst_v < 1e-4, (direction, worst_m, worst_v)
+
+
+def test_glonass_states_of_a_slot_equal_the_per_epoch_selection_clock_and_state_to_the_bit() -> None:
+    # the engine's batch of one slot (selection among the slot's ephemerides, the clock fixed point, the orbit
+    # carried on) against select + glonass_clock_s + state called epoch by epoch on a store of its own
+    from onboard.rtk.consts import CLIGHT_M_S
+    from onboard.rtk.glonass import glonass_clock_s
+
+    glo = read_rinex_nav(shared_file(GLO_NAV)).glonass
+    slot = glo[len(glo) // 2].slot
+    ephs = [e for e in glo if e.slot == slot]
+    assert len(ephs) >= 3
+    batch, single = BroadcastNavigation(ephs), BroadcastNavigation(ephs)
+    t_first = ephs[-1].toe.add_s(-7200.0)  # through the slot's last ephemeris and an hour past its 30 min
+    times = [t_first.add_s(s) for s in range(0, 3 * 3600, 13)]
+    pr = np.random.default_rng(3).uniform(1.9e7, 2.5e7, len(times))
+    t0 = np.array([t.add_s(-p / CLIGHT_M_S).total_ns for t, p in zip(times, pr, strict=True)], np.int64)
+    out = (np.zeros((len(times), 3)), np.zeros((len(times), 3)), np.zeros(len(times)), np.zeros(len(times)),
+           np.zeros(len(times)))
+    ok = np.zeros(len(times), bool)
+    batch.glonass_states(slot, t0, out, ok)
+    for i, (t, p) in enumerate(zip(times, pr, strict=True)):
+        t_tx0 = t.add_s(-p / CLIGHT_M_S)
+        eph = single.select(GNSS_GLONASS, slot, t_tx0)
+        if eph is None:
+            assert not ok[i]
+            continue
+        want = single.state(eph, t_tx0.add_s(-glonass_clock_s(eph, t_tx0)))  # type: ignore[arg-type]
+        assert ok[i] == want.healthy
+        np.testing.assert_array_equal(out[0][i], want.pos_m)
+        np.testing.assert_array_equal(out[1][i], want.vel_m_s)
+        assert (out[2][i], out[3][i], out[4][i]) == (want.clock_s, want.drift_s_s, want.var_m2)
+    assert 0.5 * len(times) < ok.sum() < 0.75 * len(times)  # the last hour has no ephemeris within 30 min
