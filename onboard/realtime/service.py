@@ -647,7 +647,6 @@ class RtkService:
         from onboard.formats.pos import format_solution
 
         st = self._status
-        st.epochs += 1
         st.q, st.ratio, st.ns = int(sol.q), float(sol.ratio), int(sol.ns)
         st.base_systems = None if base is None else "".join(
             sorted((system(g).letter for g in base.systems()), key="GRECJ".find))
@@ -664,6 +663,8 @@ class RtkService:
             st.baseline_m = float(np.linalg.norm(sol.pos_ecef_m - base_pos))
         if sol.q == Q_FIX and st.ttff_s is None:
             st.ttff_s = sol.time.diff_s(first)
+        # counted last: a reader that sees the epoch counted sees the epoch's status (its age, Q, ratio)
+        st.epochs += 1
         if sol.q == Q_NONE or self._pos_file is None:
             return
         try:

@@ -189,7 +189,8 @@ def test_a_surveyed_take_off_point_fixes_the_first_epoch(world, tmp_path) -> Non
     err = [np.linalg.norm(p - world.truth(t)["antenna_ecef_m"])
            for t, p in zip(track.time[first:], track.pos_ecef_m[first:])]
     assert max(err) < 0.02
-    assert svc.snapshot()["ttff_s"] <= 3.0
+    # fixed by the fourth epoch at the latest, as `first` allows (3.00035 s on the rover's clock-offset tags)
+    assert svc.snapshot()["ttff_s"] < 3.5
 
 
 @pytest.mark.parametrize("offset_m", [0.0, 60.0])
