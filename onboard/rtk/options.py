@@ -70,6 +70,17 @@ class RtkOptions:
     its residuals must still fit). Why: after a hold is released the float of a static rover is known to
     millimetres yet off by the centimetre multipath the hold kept out, and rejects the validated integers until
     they settle (M8P static with the RAWX base, GPS+GLONASS: 86 s unfixed)."""
+    float_fix_gate_scale: float = 4.0
+    """The float's position covariance is multiplied by this in the float-fix consistency test (the
+    Mahalanobis distance of the fixed from the float position, against χ²(3) at 99.9 %) when the code has been
+    measured u-blox-like (code_variance_scale ≥ 0.5) and the integer set has at least float_fix_gate_min_dd
+    double differences. Why: u-blox code multipath under trees is correlated over tens of seconds, so the
+    float's covariance is too small along the directions it leaves loose and rejects the right set for
+    minutes; a set of many double differences is refuted by its own fixed phase residuals instead. 1 disables."""
+    float_fix_gate_min_dd: int = 10
+    """Fewest double differences (beyond the three position unknowns, seven redundant) a fix needs for
+    float_fix_gate_scale. Why: the fewer double differences, the less the fixed solution's own phase residuals
+    can refute a wrong set, and the more the float's verdict is needed (a 5-DD GPS set 80 cm off fits them)."""
     confirm_across_set_changes: bool = True
     """A first-fix candidate keeps its confirmation spans (first win, settled fraction; not its count of
     consecutive wins, which full_set_confirm_epochs reads of one and the same set) when the next winning set
@@ -289,6 +300,10 @@ class RtkOptions:
             raise ValueError(f"systems must be letters of G, R, E, C, J, not {self.systems!r}")
         if self.ratio_threshold < 1.0:
             raise ValueError("ratio_threshold must be ≥ 1")
+        if not self.float_fix_gate_scale >= 1.0:
+            raise ValueError(f"float_fix_gate_scale must be ≥ 1 (1 disables), not {self.float_fix_gate_scale}")
+        if self.float_fix_gate_min_dd < 0:
+            raise ValueError(f"float_fix_gate_min_dd must be ≥ 0, not {self.float_fix_gate_min_dd}")
 
 
 # TOML key → (field, converter). Keys carry RTKLIB-like names; units convert here, at the boundary.
@@ -315,6 +330,8 @@ TOML_KEYS: dict[str, tuple[str, Any]] = {
     "tdcp_slip_threshold_cyc": ("tdcp_slip_threshold_cyc", float),
     "tdcp_float_slip_threshold_cyc": ("tdcp_float_slip_threshold_cyc", float),
     "confirm_across_set_changes": ("confirm_across_set_changes", bool),
+    "float_fix_gate_scale": ("float_fix_gate_scale", float),
+    "float_fix_gate_min_dd": ("float_fix_gate_min_dd", int),
     "standstill": ("standstill", bool),
     "standstill_window_s": ("standstill_window_s", float),
     "standstill_min_s": ("standstill_min_s", float),

@@ -1948,9 +1948,10 @@ def _resolve(st: RtkState, ctx: EpochContext) -> _Fix | None:
         use_fix[fix.slots] = True
         use_fix[fix.ref] = True
         fix_rows, valid, _ = _phase_fit(st, ctx, xf, use_fix)
+        near_float = maha <= _CHI2_3DOF_999 * _float_fix_gate_scale(st, fix)
         # a re-fix of validated integers need not lie near the float: after a released hold the float of a
         # static rover knows its position to millimetres and carries the centimetre multipath the hold kept out
-        if (maha <= _CHI2_3DOF_999 or fix.settled or (fix.revalidated and o.revalidated_skips_float_check)) \
+        if (near_float or fix.settled or (fix.revalidated and o.revalidated_skips_float_check)) \
                 and np.count_nonzero(valid) == valid.size:
             break
         log.debug("%s: fix rejected (mahalanobis %.1f, residuals ok %s)", ctx.time, maha, bool(valid.all()))
@@ -1962,7 +1963,7 @@ def _resolve(st: RtkState, ctx: EpochContext) -> _Fix | None:
         # confirmation under way is left as it was.
         fix = None
         retry = None
-        if _try == 0 and maha <= _CHI2_3DOF_999 and int((~valid).sum()) == 1 and valid.sum() >= o.min_fix_sats - 1:
+        if _try == 0 and near_float and int((~valid).sum()) == 1 and valid.sum() >= o.min_fix_sats - 1:
             retry = cand.copy()
             retry[fix_rows[~valid]] = False
         elif _try == 0 and st.held_prns.any() and np.any(cand & ~st.held_prns):
@@ -1973,6 +1974,14 @@ def _resolve(st: RtkState, ctx: EpochContext) -> _Fix | None:
             fix = _resamb_lambda(st, ctx, retry)
             st.pending_fix = pending
     return fix
+
+
+def _float_fix_gate_scale(st: RtkState, fix: _Fix) -> float:
+    """Factor on the float's position covariance in the float-fix consistency test (float_fix_gate_scale):
+    measured u-blox-like code and a set of at least float_fix_gate_min_dd double differences, else 1."""
+    o = st.options
+    ublox = st.code_scatter.epochs >= o.code_scatter_min_epochs and st.code_var_scale >= GEODETIC_CODE_SCALE
+    return o.float_fix_gate_scale if ublox and fix.slots.size >= o.float_fix_gate_min_dd else 1.0
 
 
 def _restart_stuck(st: RtkState, ctx: EpochContext, fix: _Fix | None) -> None:

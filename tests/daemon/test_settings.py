@@ -105,6 +105,8 @@ def test_layering_file_env_cli(tmp_path: Path) -> None:
         ("[receiver]\nant_cable_delay_ns = 40000\n", "receiver.ant_cable_delay_ns 40000: must be -32768–32767 ns"),
         ("[rtk.engine]\nratio_threshold = nan\n", "rtk.engine.ratio_threshold nan: must be a finite number"),
         ("[rtk.engine]\nratio_threshold = 0.5\n", "rtk.engine.ratio_threshold 0.5: ratio_threshold must be ≥ 1"),
+        ("[rtk.engine]\nfloat_fix_gate_scale = 0.5\n", "rtk.engine.float_fix_gate_scale 0.5: float_fix_gate_scale must be ≥ 1"),
+        ("[rtk.engine]\nfloat_fix_gate_min_dd = -1\n", "rtk.engine.float_fix_gate_min_dd -1: float_fix_gate_min_dd must be ≥ 0"),
         ("[watchdog]\nwriter_stall_s = 0.05\n", "watchdog.writer_stall_s 0.05: must be > port.read_timeout_s"),
         ("[receiver]\nmodel = 'zed'\n", "receiver.model"),
         ("[receiver]\nmeas_rate_ms = 5\n", "receiver.meas_rate_ms 5: meas_rate_ms must be within 25–65535 ms"),
