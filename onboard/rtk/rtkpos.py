@@ -1032,6 +1032,11 @@ def _geodetic_code(st: RtkState) -> bool:
     return st.code_scatter.epochs >= st.options.code_scatter_min_epochs and st.code_var_scale < GEODETIC_CODE_SCALE
 
 
+def _ublox_code(st: RtkState) -> bool:
+    """The code has been measured u-blox-like (code_variance_scale ≥ 0.5; the other side of _geodetic_code)."""
+    return st.code_scatter.epochs >= st.options.code_scatter_min_epochs and st.code_var_scale >= GEODETIC_CODE_SCALE
+
+
 def _drop_iono(st: RtkState, drop: npt.NDArray[np.bool_], el: Arr, lam: Arr | None = None) -> None:
     """Remove the ionosphere states of the `drop` slots, folding each into its ambiguity where both exist
     (N' = N − m(el)·I/λ, the phase then carries the delay as without the states), so that the ambiguities keep
@@ -1549,8 +1554,7 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
             settled = o.settled_fix_span_s > 0 and progress >= 1.0 - 1e-9
             # correlated code multipath biases the float for about its correlation time: clean code waits less
             need_span = max(o.confirm_fix_span_min_s, o.confirm_fix_span_s * st.code_var_scale)
-            cs = st.code_scatter
-            if cs.epochs >= o.code_scatter_min_epochs and st.code_var_scale >= GEODETIC_CODE_SCALE:
+            if _ublox_code(st):
                 # measured u-blox-like code: the differential ionosphere biases its float for minutes
                 need_span += o.confirm_fix_span_per_km_s * ctx.baseline_m / 1000.0
             wins = st.pending_fix.wins
@@ -1980,8 +1984,7 @@ def _float_fix_gate_scale(st: RtkState, fix: _Fix) -> float:
     """Factor on the float's position covariance in the float-fix consistency test (float_fix_gate_scale):
     measured u-blox-like code and a set of at least float_fix_gate_min_dd double differences, else 1."""
     o = st.options
-    ublox = st.code_scatter.epochs >= o.code_scatter_min_epochs and st.code_var_scale >= GEODETIC_CODE_SCALE
-    return o.float_fix_gate_scale if ublox and fix.slots.size >= o.float_fix_gate_min_dd else 1.0
+    return o.float_fix_gate_scale if _ublox_code(st) and fix.slots.size >= o.float_fix_gate_min_dd else 1.0
 
 
 def _restart_stuck(st: RtkState, ctx: EpochContext, fix: _Fix | None) -> None:
