@@ -24,7 +24,7 @@ from ground.api.settings import database_url
 from ground.store import Store
 from onboard.hw.ports import SystemClock
 from onboard.logger.events import read_events
-from onboard.logger.journal import Journal, JournalOptions, iter_journal_bytes, read_manifest
+from onboard.logger.journal import Journal, JournalOptions, iter_journal_bytes, list_segments, read_manifest
 from onboard.receiver.framing import StreamFramer
 from onboard.recorder.feature import is_rollover
 from onboard.upload.priority import io_class
@@ -160,6 +160,11 @@ def autopilot_events(flight: Path) -> list[str]:
     return [r["event"] for r in read_events(flight / "events.jsonl").records if r.get("type") == "autopilot"]
 
 
+def _holds_bytes(flights: list[Path]) -> bool:
+    """One flight folder is given and its journal segments hold at least one byte."""
+    return len(flights) == 1 and any(p.stat().st_size > 0 for p in list_segments(flights[0]))
+
+
 def test_closed_after_landing_uploaded_next_flight_without_a_gap(tmp_path: Path) -> None:
     """Two flights: each closed 2 s after its disarm (a roll-over: recording goes on), uploaded by the uploader
     started at boot, byte-identical on the server; the receiver's stream split between the flights loses and
@@ -192,6 +197,9 @@ def test_closed_after_landing_uploaded_next_flight_without_a_gap(tmp_path: Path)
         wait_until(lambda: autopilot_json(status_path).get("armed"), 40, "second flight armed")
         wait_until(lambda: autopilot_json(status_path).get("flights_closed") == 2, 60, "second flight closed")
         wait_until(lambda: upload_json(tmp_path).get("done") == 2, 40, "second flight uploaded")
+        # the flight opened at the second roll-over records the receiver before the stop: stopped first, it would
+        # rightly hold no byte (CI once stopped it within its first second)
+        wait_until(lambda: _holds_bytes(sorted(data.glob("flight-*"))[2:]), 20, "third flight recording")
         sampling.set()
         status_before_stop = json.loads(status_path.read_text())
         sigterm(daemon)
