@@ -37,3 +37,27 @@ def test_the_lea6t_sees_gps_only_and_the_radio_loss_drops_seconds() -> None:
     assert all(set(ep.gnss_id.tolist()) == {GNSS_GPS} for ep in data.rover)
     assert 0.3 < 1 - len(data.base) / len(data.rover) < 0.75 and data.lost_bytes > 0
     assert replace(case, systems="G").multi is False
+
+
+def test_a_base_with_few_gps_satellites_is_checked_on_every_constellation_it_tracks() -> None:
+    """Five satellites, three or four of them GPS: the base's GPS-alone single points are rare and tens of
+    metres off (GDOP ~37), so a check on GPS alone refused the right base position and the whole run; on GPS and
+    GLONASS the right position passes, and a position 100 m off is still refused."""
+    from onboard.rtk.options import RtkOptions
+    from onboard.rtk.postpro import base_spp_offset_m, check_base_position
+    from onboard.rtk.types import BasePositionRejected
+
+    case = SimCase("5 satellites", "", max_sats=5, systems="GR", world="gr-2012", seed=1)
+    data = simulate(case, "m8t")
+    base_pos = np.asarray(data.base_pos_ecef_m)
+    gps = base_spp_offset_m(data.base, data.nav, base_pos, RtkOptions(systems="G"))
+    assert gps is not None and gps[0] > RtkOptions().max_base_spp_offset_m
+    check_base_position(data.base, data.nav, base_pos, RtkOptions(systems="GR"))  # no refusal
+    found = base_spp_offset_m(data.base, data.nav, base_pos, RtkOptions(systems="GR"))
+    assert found is not None and found[1] > gps[1]
+    try:
+        check_base_position(data.base, data.nav, base_pos + [100.0, 0.0, 0.0], RtkOptions(systems="GR"))
+    except BasePositionRejected:
+        pass
+    else:
+        raise AssertionError("a base position 100 m off passed the check")
