@@ -249,9 +249,11 @@ def run_child(cmd: list[str]) -> tuple[float, float, int]:
     return cpu, wall, proc.returncode
 
 
-ENGINES = ("rtklib-2.4.3", "demo5", "2.4.3-driver", "demo5-driver", "ours")
-MULTI_ENGINES = ("demo5", "ours")
+ENGINES = ("rtklib-2.4.3", "demo5", "2.4.3-driver", "demo5-driver", "ours", "demo5-combined", "ours-combined")
+MULTI_ENGINES = ("demo5", "ours", "demo5-combined", "ours-combined")
 """Engines run with more than GPS: the drivers are GPS-only, 2.4.3 is not the peer any more."""
+PEER = {"ours": "demo5", "ours-combined": "demo5-combined"}
+"""Each of our runs' CPU is given as a ratio to the demo5 run of the same direction."""
 
 
 def engine_commands(ds: Dataset, systems: str, out: Path, engines: tuple[str, ...] = ENGINES,
@@ -274,15 +276,16 @@ def engine_commands(ds: Dataset, systems: str, out: Path, engines: tuple[str, ..
                  f"--systems={systems}",
                  "--no-progress", "-o", str(out / "ours.pos")],
     }
+    # the post-processing mode of both (forward and backward passes combined), as a surveyor runs it on the ground
+    cmds["demo5-combined"] = [*cmds["demo5"][:4], str(out / "demo5-combined.pos"), "--combined", *cmds["demo5"][5:]]
+    cmds["ours-combined"] = [*cmds["ours"][:-2], "--direction=combined", "-o", str(out / "ours-combined.pos")]
     allowed = ENGINES if systems == "G" else MULTI_ENGINES
     return {k: v for k, v in cmds.items() if k in engines and k in allowed}
 
 
 def pseudo_ref_command(ds: Dataset, out: Path, rtklib_args: tuple[str, ...] = ()) -> list[str]:
     """demo5 combined forward/backward with the widest system set: the pseudo-reference's solution."""
-    cmd = engine_commands(ds, ds.systems[-1], out, ("demo5",), rtklib_args)["demo5"]
-    cmd[cmd.index(str(out / "demo5.pos"))] = str(out / "demo5-combined.pos")
-    return [*cmd[:5], "--combined", *cmd[5:]]
+    return engine_commands(ds, ds.systems[-1], out, ("demo5-combined",), rtklib_args)["demo5-combined"]
 
 
 def _out_file(cmd: list[str]) -> Path:
@@ -430,10 +433,10 @@ def run_set(ds: Dataset, systems: str, engines: tuple[str, ...],
     # RTKLIB writes no line for rover epochs it could not solve; ours writes every solved rover epoch. The
     # /rover column counts fixes over the most epochs any engine wrote, the same denominator for all.
     n_rover = max(r["epochs"] for r, _ in results.values())
-    demo5_cpu = results["demo5"][1] if "demo5" in results else 0.0
     rows = []
     for name, (r, cpu) in results.items():
-        ratio = f"x{cpu / demo5_cpu:.2f}" if name == "ours" and demo5_cpu > 0 else ""
+        peer_cpu = results[PEER[name]][1] if PEER.get(name) in results else 0.0
+        ratio = f"x{cpu / peer_cpu:.2f}" if peer_cpu > 0 else ""
         pc = (str(r["pseudo_checked"]), str(r["pseudo_wrong"])) if pseudo is not None else ("", "")
         rows.append(table_row([ds.name, systems_label(systems), name, r["epochs"], r["fixed"], r["fix"],
                                100 * r["fixed"] / max(n_rover, 1), r["ttff"], r["h"], r["v"], r["checked"],

@@ -81,6 +81,20 @@ class RtkOptions:
     """Fewest double differences (beyond the three position unknowns, seven redundant) a fix needs for
     float_fix_gate_scale. Why: the fewer double differences, the less the fixed solution's own phase residuals
     can refute a wrong set, and the more the float's verdict is needed (a 5-DD GPS set 80 cm off fits them)."""
+    combined_handover: bool = True
+    """Combined post-processing hands the forward pass's fixes to the backward pass: where a run of forward
+    fixes starts in time and the backward pass holds nothing, the backward float is pinned to the forward fix,
+    fixes at once and carries that hold on into the epochs before, where the forward pass was still
+    confirming its first fix or re-fixing after slips. Why: under trees each direction loses its hold at the
+    slips and needs minutes to confirm a new first fix, minutes the other direction crossed fixed (M8P walk,
+    GPS+GLONASS: 53 -> 61 % fixed; docs/rtk-defaults.md)."""
+    handover_sigma_m: float = 0.01
+    """σ (m, per ECEF axis) added to the handed-over fix's own covariance when it pins the other pass. Why: a
+    fixed position carries centimetre multipath its covariance does not hold; 1 cm keeps the pinned double
+    differences within a fraction of a cycle (λ 19 cm)."""
+    handover_min_run_s: float = 5.0
+    """Shortest run of consecutive forward fixes (s) whose first epoch pins the backward pass (see
+    combined_handover). Why: an isolated fix has not been borne out by the epochs after it."""
     confirm_across_set_changes: bool = True
     """A first-fix candidate keeps its confirmation spans (first win, settled fraction; not its count of
     consecutive wins, which full_set_confirm_epochs reads of one and the same set) when the next winning set
@@ -304,6 +318,10 @@ class RtkOptions:
             raise ValueError(f"float_fix_gate_scale must be ≥ 1 (1 disables), not {self.float_fix_gate_scale}")
         if self.float_fix_gate_min_dd < 0:
             raise ValueError(f"float_fix_gate_min_dd must be ≥ 0, not {self.float_fix_gate_min_dd}")
+        if not (math.isfinite(self.handover_sigma_m) and self.handover_sigma_m > 0.0):
+            raise ValueError(f"handover_sigma_m must be a positive number of metres, not {self.handover_sigma_m}")
+        if not (math.isfinite(self.handover_min_run_s) and self.handover_min_run_s >= 0.0):
+            raise ValueError(f"handover_min_run_s must be ≥ 0 s, not {self.handover_min_run_s}")
 
 
 # TOML key → (field, converter). Keys carry RTKLIB-like names; units convert here, at the boundary.
@@ -332,6 +350,9 @@ TOML_KEYS: dict[str, tuple[str, Any]] = {
     "confirm_across_set_changes": ("confirm_across_set_changes", bool),
     "float_fix_gate_scale": ("float_fix_gate_scale", float),
     "float_fix_gate_min_dd": ("float_fix_gate_min_dd", int),
+    "combined_handover": ("combined_handover", bool),
+    "handover_sigma_m": ("handover_sigma_m", float),
+    "handover_min_run_s": ("handover_min_run_s", float),
     "standstill": ("standstill", bool),
     "standstill_window_s": ("standstill_window_s", float),
     "standstill_min_s": ("standstill_min_s", float),

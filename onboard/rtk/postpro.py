@@ -148,8 +148,8 @@ def reverse_slip_flags(epochs: Sequence[ObsEpoch]) -> list[ObsEpoch]:
 
 def run_filter(rover: Sequence[ObsEpoch], paired_base: Sequence[ObsEpoch | None], nav: NavData,
                base_pos_ecef_m: Arr | None, options: RtkOptions, backward: bool = False,
-               init_pos_ecef_m: Arr | None = None, progress: Callable[[int], None] | None = None
-               ) -> tuple[list[Solution], RunStats]:
+               init_pos_ecef_m: Arr | None = None, progress: Callable[[int], None] | None = None,
+               anchors: Sequence[Solution] | None = None) -> tuple[list[Solution], RunStats]:
     """One filter pass over all rover epochs (in time order, or reversed when `backward`).
 
     Returns the solutions in time order (index-aligned with `rover`) and run statistics. The known take-off
@@ -177,8 +177,11 @@ def run_filter(rover: Sequence[ObsEpoch], paired_base: Sequence[ObsEpoch | None]
     stats = RunStats(epochs=len(rover))
     for i in order:
         b = paired_base[i]
+        anchor = None
+        if anchors is not None and (a := anchors[i]) is not None:
+            anchor = (a.pos_ecef_m, a.cov_pos_m2 + np.eye(3) * options.handover_sigma_m**2)
         sol = rtk_pos(st, rover[i], b, nav, base_pos_ecef_m, (rcv_r[i], None if b is None else rcv_b[id(b)]),
-                      spps[i])
+                      spps[i], anchor)
         sols[i] = sol
         stats.fixed += sol.q == Q_FIX
         stats.float_ += sol.q == Q_FLOAT
@@ -189,6 +192,27 @@ def run_filter(rover: Sequence[ObsEpoch], paired_base: Sequence[ObsEpoch | None]
     stats.float_restarts = st.float_restarts
     stats.rejected_updates = st.rejected_updates
     return [s for s in sols if s is not None], stats
+
+
+def handover_anchors(sols: Sequence[Solution], min_run_s: float) -> list[Solution | None]:
+    """The forward pass's fixes (time order) that pin the backward pass, index-aligned (None elsewhere): the
+    first epoch of each run of consecutive fixes lasting `min_run_s` (s) or more. The backward pass meets it
+    after crossing the run on its own, so where it fixes the run by itself the two passes stay independent
+    checks of each other (combine); pinned there, it carries the fix on into the epochs before, where the
+    forward pass had none (RtkOptions.combined_handover)."""
+    out: list[Solution | None] = [None] * len(sols)
+    i = 0
+    while i < len(sols):
+        if sols[i].q != Q_FIX:
+            i += 1
+            continue
+        j = i
+        while j + 1 < len(sols) and sols[j + 1].q == Q_FIX:
+            j += 1
+        if abs(sols[j].time.diff_s(sols[i].time)) >= min_run_s:
+            out[i] = sols[i]
+        i = j + 1
+    return out
 
 
 def _smooth(a: Solution, b: Solution) -> tuple[Arr, Arr]:
@@ -249,7 +273,9 @@ def combine(fwd: Solution, bwd: Solution) -> Solution:
 def postprocess(rover: Sequence[ObsEpoch], base: Sequence[ObsEpoch], nav: NavData, base_pos_ecef_m: Arr | None,
                 options: RtkOptions, direction: str = "forward", init_pos_ecef_m: Arr | None = None,
                 progress: Callable[[int], None] | None = None) -> tuple[list[Solution], list[RunStats]]:
-    """Pair, then run forward, backward or both and combine. Rover epochs are processed in time order.
+    """Pair, then run forward, backward or both and combine (with options.combined_handover, the backward pass
+    pinned to the forward's fixes: see handover_anchors). Rover epochs are processed in time order. Returns
+    the solutions (time order) and the run statistics of each pass.
 
     Raises ValueError for a direction not in DIRECTIONS or a base/take-off position that is not three finite
     ECEF coordinates (m), and BasePositionRejected (a ValueError) for a base position the base's own
@@ -271,7 +297,8 @@ def postprocess(rover: Sequence[ObsEpoch], base: Sequence[ObsEpoch], nav: NavDat
         sols, st = run_filter(rov, paired, nav, base_pos_ecef_m, options, True, init_pos_ecef_m, progress)
         return sols, [st]
     f, sf = run_filter(rov, paired, nav, base_pos_ecef_m, options, False, init_pos_ecef_m, progress)
-    b, sb = run_filter(rov, paired, nav, base_pos_ecef_m, options, True, init_pos_ecef_m, progress)
+    b, sb = run_filter(rov, paired, nav, base_pos_ecef_m, options, True, init_pos_ecef_m, progress,
+                       handover_anchors(f, options.handover_min_run_s) if options.combined_handover else None)
     return [combine(x, y) for x, y in zip(f, b, strict=True)], [sf, sb]
 
 

@@ -243,12 +243,15 @@ class EpochContext:
     """The double-difference system of the last outlier pass."""
     ns: int
     """Satellites whose phase is used."""
+    anchored: bool
+    """The float was pinned this epoch to the other pass's fix (see _apply_anchor): its integers need no
+    confirmation."""
 
     __slots__ = (  # noqa: RUF023 (in the order of the stages that fill them)
         "time", "rov", "spp", "t_sol", "moving", "bas", "base_pos", "age_s", "dt_s", "baseline_m",
         "base_age_var_m2", "static_code_factor", "rng_b", "rng_r", "los_r", "el", "trop_r",
         "base_zb_cyc", "common", "half", "phase_ok", "code_ok", "use_phase", "x_prior", "p_prior", "dd",
-        "ns",
+        "ns", "anchored",
     )
 
     def __init__(self, time: GpsTime, rov: _Receiver, spp: SppSolution, t_sol: GpsTime) -> None:
@@ -279,6 +282,7 @@ class EpochContext:
         self.p_prior = _NO_F
         self.dd = None
         self.ns = 0
+        self.anchored = False
 
 
 @dataclass
@@ -1558,7 +1562,7 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
                 # measured u-blox-like code: the differential ionosphere biases its float for minutes
                 need_span += o.confirm_fix_span_per_km_s * ctx.baseline_m / 1000.0
             wins = st.pending_fix.wins
-            trusted = bool(np.count_nonzero(st.held_prns) or st.known_amb[idx].all()) \
+            trusted = bool(np.count_nonzero(st.held_prns) or st.known_amb[idx].all() or ctx.anchored) \
                 or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_fix_sats)
             # a survivor contradicting the full set's best integers on the satellites they share: two rival
             # integer hypotheses, the partial one winning only without the satellites that contradict it
@@ -1578,7 +1582,8 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
                 accept = span >= max(o.consistent_fix_span_s, need_span) or (
                     full and wins >= o.full_set_confirm_epochs and span >= need_span)
         elif ratio >= need_ratio:
-            accept = res.success_rate >= need_sr and (bool(st.held_prns.any() or st.known_amb[idx].all())
+            accept = res.success_rate >= need_sr and (bool(st.held_prns.any() or st.known_amb[idx].all()
+                                                           or ctx.anchored)
                                                      or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_fix_sats))
         if accept:
             ints = res.fixed[:, 0]
@@ -1649,14 +1654,16 @@ def _holdamb(st: RtkState, fix: _Fix, el: Arr) -> None:
 
 def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
             base_pos_ecef_m: Arr | None, receivers: tuple[_Receiver | None, _Receiver | None] = (None, None),
-            spp: SppSolution | None = None) -> Solution:
+            spp: SppSolution | None = None, anchor: tuple[Arr, Arr] | None = None) -> Solution:
     """Process one rover epoch (RTKLIB rtkpos()/relpos()); returns the epoch's Solution.
 
     `base` is the base epoch paired with this rover epoch (latest at or before it, see postpro.pair_epochs);
     `base_pos_ecef_m` the base antenna L1 phase centre. Without base data a single-point solution (Q=5);
     without a single-point solution none (Q=0, NaN position: see Solution).
     `receivers`: the rover's and the base epoch's slot data when already built (epoch_receivers), else None
-    (built here); `spp` the rover's single-point solution likewise (epoch_spp).
+    (built here); `spp` the rover's single-point solution likewise (epoch_spp). `anchor`: a fixed position of
+    this epoch from another pass over the same data (ECEF m, its covariance m²), which pins a float without a
+    held set (see _apply_anchor).
     """
     ctx = _start_epoch(st, rover, nav, receivers[0], spp)
     if ctx is None:
@@ -1676,9 +1683,24 @@ def rtk_pos(st: RtkState, rover: ObsEpoch, base: ObsEpoch | None, nav: NavData,
         return _solution(ctx.t_sol, st.x[:3], st.x[3:6], Q_FLOAT if ctx.ns >= 2 else Q_SINGLE, ctx.ns,
                          st.p[:3, :3], st.p[3:6, 3:6], ctx.age_s, 0.0)
     _check_hold(st, ctx)
+    if anchor is not None:
+        _apply_anchor(st, ctx, *anchor)
     fix = _resolve(st, ctx) if st.options.ar_mode != "off" else None
     _restart_stuck(st, ctx, fix)
     return _epoch_solution(st, ctx, fix)
+
+
+def _apply_anchor(st: RtkState, ctx: EpochContext, pos_ecef_m: Arr, cov_m2: Arr) -> None:
+    """Pin the float to another pass's fixed position of this epoch (a Kalman update of the position, ECEF m,
+    with covariance `cov_m2` m²) when nothing is held: the position determines the ambiguities through their
+    correlation with it, as a surveyed take-off point does, and the integers that follow need no confirmation
+    (ctx.anchored). A held set is left alone: it stays an independent check of the other pass."""
+    if st.held_prns.any() or not np.all(np.isfinite(pos_ecef_m)) or not np.all(np.isfinite(cov_m2)):
+        return
+    h = np.zeros((3, st.x.size))
+    h[:, :3] = np.eye(3)
+    st.x, st.p = _kf_update(st.x, st.p, pos_ecef_m - st.x[:3], h, cov_m2)
+    ctx.anchored = True
 
 
 def _broadcast(nav: NavData) -> BroadcastNavigation | None:

@@ -82,8 +82,18 @@ def test_systems_label_and_navsys_mask():
 def test_multi_constellation_runs_only_demo5_and_ours(tmp_path):
     ds = next(d for d in bench_rtk.DATASETS if "GR" in d.systems)
     cmds = bench_rtk.engine_commands(ds, "GR", tmp_path)
-    assert set(cmds) == {"demo5", "ours"}
-    assert "--systems=GR" in cmds["demo5"] and "--systems=GR" in cmds["ours"]
+    assert set(cmds) == {"demo5", "ours", "demo5-combined", "ours-combined"}
+    assert all("--systems=GR" in c for c in cmds.values())
     assert set(bench_rtk.engine_commands(ds, "G", tmp_path)) == set(bench_rtk.ENGINES)
     combined = bench_rtk.pseudo_ref_command(ds, tmp_path)
     assert "--combined" in combined and str(tmp_path / "demo5-combined.pos") == combined[4]
+    assert combined == cmds["demo5-combined"]
+
+
+def test_combined_runs_write_their_own_files_in_their_own_direction(tmp_path):
+    ds = next(d for d in bench_rtk.DATASETS if "GR" in d.systems)
+    cmds = bench_rtk.engine_commands(ds, "GR", tmp_path)
+    ours = cmds["ours-combined"]
+    assert "--direction=combined" in ours and ours[-2:] == ["-o", str(tmp_path / "ours-combined.pos")]
+    assert "--direction=combined" not in cmds["ours"] and "--combined" not in cmds["demo5"]
+    assert len({bench_rtk._out_file(c) for c in cmds.values()}) == 4

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -10,8 +12,8 @@ from onboard.formats.rinex_obs import read_rinex_obs
 from onboard.gnsstime import GpsTime
 from onboard.rtk.ephemeris import EphemerisStore
 from onboard.rtk.options import RtkOptions
-from onboard.rtk.postpro import combine, pair_epochs, postprocess
-from onboard.rtk.rtkpos import Nav
+from onboard.rtk.postpro import combine, handover_anchors, pair_epochs, postprocess
+from onboard.rtk.rtkpos import NX0, Nav, _apply_anchor, rtk_init
 from onboard.rtk.types import GNSS_GLONASS, GNSS_GPS, Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, ObsEpoch, Solution
 from tests.conftest import shared_file
 
@@ -149,3 +151,50 @@ def test_onboard_rtk_combined_end_to_end_on_geonet(tmp_path, capsys):
 def test_unknown_direction_is_refused():
     with pytest.raises(ValueError, match="direction"):
         postprocess([], [], Nav(EphemerisStore()), None, RtkOptions(), "sideways")
+
+
+def _run_of(q_by_s: str) -> list[Solution]:
+    """Solutions one second apart, fixed where the string has 'F', float where '.'."""
+    return [Solution(GpsTime(2021, round(k * 1e9)), np.full(3, float(k)), np.zeros(3),
+                     Q_FIX if c == "F" else Q_FLOAT, 8, np.eye(3) * 1e-6, np.eye(3), 1.0, 5.0)
+            for k, c in enumerate(q_by_s)]
+
+
+def test_handover_takes_the_first_epoch_of_each_long_run_of_fixes():
+    sols = _run_of("..FFFFFFF..F..FFF.FFFFFF")
+    anchors = handover_anchors(sols, 5.0)
+    assert [k for k, a in enumerate(anchors) if a is not None] == [2, 18]
+    assert all(anchors[k] is sols[k] for k in (2, 18))
+    # shorter runs hand over with a shorter minimum; an isolated fix only with none
+    assert [k for k, a in enumerate(handover_anchors(sols, 2.0)) if a is not None] == [2, 14, 18]
+    assert [k for k, a in enumerate(handover_anchors(sols, 0.0)) if a is not None] == [2, 11, 14, 18]
+    assert handover_anchors(_run_of("...."), 0.0) == [None] * 4
+    assert handover_anchors([], 5.0) == []
+
+
+@pytest.mark.parametrize("bad", [{"handover_sigma_m": 0.0}, {"handover_sigma_m": float("nan")},
+                                 {"handover_min_run_s": -1.0}, {"handover_min_run_s": float("inf")}])
+def test_handover_options_are_checked(bad):
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        RtkOptions(**bad)
+
+
+def test_an_anchor_pins_a_free_float_and_leaves_a_held_set_alone():
+    st = rtk_init(RtkOptions())
+    truth = np.array([-3976219.19, 3382371.61, 3652511.14])
+    st.x[:3] = truth + [0.8, -0.5, 0.3]
+    st.p[:3, :3] = np.eye(3) * 0.25
+    # one ambiguity correlated with the position's x: pinning the position moves it as well
+    st.x[NX0], st.p[NX0, NX0], st.p[0, NX0], st.p[NX0, 0] = 10.0, 1.0, 0.4, 0.4
+    ctx = SimpleNamespace(anchored=False)
+    _apply_anchor(st, ctx, truth, np.eye(3) * 1e-4)  # type: ignore[arg-type]
+    assert ctx.anchored and np.linalg.norm(st.x[:3] - truth) < 0.01 and np.all(np.diag(st.p[:3, :3]) < 1.1e-4)
+    assert st.x[NX0] == pytest.approx(10.0 - 0.4 / 0.25 * 0.8, abs=0.01)
+    x_held, p_held = st.x.copy(), st.p.copy()
+    st.held_prns[3] = True
+    ctx = SimpleNamespace(anchored=False)
+    _apply_anchor(st, ctx, truth + 1.0, np.eye(3) * 1e-4)  # type: ignore[arg-type]
+    assert not ctx.anchored and np.array_equal(st.x, x_held) and np.array_equal(st.p, p_held)
+    st.held_prns[:] = False
+    _apply_anchor(st, ctx, np.full(3, np.nan), np.eye(3) * 1e-4)  # type: ignore[arg-type]
+    assert not ctx.anchored and np.array_equal(st.x, x_held)

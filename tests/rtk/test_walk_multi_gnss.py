@@ -29,14 +29,15 @@ def _inputs(rover: Path, base: Path, nav: Path) -> RtkRunInputs:
     return load_rtk_inputs(rover, base, [nav], BASE_ECEF_M, systems="GR")
 
 
-def _run(options: RtkOptions, horizontal: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _run(options: RtkOptions, horizontal: bool = False, direction: str = "forward"
+         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(rover tow s, Q, 3D (or horizontal) distance (m) from the M8P's own fixed solution at that tow, NaN where
     it has none)."""
     run = _inputs(shared_file(M8P + "rinex/rover-20181004-1532.obs.gz"),
                   shared_file(M8P + "rinex/base-20181004-1452.rawx.obs.gz"),
                   shared_file(M8P + "rinex/rover-20181004-1532.nav.gz"))
     ref = np.loadtxt(shared_file(M8P + "ref/rover-20181004-1532.m8p_rtk_fixed.csv"), delimiter=",", skiprows=1)
-    sols, _ = postprocess(run.rover, run.base, run.nav, run.base_pos_ecef_m, options, "forward")
+    sols, _ = postprocess(run.rover, run.base, run.nav, run.base_pos_ecef_m, options, direction)
     tow = np.array([s.time.tow_ns / 1e9 for s in sols])
     q = np.array([s.q for s in sols])
     j = np.clip(np.searchsorted(ref[:, 0], tow), 1, len(ref) - 1)
@@ -94,3 +95,19 @@ def test_the_walkers_first_steps_are_no_slips_of_the_held_set() -> None:
     tow, q, d = _run(replace(OPTIONS, tdcp_slip_test=False))
     fixed = steps & (q == Q_FIX)
     assert np.nanmax(d[fixed]) > 0.1
+
+
+def test_combined_passes_hand_their_fixes_over() -> None:
+    """Post-processed forward and backward, each direction loses its hold at the walker's slips and confirms a
+    new first fix only minutes later, while the other direction crossed those minutes fixed. The backward pass
+    pinned to the forward fix where a run of forward fixes starts carries that fix on into the epochs before:
+    the walk combined fixes over 60 % of its epochs (61.2 %, from the first epoch on), against under 55 %
+    (53.2 %) when the passes are only combined as RTKLIB does, and no fixed epoch lies more than 10 cm from
+    the M8P's fixes horizontally."""
+    _tow, q, d = _run(OPTIONS, horizontal=True, direction="combined")
+    assert np.mean(q == Q_FIX) > 0.60
+    assert q[0] == Q_FIX
+    checked = (q == Q_FIX) & np.isfinite(d)
+    assert checked.sum() >= 400 and np.all(d[checked] < 0.10)
+    _, q_plain, _ = _run(replace(OPTIONS, combined_handover=False), direction="combined")
+    assert np.mean(q_plain == Q_FIX) < 0.55 and q_plain[0] != Q_FIX
