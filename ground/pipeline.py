@@ -38,6 +38,8 @@ MAX_DELAY_S = 5.0
 MAX_SIGMA_M = 10.0
 """Largest prior σ of the lever arm (m): a drone is smaller."""
 RTK_DIRECTIONS = ("forward", "backward", "combined")
+RTK_SYSTEMS_AUTO = "auto"
+"""RtkJobOptions.systems: every constellation both receivers observed (onboard.postpro.inputs.observed_systems)."""
 
 
 class RefusedByData(AdjustmentRefused):
@@ -301,7 +303,10 @@ class RtkJobOptions:
     `base_pos_ecef_m` the base antenna phase centre (ECEF m; None: the base file's header), `direction`
     forward/backward/combined, `elmask_deg` the elevation mask (°), `velocity` write velocity columns,
     `static_start` the rover stands still from its first epoch until take-off (the engine's static start:
-    no process noise until its Doppler speed exceeds the take-off speed; `onboard rtk --static-start`).
+    no process noise until its Doppler speed exceeds the take-off speed; `onboard rtk --static-start`),
+    `systems` the constellations as RINEX letters (`onboard rtk --systems`: "G" the LEA-6T's GPS, "GREJ" the
+    M8T's; GLONASS is fixed on the assumption of one receiver type at both ends), or "auto": every one both
+    receivers observed, as the drone's own real-time engine uses its receiver's.
     """
 
     base_pos_ecef_m: tuple[float, float, float] | None = None
@@ -309,8 +314,11 @@ class RtkJobOptions:
     elmask_deg: float = 15.0
     velocity: bool = True
     static_start: bool = False
+    systems: str = RTK_SYSTEMS_AUTO
 
     def __post_init__(self) -> None:
+        if self.systems != RTK_SYSTEMS_AUTO:
+            object.__setattr__(self, "systems", validate.gnss_systems(self.systems))
         if self.base_pos_ecef_m is not None:
             object.__setattr__(self, "base_pos_ecef_m",
                                validate.ecef_position_m(self.base_pos_ecef_m, name="base position"))
@@ -330,12 +338,15 @@ class RtkOutcome:
     n_single: int
     n_none: int
     header: tuple[str, ...] = field(default=())
+    systems: str = "G"
+    """The constellations the engine used (RINEX letters)."""
 
     def summary(self) -> str:
         """One line for a job's message."""
         n = max(self.n_epochs, 1)
         return (f"{self.n_epochs} epochs: fix {self.n_fix} ({100 * self.n_fix / n:.1f} %), float {self.n_float}, "
-                f"single {self.n_single}, no solution {self.n_none} (not written); written {self.output.name}")
+                f"single {self.n_single}, no solution {self.n_none} (not written); systems {self.systems}; "
+                f"written {self.output.name}")
 
 
 def run_rtk(inputs: RtkInputs, options: RtkJobOptions, output: Path) -> RtkOutcome:
@@ -348,19 +359,22 @@ def run_rtk(inputs: RtkInputs, options: RtkJobOptions, output: Path) -> RtkOutco
 
     from onboard.errors import DataRefused
     from onboard.formats.pos import is_position, write_pos
-    from onboard.postpro.inputs import load_rtk_inputs
+    from onboard.postpro.inputs import load_rtk_inputs, observed_systems
     from onboard.rtk.options import RtkOptions
     from onboard.rtk.postpro import postprocess
     from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE
 
     try:
         run = load_rtk_inputs(inputs.rover, inputs.base, list(inputs.nav), options.base_pos_ecef_m,
-                              base_pos_hint="base_pos X,Y,Z", nav_hint="a RINEX navigation file (role nav)")
+                              base_pos_hint="base_pos X,Y,Z", nav_hint="a RINEX navigation file (role nav)",
+                              systems="GRECJ" if options.systems == RTK_SYSTEMS_AUTO else options.systems)
     except DataRefused as exc:
         raise RefusedByData(str(exc)) from None
     rov_gps, bas_gps, nav, base_pos_arr = run.rover, run.base, run.nav, run.base_pos_ecef_m
-    rtk_options = replace(RtkOptions(), elmask_deg=options.elmask_deg, ar_elmask_deg=max(options.elmask_deg, 15.0),
-                          static_start=options.static_start)
+    # the engine leaves the constellations it is not given alone: the data read with all of them serve any choice
+    systems = observed_systems(run) if options.systems == RTK_SYSTEMS_AUTO else options.systems
+    rtk_options = replace(RtkOptions(), systems=systems, elmask_deg=options.elmask_deg,
+                          ar_elmask_deg=max(options.elmask_deg, 15.0), static_start=options.static_start)
     sols, _ = postprocess(rov_gps, bas_gps, nav, base_pos_arr, rtk_options, options.direction)
     good = [s for s in sols if is_position(s)]
     q = np.array([s.q for s in sols], dtype=int)
@@ -368,7 +382,8 @@ def run_rtk(inputs: RtkInputs, options: RtkJobOptions, output: Path) -> RtkOutco
         raise RefusedByData(f"no epoch of {len(sols)} has a position solution (wrong navigation day, base "
                             "position or base data?): no .pos written")
     bx, by, bz = (float(v) for v in base_pos_arr)
-    header = ("program   : directgeo ground rtk job (GPS L1)", f"inp file  : {inputs.rover.name}",
+    chosen = f"{systems} (auto: both receivers')" if options.systems == RTK_SYSTEMS_AUTO else systems
+    header = (f"program   : directgeo ground rtk job (L1, systems {chosen})", f"inp file  : {inputs.rover.name}",
               f"inp file  : {inputs.base.name}", *(f"inp file  : {n.name}" for n in inputs.nav),
               f"pos mode  : kinematic{' (static start)' if options.static_start else ''}",
               f"solution  : {options.direction}",
@@ -377,4 +392,4 @@ def run_rtk(inputs: RtkInputs, options: RtkJobOptions, output: Path) -> RtkOutco
     with atomic_output(output, "w") as fh:
         write_pos(fh, good, header, velocity=options.velocity)
     return RtkOutcome(output, len(sols), int(np.sum(q == Q_FIX)), int(np.sum(q == Q_FLOAT)),
-                      int(np.sum(q == Q_SINGLE)), len(sols) - len(good), header)
+                      int(np.sum(q == Q_SINGLE)), len(sols) - len(good), header, systems)

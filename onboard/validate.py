@@ -79,6 +79,20 @@ def elevation_mask_deg(value: Any, *, name: str | None = "elevation mask") -> fl
     return number(value, name=name, unit="°", minimum=0.0, maximum=90.0)
 
 
+GNSS_SYSTEM_LETTERS = "GRECJ"
+"""RINEX system letters the RTK engine uses: GPS, GLONASS, Galileo, BeiDou, QZSS."""
+
+
+def gnss_systems(value: Any, *, name: str | None = "systems") -> str:
+    """Constellations as RINEX letters of G R E C J (GPS, GLONASS, Galileo, BeiDou, QZSS), upper-cased, in the
+    given order, repeats dropped: e.g. 'gr' → 'GR'."""
+    letters = "".join(dict.fromkeys(value.strip().upper())) if isinstance(value, str) else ""
+    if not letters or set(letters) - set(GNSS_SYSTEM_LETTERS):
+        raise ValueError(f"{_label(name, value)}: must be letters of G, R, E, C, J (GPS, GLONASS, Galileo, BeiDou, "
+                         "QZSS)")
+    return letters
+
+
 def tcp_port(value: Any, *, name: str | None = "port") -> int:
     """A TCP/UDP port number 1–65535."""
     return integer(value, name=name, minimum=1, maximum=65535)

@@ -208,6 +208,9 @@ class RtkParams(BaseModel):
     static_start: bool = Field(default=False, description="the rover stands still from its first epoch until "
                                "take-off (a drone recording from power-on on the ground): held static until its "
                                "Doppler speed says it moves")
+    systems: str = Field(default="auto", description="constellations, RINEX letters: G GPS, R GLONASS, E Galileo, "
+                         "C BeiDou, J QZSS (e.g. 'G' for a LEA-6T, 'GREJ' for an M8T; leave R out unless the base "
+                         "receiver is of the rover's type), or 'auto' (default): every one both receivers observed")
 
     @model_validator(mode="after")
     def _check(self) -> RtkParams:
@@ -218,7 +221,7 @@ class RtkParams(BaseModel):
         """The pipeline's options of these parameters."""
         pos = None if self.base_pos is None else validate.ecef_position_m(self.base_pos, name="base_pos")
         return RtkJobOptions(base_pos_ecef_m=pos, direction=self.direction, elmask_deg=self.elmask_deg,
-                             static_start=self.static_start)
+                             static_start=self.static_start, systems=self.systems)
 
 
 class ErrorOut(BaseModel):

@@ -229,6 +229,20 @@ class RtkRunInputs:
     base_pos_source: str
 
 
+def observed_systems(run: RtkRunInputs) -> str:
+    """The constellations (RINEX letters in "GRECJ" order, for RtkOptions.systems) that both receivers observed
+    and whose broadcast ephemerides `run` holds, GPS always (the engine needs it): what `run`, read with every
+    constellation, can use."""
+    from onboard.rtk.gnss import SYSTEMS_BY_LETTER
+
+    def seen(epochs: Sequence[ObsEpoch]) -> set[int]:
+        return set().union(*(e.systems() for e in epochs))
+
+    both = seen(run.rover) & seen(run.base)
+    with_eph = {g for g, _ in run.nav.broadcast.satellites()} if run.nav.broadcast is not None else set()
+    return "G" + "".join(c for c in "RECJ" if SYSTEMS_BY_LETTER[c].gnss_id in both & with_eph)
+
+
 def load_rtk_inputs(rover_path: str | Path, base_path: str | Path, nav_paths: Sequence[str | Path],
                     base_pos_ecef_m: Sequence[float] | None = None, *, base_pos_hint: str = "--base-pos X,Y,Z",
                     nav_hint: str = "--nav FILE (RINEX navigation)", systems: str = "G") -> RtkRunInputs:

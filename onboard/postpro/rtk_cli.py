@@ -33,7 +33,7 @@ from onboard.postpro.inputs import load_rtk_inputs
 from onboard.rtk.options import AR_MODES, RtkOptions
 from onboard.rtk.postpro import DIRECTIONS, postprocess
 from onboard.rtk.types import Q_FIX, Q_FLOAT, Q_SINGLE
-from onboard.validate import arg_type, ecef_position_m, elevation_mask_deg
+from onboard.validate import arg_type, ecef_position_m, elevation_mask_deg, gnss_systems
 
 log = logging.getLogger(__name__)
 
@@ -78,7 +78,7 @@ def add_rtk_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
     p.add_argument("--init-pos", nargs="+", action=xyz, metavar="X,Y,Z",
                    help="surveyed take-off antenna position, ECEF metres (same forms as --base-pos); implies "
                         "--static-start")
-    p.add_argument("--systems", type=_systems, default="G", metavar="LETTERS",
+    p.add_argument("--systems", type=arg_type(gnss_systems), default="G", metavar="LETTERS",
                    help="constellations used, RINEX letters: G GPS, R GLONASS, E Galileo, C BeiDou, J QZSS (default "
                         "G; e.g. GR for an M8P, GREJ for an M8T); read from the observation and navigation files")
     p.add_argument("--ar-mode", choices=[m for m in AR_MODES if m != "off"], default="fix-and-hold",
@@ -105,15 +105,6 @@ def _elmask_deg(text: str) -> float:
     if value >= 90.0:
         raise argparse.ArgumentTypeError(f"{text}: must be below 90° (a mask at the zenith leaves no satellite)")
     return value
-
-
-def _systems(text: str) -> str:
-    """argparse type of --systems: RINEX system letters (upper-cased, repeats dropped), G R E C J only."""
-    letters = "".join(dict.fromkeys(text.strip().upper()))
-    bad = sorted(set(letters) - set("GRECJ"))
-    if not letters or bad:
-        raise argparse.ArgumentTypeError(f"{text!r}: letters of G, R, E, C, J (GPS, GLONASS, Galileo, BeiDou, QZSS)")
-    return letters
 
 
 def rtk_main(args: argparse.Namespace) -> int:

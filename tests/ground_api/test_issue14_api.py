@@ -61,6 +61,7 @@ def test_job_parameters_are_checked_at_submission(client: TestClient) -> None:
         ({"kind": "rtk", "params": {"direction": "sideways"}}, "direction"),
         ({"kind": "rtk", "params": {"base_pos": "nan,nan,nan"}}, "must be a finite number"),
         ({"kind": "rtk", "params": {"base_pos": [0, 0, 0]}}, "near the Earth's surface"),
+        ({"kind": "rtk", "params": {"systems": "GX"}}, "letters of G, R, E, C, J"),
         ({"kind": "adjust", "params": {"lever_arm": [float("nan"), 0, 0]}}, "must be a finite number"),
         ({"kind": "adjust", "params": {"delay": float("inf")}}, "must be a finite number"),
         ({"kind": "adjust", "params": {"capture_times": {"a.jpg": "yesterday"}}}, "capture_times"),

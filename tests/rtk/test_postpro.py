@@ -198,3 +198,17 @@ def test_an_anchor_pins_a_free_float_and_leaves_a_held_set_alone():
     st.held_prns[:] = False
     _apply_anchor(st, ctx, np.full(3, np.nan), np.eye(3) * 1e-4)  # type: ignore[arg-type]
     assert not ctx.anchored and np.array_equal(st.x, x_held)
+
+
+def test_observed_systems_are_those_of_both_receivers_with_ephemerides():
+    from onboard.postpro.inputs import RtkRunInputs, observed_systems
+    from onboard.rtk.types import GNSS_GALILEO, GNSS_QZSS
+
+    rover = [_epoch(100.0), _epoch(101.0, GNSS_GLONASS), _epoch(102.0, GNSS_GALILEO), _epoch(103.0, GNSS_QZSS)]
+    base = [_epoch(100.0), _epoch(100.0, GNSS_GLONASS), _epoch(101.0, GNSS_QZSS)]
+    eph = SimpleNamespace(satellites=lambda: [(GNSS_GPS, 5), (GNSS_GLONASS, 5), (GNSS_GALILEO, 5)])
+    run = RtkRunInputs(rover, base, SimpleNamespace(broadcast=eph), np.zeros(3), "given")  # type: ignore[arg-type]
+    # Galileo: the base has none; QZSS: no ephemeris
+    assert observed_systems(run) == "GR"
+    run = RtkRunInputs(rover[:1], base, SimpleNamespace(broadcast=None), np.zeros(3), "given")  # type: ignore[arg-type]
+    assert observed_systems(run) == "G"
