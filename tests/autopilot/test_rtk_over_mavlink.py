@@ -155,12 +155,15 @@ def test_camera_cross_check_counts_what_the_simulated_camera_did(
     standin = ctx["standin"]["camera"]
     # every trigger reported (the last one may still wait out its latency when the stand-in stops)
     assert standin["triggers"] - 1 <= standin["feedback_sent"] <= standin["triggers"] and standin["triggers"] > 40
-    # every trigger pulse the recorder timed (TIM-TM2 channel 1) has its camera check, the last ones before
-    # the stop included (the autopilot's report of a trigger comes before the receiver's TIM-TM2 of it)
+    # every trigger pulse the recorder timed (TIM-TM2 channel 1) has its camera check, the ones before the stop
+    # included; the very last may not: the recorder is stopped mid-mission here, and the receiver's TIM-TM2 of
+    # the last trigger can beat the autopilot's CAMERA_FEEDBACK of it to the stop (a CI run: 111 triggers, 110
+    # feedbacks sent, 110 pulses timed, 109 checks logged, the unchecked pulse the last, 2 s after the last check)
     _marks, pairings, _other = parse_records(read_events(rover / "events.jsonl").records)
     pulses = [p.pulse_time.total_ns for p in pairings if p.pulse_time is not None]
     shots = [GpsTime(c["shot_week"], c["shot_tow_ns"]).total_ns for c in checks if c["shot_week"] is not None]
-    assert len(pulses) > 40 and all(min(abs(s - p) for s in shots) < 10_000_000 for p in pulses)
+    unchecked = [p for p in pulses if min(abs(s - p) for s in shots) >= 10_000_000]
+    assert len(pulses) > 40 and unchecked in ([], pulses[-1:]), (len(pulses), unchecked)
     assert counts["disagree_with_truth"] == 0 and counts["no_such_pulse"] == 0, counts
     assert counts["flashes_without_shot"] == 0, counts
     assert counts["shots_without_flash"] == counts["simulated_missed_flashes"] >= 2, counts
