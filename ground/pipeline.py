@@ -367,7 +367,8 @@ def run_rtk(inputs: RtkInputs, options: RtkJobOptions, output: Path) -> RtkOutco
     try:
         run = load_rtk_inputs(inputs.rover, inputs.base, list(inputs.nav), options.base_pos_ecef_m,
                               base_pos_hint="base_pos X,Y,Z", nav_hint="a RINEX navigation file (role nav)",
-                              systems="GRECJ" if options.systems == RTK_SYSTEMS_AUTO else options.systems)
+                              systems=validate.GNSS_SYSTEM_LETTERS if options.systems == RTK_SYSTEMS_AUTO
+                              else options.systems)
     except DataRefused as exc:
         raise RefusedByData(str(exc)) from None
     rov_gps, bas_gps, nav, base_pos_arr = run.rover, run.base, run.nav, run.base_pos_ecef_m

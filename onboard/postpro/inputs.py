@@ -234,13 +234,14 @@ def observed_systems(run: RtkRunInputs) -> str:
     and whose broadcast ephemerides `run` holds, GPS always (the engine needs it): what `run`, read with every
     constellation, can use."""
     from onboard.rtk.gnss import SYSTEMS_BY_LETTER
+    from onboard.validate import GNSS_SYSTEM_LETTERS
 
     def seen(epochs: Sequence[ObsEpoch]) -> set[int]:
         return set().union(*(e.systems() for e in epochs))
 
     both = seen(run.rover) & seen(run.base)
     with_eph = {g for g, _ in run.nav.broadcast.satellites()} if run.nav.broadcast is not None else set()
-    return "G" + "".join(c for c in "RECJ" if SYSTEMS_BY_LETTER[c].gnss_id in both & with_eph)
+    return "G" + "".join(c for c in GNSS_SYSTEM_LETTERS if c != "G" and SYSTEMS_BY_LETTER[c].gnss_id in both & with_eph)
 
 
 def load_rtk_inputs(rover_path: str | Path, base_path: str | Path, nav_paths: Sequence[str | Path],

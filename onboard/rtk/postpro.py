@@ -154,7 +154,8 @@ def run_filter(rover: Sequence[ObsEpoch], paired_base: Sequence[ObsEpoch | None]
 
     Returns the solutions in time order (index-aligned with `rover`) and run statistics. The known take-off
     point and the static start describe the first epoch in time: a backward pass starts at the last one, so it
-    gets neither.
+    gets neither. `anchors` (index-aligned with `rover`, None where there is none): another pass's fixes that pin
+    this one (handover_anchors), their covariance widened by options.handover_sigma_m.
     """
     st = rtk_init(replace(options, static_start=False), None) if backward else rtk_init(options, init_pos_ecef_m)
     order = range(len(rover) - 1, -1, -1) if backward else range(len(rover))
