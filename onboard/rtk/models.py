@@ -157,6 +157,39 @@ class CodeScatter:
         self.count[upd] += 1.0
 
 
+@dataclass
+class ChannelCodeBias:
+    """Per-slot single-difference (rover − base) code bias (m) of GLONASS's FDMA channels, learned at fixed
+    epochs, where the position is known to centimetres and a channel's code residual is its bias plus noise.
+
+    Two receivers' (and antennas') code group delays differ from one FDMA frequency to the next by up to
+    metres, even between two units of one receiver type; the receiver clock's part common to the channels
+    cancels in the double differences, so each bias is kept relative to the median over the channels of an
+    epoch (a datum the calibrated channels hold steady as satellites come and go). Running mean over at most
+    `window` samples per slot. Pure."""
+
+    bias_m: Arr
+    count: npt.NDArray[np.int64]
+
+    @classmethod
+    def empty(cls, n: int) -> ChannelCodeBias:
+        return cls(np.zeros(n), np.zeros(n, np.int64))
+
+    def learn(self, resid_m: Arr, use: npt.NDArray[np.bool_], window: int) -> None:
+        """Add one fixed epoch: `resid_m` SD code − modelled SD range at the fixed position per slot (m),
+        `use` the slots to learn from (at least 3, else nothing is learned)."""
+        if np.count_nonzero(use) < 3:
+            return
+        common = median_of_few(resid_m[use] - self.bias_m[use])
+        n = np.minimum(self.count[use] + 1, window)
+        self.bias_m[use] += (resid_m[use] - common - self.bias_m[use]) / n
+        self.count[use] += 1
+
+    def correction_m(self, min_count: int) -> Arr:
+        """The bias to take off each slot's SD code (m): 0 for a slot learned at fewer than `min_count` epochs."""
+        return np.where(self.count >= min_count, self.bias_m, 0.0)
+
+
 def median_of_few(a: Arr) -> float:
     """np.median of a short, finite, non-empty 1-D array, to the bit (mean of the middle two when even),
     without its generic-reduction overhead and its import of numpy.ma (per-epoch hot paths)."""

@@ -152,6 +152,19 @@ class RtkOptions:
     disables), i.e. the code variance is kept at ≥ 10× the measured white scatter. Why: code_phase_ratio is set
     for u-blox code; geodetic receivers scatter an order of magnitude less, and their float should lean on
     their code accordingly, while multipath correlated over tens of seconds must not average out."""
+    code_cn0_ref_dbhz: float = 42.0
+    """C/N0 (dB-Hz) below which a signal's code variance grows as 10^((this − C/N0)/10), on each receiver's
+    side of the single difference, for code measured u-blox-like (code_variance_scale ≥ 0.5; 0 disables;
+    an unknown C/N0 counts as strong). Why: under trees the weak, diffracted signals carry most of the code
+    error, and it is biased (the float followed it metres up), so it does not average out."""
+    glonass_code_bias_min_epochs: int = 60
+    """Fixed epochs after which a GLONASS channel's learned code bias (rover − base, relative to the other
+    channels) is taken off its code (0 disables learning and use). Why: the two receivers' code delays differ
+    by channel by metres (M8P walk: R08 −4.1 m, R09/R10 −1.2 m); the float, held on them, stays metres off
+    once a hold is lost."""
+    glonass_code_bias_window_epochs: int = 300
+    """Samples in the running mean of each channel's bias (it follows a slow change over this many fixed
+    epochs)."""
     code_variance_min_scale: float = 1.0 / 9.0
     """Floor of that variance factor: the code keeps at least (code_phase_ratio / 3) × the phase σ
     (RTKLIB 2.4.3's ratio of 100), since its multipath is correlated in time and does not average out."""
@@ -322,6 +335,11 @@ class RtkOptions:
             raise ValueError(f"handover_sigma_m must be a positive number of metres, not {self.handover_sigma_m}")
         if not (math.isfinite(self.handover_min_run_s) and self.handover_min_run_s >= 0.0):
             raise ValueError(f"handover_min_run_s must be ≥ 0 s, not {self.handover_min_run_s}")
+        if self.glonass_code_bias_min_epochs < 0 or self.glonass_code_bias_window_epochs < 1:
+            raise ValueError("glonass_code_bias_min_epochs must be ≥ 0 (0 disables) and "
+                             "glonass_code_bias_window_epochs ≥ 1")
+        if not 0.0 <= self.code_cn0_ref_dbhz <= 70.0:  # also refuses NaN
+            raise ValueError(f"code_cn0_ref_dbhz must be 0 (off) to 70 dB-Hz, not {self.code_cn0_ref_dbhz}")
 
 
 # TOML key → (field, converter). Keys carry RTKLIB-like names; units convert here, at the boundary.
@@ -338,6 +356,9 @@ TOML_KEYS: dict[str, tuple[str, Any]] = {
     "phase_sigma_mm": ("phase_sigma_a_m", lambda v: float(v) / 1000.0),
     "phase_sigma_el_mm": ("phase_sigma_b_m", lambda v: float(v) / 1000.0),
     "code_phase_ratio": ("code_phase_ratio", float),
+    "code_cn0_ref_dbhz": ("code_cn0_ref_dbhz", float),
+    "glonass_code_bias_min_epochs": ("glonass_code_bias_min_epochs", int),
+    "glonass_code_bias_window_epochs": ("glonass_code_bias_window_epochs", int),
     "accel_h_sigma_m_s2": ("accel_h_sigma_m_s2", float),
     "accel_v_sigma_m_s2": ("accel_v_sigma_m_s2", float),
     "max_age_s": ("max_age_s", float),

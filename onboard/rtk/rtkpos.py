@@ -34,7 +34,14 @@ from onboard.rtk.ephemeris import EphemerisStore, SatState, geometric_range, sat
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.linsolve import LinAlgError, solve
 from onboard.rtk.mlambda import LambdaError, LambdaResult, mlambda
-from onboard.rtk.models import CodeScatter, iono_mapping, median_of_few, phase_variance_m2, saastamoinen_m
+from onboard.rtk.models import (
+    ChannelCodeBias,
+    CodeScatter,
+    iono_mapping,
+    median_of_few,
+    phase_variance_m2,
+    saastamoinen_m,
+)
 from onboard.rtk.navstore import BroadcastNavigation
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.pntpos import SppSolution, _norm, pntpos, pntpos_batch, sat_az_el
@@ -154,6 +161,8 @@ class _Receiver:
     has: npt.NDArray[np.bool_]
     lam: Arr = field(default_factory=lambda: _LAM_GPS)
     """Carrier wavelength per slot (m): the unit of its phase (GLONASS: its frequency channel's)."""
+    cn0_dbhz: Arr | None = None
+    """C/N0 per slot (dB-Hz; NaN, or 0 as RTCM MSM sends it, where unknown), None when the source has none."""
     memo: dict[tuple[object, ...], tuple[Arr, ...]] = field(default_factory=dict)
     """What was already computed for this epoch, by (what, its inputs): geometry by receiver position bytes (the
     base epoch serves several rover epochs from the same known position, and the rover's is asked for again at
@@ -351,6 +360,9 @@ class RtkState:
     code_scatter: CodeScatter = field(default_factory=CodeScatter)
     code_var_scale: float = 1.0
     """Factor on the modelled code variance from the measured code scatter (see code_variance_scale)."""
+    channel_code_bias: ChannelCodeBias | None = None
+    """The GLONASS channels' SD code biases learned at fixed epochs (glonass_code_bias_min_epochs), None
+    without GLONASS or with the learning off."""
     standstill: StandstillMonitor = field(default_factory=StandstillMonitor)
     iono_on: bool = False
     """The per-satellite ionosphere states are in use (see _udion)."""
@@ -383,22 +395,25 @@ def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkStat
             setattr(st, name, np.full(n, old[0], old.dtype))
         st.prev_sat_pos_r = np.zeros((n, 3))
         st.code_scatter = CodeScatter(mean_m=np.full(n, np.nan), count=np.zeros(n))
+        if "R" in layout.systems and options.glonass_code_bias_min_epochs > 0:
+            st.channel_code_bias = ChannelCodeBias.empty(n)
     st.static = options.static_start
     st.init_pos_ecef_m = None if init_pos_ecef_m is None else np.asarray(init_pos_ecef_m, float)
     return st
 
 
-def _slot_arrays(epochs: list[ObsEpoch]) -> tuple[Arr, Arr, Arr, npt.NDArray[np.uint8]]:
-    """The epochs' GPS pseudoranges (m), phases (cycles), Dopplers (Hz) (NaN where absent) and LLI bits (0
-    where absent) on the 32 PRN slots, one row per epoch, scattered in one assignment each."""
+def _slot_arrays(epochs: list[ObsEpoch]) -> tuple[Arr, Arr, Arr, npt.NDArray[np.uint8], Arr]:
+    """The epochs' GPS pseudoranges (m), phases (cycles), Dopplers (Hz) (NaN where absent), LLI bits (0
+    where absent) and C/N0 (dB-Hz, NaN where absent) on the 32 PRN slots, one row per epoch, scattered in one
+    assignment each."""
     gps = [e.gps_only() for e in epochs]
     shape = (len(gps), NSAT)
-    pr, cp, dop = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
+    pr, cp, dop, cn0 = (np.full(shape, np.nan) for _ in range(4))
     lli = np.zeros(shape, np.uint8)
     if len(gps) == 1:  # one live epoch: no concatenation
         g = gps[0]
         at: tuple[npt.NDArray[np.int64] | int, npt.NDArray[np.int64]] = (0, g.sv_id.astype(int) - 1)
-        pr[at], cp[at], dop[at], lli[at] = g.pr_m, g.cp_cyc, g.dop_hz, g.lli
+        pr[at], cp[at], dop[at], lli[at], cn0[at] = g.pr_m, g.cp_cyc, g.dop_hz, g.lli, g.cn0_dbhz
     elif gps:
         rows = np.repeat(np.arange(len(gps)), [len(g) for g in gps])
         at = (rows, np.concatenate([g.sv_id for g in gps]).astype(int) - 1)
@@ -406,7 +421,8 @@ def _slot_arrays(epochs: list[ObsEpoch]) -> tuple[Arr, Arr, Arr, npt.NDArray[np.
         cp[at] = np.concatenate([g.cp_cyc for g in gps])
         dop[at] = np.concatenate([g.dop_hz for g in gps])
         lli[at] = np.concatenate([g.lli for g in gps])
-    return pr, cp, dop, lli
+        cn0[at] = np.concatenate([g.cn0_dbhz for g in gps])
+    return pr, cp, dop, lli, cn0
 
 
 def epoch_receivers(epochs: list[ObsEpoch], store: EphemerisStore, pos_ecef_m: Arr | None = None,
@@ -421,10 +437,10 @@ def epoch_receivers(epochs: list[ObsEpoch], store: EphemerisStore, pos_ecef_m: A
     if not epochs:
         return []
     if layout.gps_only:
-        pr, cp, dop, lli = _slot_arrays(epochs)
+        pr, cp, dop, lli, cn0 = _slot_arrays(epochs)
         sats = satellite_states_batch(store, _PRNS, [e.time.total_ns for e in epochs], pr)
         has = np.isfinite(pr) & np.array([s.ok for s in sats])
-        out = [_Receiver(pr[k], cp[k], dop[k], lli[k], sats[k], has[k]) for k in range(len(epochs))]
+        out = [_Receiver(pr[k], cp[k], dop[k], lli[k], sats[k], has[k], cn0_dbhz=cn0[k]) for k in range(len(epochs))]
     else:
         out = _layout_receivers(epochs, store, layout, broadcast)
     if pos_ecef_m is not None:
@@ -471,7 +487,7 @@ def _layout_receivers(epochs: list[ObsEpoch], store: EphemerisStore, layout: Slo
                       broadcast: BroadcastNavigation | None) -> list[_Receiver]:
     """epoch_receivers on a multi-constellation layout: slot arrays, satellite states, the slots' wavelengths
     (a GLONASS slot without a known frequency channel has no usable data)."""
-    pr, cp, dop, lli = slot_arrays(layout, epochs)
+    pr, cp, dop, lli, cn0 = slot_arrays(layout, epochs)
     sats = satellite_states_layout(layout, store, broadcast, [e.time.total_ns for e in epochs], pr)
     # a satellite's frequency channel does not change over a session: one wavelength array for all epochs
     lam = wavelengths(layout, epochs, broadcast)
@@ -479,7 +495,7 @@ def _layout_receivers(epochs: list[ObsEpoch], store: EphemerisStore, layout: Slo
     out = []
     for k in range(len(epochs)):
         has = np.isfinite(pr[k]) & sats[k].ok & np.isfinite(lam)
-        out.append(_Receiver(pr[k], cp[k], dop[k], lli[k], sats[k], has, lam))
+        out.append(_Receiver(pr[k], cp[k], dop[k], lli[k], sats[k], has, lam, cn0[k]))
     return out
 
 
@@ -489,10 +505,10 @@ def _slots(obs: ObsEpoch, store: EphemerisStore, layout: SlotLayout = GPS_LAYOUT
     real-time path's epoch_receivers of one epoch."""
     if not layout.gps_only:
         return _layout_receivers([obs], store, layout, broadcast)[0]
-    pr, cp, dop, lli = (a[0] for a in _slot_arrays([obs]))
+    pr, cp, dop, lli, cn0 = (a[0] for a in _slot_arrays([obs]))
     # straight onto the 32 slots: a batch of one leaves slots without a pseudorange zero and not ok
     sats = satellite_states_batch(store, _PRNS, [obs.time.total_ns], pr.reshape(1, NSAT))[0]
-    return _Receiver(pr, cp, dop, lli, sats, np.isfinite(pr) & sats.ok)
+    return _Receiver(pr, cp, dop, lli, sats, np.isfinite(pr) & sats.ok, cn0_dbhz=cn0)
 
 
 def _geometry(rcv: _Receiver, pos_ecef_m: Arr) -> tuple[Arr, Arr]:
@@ -854,7 +870,7 @@ def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver
     step = slope * (age_s - o.base_extrapolate_min_age_s)
     # the history is in GPS L1 cycles (see _udbias_epoch): each slot's own
     cp[ok] += step if st.layout.gps_only else step / lambda_ratio_to_gps(base.lam)[ok]
-    return _Receiver(base.pr_m, cp, base.dop_hz, base.lli, base.sats, base.has, base.lam)
+    return _Receiver(base.pr_m, cp, base.dop_hz, base.lli, base.sats, base.has, base.lam, base.cn0_dbhz)
 
 
 def _correction_rate(o: RtkOptions, hist: list[tuple[GpsTime, Arr]], base_cp_cyc: Arr) -> tuple[Arr, ...]:
@@ -1172,6 +1188,29 @@ def _var_sd_m2(o: RtkOptions, rov: _Receiver, el: Arr) -> Arr:
     return hit[0]
 
 
+def _code_cn0_factor(cn0_ref_dbhz: float, rov: _Receiver, bas: _Receiver) -> Arr:
+    """Factor on each slot's SD code variance for a weak signal: the mean over the two receivers of
+    max(1, 10^((cn0_ref_dbhz − C/N0)/10)), 1 for a receiver whose C/N0 is unknown (code_cn0_ref_dbhz).
+    Memoised on the rover epoch for its base epoch. Read-only."""
+    key = ("cn0", id(bas), cn0_ref_dbhz)
+    hit = rov.memo.get(key)
+    if hit is None:
+        f = (_cn0_inflation(cn0_ref_dbhz, rov.cn0_dbhz, rov.pr_m.shape[0])
+             + _cn0_inflation(cn0_ref_dbhz, bas.cn0_dbhz, rov.pr_m.shape[0])) / 2.0
+        f.flags.writeable = False
+        hit = rov.memo[key] = (f,)
+    return hit[0]
+
+
+def _cn0_inflation(cn0_ref_dbhz: float, cn0_dbhz: Arr | None, n: int) -> Arr:
+    """max(1, 10^((cn0_ref_dbhz − C/N0)/10)) per slot; 1 where the C/N0 is unknown (NaN, ≤ 0, or no array)."""
+    if cn0_dbhz is None:
+        return np.ones(n)
+    known = np.isfinite(cn0_dbhz) & (cn0_dbhz > 0.0)
+    return np.where(known, 10.0 ** (np.maximum(cn0_ref_dbhz - np.where(known, cn0_dbhz, cn0_ref_dbhz), 0.0) / 10.0),
+                    1.0)
+
+
 def _reference_slot(idx: npt.NDArray[np.int64], el: Arr) -> int:
     """The reference satellite of a double-difference set among slots `idx`: the highest (elevation `el`,
     rad), as RTKLIB's. One place: the filter's rows, the residual checks and partial fixing must agree on it."""
@@ -1281,9 +1320,13 @@ def _ddres(st: RtkState, ctx: EpochContext, x: Arr, phase_ok: npt.NDArray[np.boo
             var = var_sd
         else:
             z = sd_code - drng
+            if st.channel_code_bias is not None:
+                z = z - st.channel_code_bias.correction_m(o.glonass_code_bias_min_epochs)
             if ion is not None:
                 z = z - ion[0]  # and delays the code
             var = var_sd * o.code_phase_ratio**2 * st.code_var_scale * ctx.static_code_factor
+            if o.code_cn0_ref_dbhz > 0.0 and _ublox_code(st):
+                var = var * _code_cn0_factor(o.code_cn0_ref_dbhz, rov, base)
         groups.append((kind, refs, others, z, var))
     if with_doppler:
         idx = (code_ok & np.isfinite(rov.dop_hz)).nonzero()[0]
@@ -2021,6 +2064,25 @@ def _restart_stuck(st: RtkState, ctx: EpochContext, fix: _Fix | None) -> None:
         st.float_restarts += 1
 
 
+def _learn_channel_code_bias(st: RtkState, ctx: EpochContext, pos_ecef_m: Arr) -> None:
+    """One fixed epoch's GLONASS SD code residuals at the fixed position (ECEF m) into the channel biases:
+    the strong signals' (C/N0 at or above code_cn0_ref_dbhz where known), whose code multipath is small next
+    to the biases."""
+    assert st.channel_code_bias is not None and ctx.bas is not None
+    o = st.options
+    x = st.x.copy()
+    x[:3] = pos_ecef_m
+    drng, _, _, ion = _sd_terms(st, ctx, x)
+    resid = _sd_obs_m(ctx.rov, ctx.bas)[1] - drng
+    if ion is not None:
+        resid = resid - ion[0]
+    use = ctx.code_ok & (st.layout.group == st.layout.systems.index("R")) & np.isfinite(resid)
+    cn0 = ctx.rov.cn0_dbhz
+    if o.code_cn0_ref_dbhz > 0.0 and cn0 is not None:
+        use &= ~(cn0 < o.code_cn0_ref_dbhz)  # unknown (NaN) counts as strong
+    st.channel_code_bias.learn(resid, use, o.glonass_code_bias_window_epochs)
+
+
 def _epoch_solution(st: RtkState, ctx: EpochContext, fix: _Fix | None) -> Solution:
     """The epoch's solution: the float one without a fix; else the fixed one (reported float when its σ exceeds
     max_fix_sigma_m), then the hold (holdamb) or, instantaneous AR, the ambiguities forgotten."""
@@ -2037,6 +2099,8 @@ def _epoch_solution(st: RtkState, ctx: EpochContext, fix: _Fix | None) -> Soluti
     weak = math.sqrt(max(float(fix.cov.trace()), 0.0)) > o.max_fix_sigma_m
     sol = _solution(ctx.t_sol, fix.pos, st.x[3:6], Q_FLOAT if weak else Q_FIX, ctx.ns, fix.cov, st.p[3:6, 3:6],
                     ctx.age_s, fix.ratio)
+    if st.channel_code_bias is not None and not weak and st.fix_count >= o.min_hold_epochs:
+        _learn_channel_code_bias(st, ctx, fix.pos)
     if o.ar_mode == "fix-and-hold" and st.fix_count >= o.min_hold_epochs:
         _holdamb(st, fix, ctx.el)
     elif o.ar_mode == "instantaneous":

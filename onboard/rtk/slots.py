@@ -113,14 +113,14 @@ def wavelengths(layout: SlotLayout, epochs: list[ObsEpoch], nav: BroadcastNaviga
     return lam
 
 
-def slot_arrays(layout: SlotLayout, epochs: list[ObsEpoch]) -> tuple[Arr, Arr, Arr, npt.NDArray[np.uint8]]:
-    """The epochs' pseudoranges (m), phases (cycles), Dopplers (Hz) (NaN where absent) and LLI bits (0 where
-    absent) on the layout's slots, one row per epoch."""
+def slot_arrays(layout: SlotLayout, epochs: list[ObsEpoch]) -> tuple[Arr, Arr, Arr, npt.NDArray[np.uint8], Arr]:
+    """The epochs' pseudoranges (m), phases (cycles), Dopplers (Hz) (NaN where absent), LLI bits (0 where
+    absent) and C/N0 (dB-Hz, NaN where absent or unknown) on the layout's slots, one row per epoch."""
     shape = (len(epochs), layout.n)
-    pr, cp, dop = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
+    pr, cp, dop, cn0 = (np.full(shape, np.nan) for _ in range(4))
     lli = np.zeros(shape, np.uint8)
     if not epochs:
-        return pr, cp, dop, lli
+        return pr, cp, dop, lli, cn0
     # every epoch's entries in one scatter (each epoch's in its own order, as one scatter per epoch)
     s = layout.slots_of(np.concatenate([e.gnss_id for e in epochs]), np.concatenate([e.sv_id for e in epochs]))
     m = s >= 0
@@ -129,7 +129,8 @@ def slot_arrays(layout: SlotLayout, epochs: list[ObsEpoch]) -> tuple[Arr, Arr, A
     cp[at] = np.concatenate([e.cp_cyc for e in epochs])[m]
     dop[at] = np.concatenate([e.dop_hz for e in epochs])[m]
     lli[at] = np.concatenate([e.lli for e in epochs])[m]
-    return pr, cp, dop, lli
+    cn0[at] = np.concatenate([e.cn0_dbhz for e in epochs])[m]
+    return pr, cp, dop, lli, cn0
 
 
 def satellite_states_layout(layout: SlotLayout, store: EphemerisStore, nav: BroadcastNavigation | None,

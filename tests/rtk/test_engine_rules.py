@@ -137,3 +137,59 @@ def test_non_finite_base_or_take_off_positions_are_refused_at_the_entry(nav, epo
         postprocess(rov, bas, nav, BASE_ECEF_M, RtkOptions(), init_pos_ecef_m=np.array(bad))
     with pytest.raises(ValueError, match="take-off position"):
         rtk_init(RtkOptions(), np.array(bad))
+
+
+def test_weak_signals_get_more_code_variance_on_each_side_of_the_single_difference() -> None:
+    """code_cn0_ref_dbhz: each receiver's weak signal inflates its half of the SD code variance by
+    10^((ref − C/N0)/10); a strong, unknown (NaN, or MSM's 0) C/N0, or a receiver without C/N0, counts as 1."""
+    from onboard.rtk.rtkpos import _code_cn0_factor, _Receiver
+
+    def rcv(cn0: np.ndarray | None) -> _Receiver:
+        n = 4
+        return _Receiver(np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n, np.uint8), None,  # type: ignore[arg-type]
+                         np.ones(n, bool), cn0_dbhz=cn0)
+
+    rov = rcv(np.array([50.0, 32.0, np.nan, 0.0]))
+    f = _code_cn0_factor(42.0, rov, rcv(np.array([45.0, 45.0, 22.0, 45.0])))
+    np.testing.assert_allclose(f, [1.0, (10.0 + 1.0) / 2, (1.0 + 100.0) / 2, 1.0])
+    np.testing.assert_allclose(_code_cn0_factor(42.0, rcv(np.array([50.0, 32.0, 40.0, 0.0])), rcv(None)),
+                               [1.0, 5.5, (10 ** 0.2 + 1) / 2, 1.0])
+    assert not f.flags.writeable  # memoised on the rover epoch: shared, so read-only
+
+
+def test_weak_signal_code_weighting_changes_the_float_only_for_u_blox_like_code(nav, epochs) -> None:
+    """The option is wired: on noise-free data whose rover reports every signal at 30 dB-Hz (the base 45), the
+    code rows of the float update carry 8.4× the variance ((10^1.2 + 1)/2 at 42 dB-Hz) once the code counts as
+    u-blox-like (code_scatter_reference 0: taken as modelled), and none while it scatters as little as
+    geodetic code; the solution stays on the truth either way (noise-free code is right whatever its weight)."""
+    from onboard.rtk import rtkpos as R
+
+    rov, bas = epochs
+    weak = [replace(e, cn0_dbhz=np.full(len(e), 30.0)) for e in rov]
+    seen: list[float] = []
+    orig = R._ddres
+
+    def spy(st, ctx, x, phase_ok, code_ok, with_doppler, jacobian=True):  # type: ignore[no-untyped-def]
+        dd, e = orig(st, ctx, x, phase_ok, code_ok, with_doppler, jacobian)
+        code = dd.kind == 1
+        if code.any():
+            seen.append(float(np.median(dd.r.diagonal()[code])))
+        return dd, e
+
+    truth = enu_to_ecef(ROVER_START_ENU_M, BASE_ECEF_M)
+
+    def last_code_variances(**kw: float) -> np.ndarray:
+        seen.clear()
+        R._ddres = spy
+        try:
+            sols, _ = postprocess(weak, bas, nav, BASE_ECEF_M, replace(RtkOptions(), **kw), "forward")
+        finally:
+            R._ddres = orig
+        assert np.linalg.norm(np.array(sols[-1].pos_ecef_m) - truth) < 0.01
+        return np.array(seen[-5:])
+
+    modelled = {"code_scatter_reference": 0.0}
+    np.testing.assert_allclose(last_code_variances(code_cn0_ref_dbhz=42.0, **modelled)
+                               / last_code_variances(code_cn0_ref_dbhz=0.0, **modelled),
+                               (10.0 ** 1.2 + 1.0) / 2.0, rtol=1e-6)
+    np.testing.assert_allclose(last_code_variances(code_cn0_ref_dbhz=42.0), last_code_variances(code_cn0_ref_dbhz=0.0))

@@ -25,7 +25,9 @@ def test_unknown_key_is_an_error_naming_it():
         options_from_mapping({"elmask": 10})
 
 
-@pytest.mark.parametrize("bad", [{"ar_mode": "sometimes"}, {"elevation_mask_deg": 95}, {"ratio_threshold": 0.5}])
+@pytest.mark.parametrize("bad", [{"ar_mode": "sometimes"}, {"elevation_mask_deg": 95}, {"ratio_threshold": 0.5},
+                                 {"code_cn0_ref_dbhz": -1.0}, {"code_cn0_ref_dbhz": float("nan")},
+                                 {"code_cn0_ref_dbhz": 90.0}])
 def test_bad_values_are_refused(bad):
     with pytest.raises(ValueError):
         options_from_mapping(bad)
