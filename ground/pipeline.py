@@ -301,7 +301,8 @@ class RtkJobOptions:
     """Options of an RTK re-processing run, checked on construction (ValueError in `onboard.validate` words).
 
     `base_pos_ecef_m` the base antenna phase centre (ECEF m; None: the base file's header), `direction`
-    forward/backward/combined, `elmask_deg` the elevation mask (°), `velocity` write velocity columns,
+    forward/backward/combined (default combined: the backward pass carries the forward's fixes back over the
+    epochs the forward spent confirming, as post-processing can and the drone cannot), `elmask_deg` the elevation mask (°), `velocity` write velocity columns,
     `static_start` the rover stands still from its first epoch until take-off (the engine's static start:
     no process noise until its Doppler speed exceeds the take-off speed; `onboard rtk --static-start`),
     `systems` the constellations as RINEX letters (`onboard rtk --systems`: "G" the LEA-6T's GPS, "GREJ" the
@@ -310,7 +311,7 @@ class RtkJobOptions:
     """
 
     base_pos_ecef_m: tuple[float, float, float] | None = None
-    direction: str = "forward"
+    direction: str = "combined"
     elmask_deg: float = 15.0
     velocity: bool = True
     static_start: bool = False

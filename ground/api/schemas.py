@@ -203,7 +203,9 @@ class RtkParams(BaseModel):
     base_pos: str | tuple[float, float, float] | None = Field(
         default=None, description="base antenna phase centre, ECEF m: 'X,Y,Z' or [X, Y, Z] (default: the base "
         "file's header)")
-    direction: Literal["forward", "backward", "combined"] = "forward"
+    direction: Literal["forward", "backward", "combined"] = Field(
+        default="combined", description="processing direction: combined (default: forward and backward, the "
+        "backward pass carrying the forward's fixes back), forward (as the drone computed it) or backward")
     elmask_deg: float = Field(default=15.0, description="elevation mask (°, 0–90)")
     static_start: bool = Field(default=False, description="the rover stands still from its first epoch until "
                                "take-off (a drone recording from power-on on the ground): held static until its "

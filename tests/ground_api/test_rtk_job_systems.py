@@ -26,15 +26,16 @@ def test_systems_are_checked_and_normalised() -> None:
 
 @pytest.mark.slow
 def test_the_walk_fixes_with_glonass_where_gps_alone_cannot(tmp_path: Path) -> None:
-    """Under the trees GPS alone never fixes; with GLONASS beside it the job fixes over a third of the walk
-    (39 % forward, docs/rtk-defaults.md), and says in its .pos and its message which constellations it used. By
-    default (auto) the job takes every constellation both receivers observed: GPS and GLONASS here."""
+    """Under the trees GPS alone hardly fixes (3 epochs of 1180, combined: the job's default direction); with
+    GLONASS beside it the job fixes over 90 % of the walk (95.5 %; forward 76.4 %, docs/rtk-defaults.md), and
+    says in its .pos and its message which constellations it used. By default (auto) the job takes every
+    constellation both receivers observed: GPS and GLONASS here."""
     inputs = RtkInputs(rover=shared_file(M8P + "rover-20181004-1532.obs.gz"),
                        base=shared_file(M8P + "base-20181004-1452.rawx.obs.gz"),
                        nav=(shared_file(M8P + "rover-20181004-1532.nav.gz"),))
     gps = run_rtk(inputs, RtkJobOptions(base_pos_ecef_m=BASE_ECEF_M, systems="G"), tmp_path / "g.pos")
     both = run_rtk(inputs, RtkJobOptions(base_pos_ecef_m=BASE_ECEF_M, systems="GR"), tmp_path / "gr.pos")
-    assert gps.n_fix == 0 and both.n_fix > 0.35 * both.n_epochs
+    assert gps.n_fix < 0.01 * gps.n_epochs and both.n_fix > 0.90 * both.n_epochs
     text = (tmp_path / "gr.pos").read_text()
     assert "ground rtk job (L1, systems GR)" in text and "systems G)" in (tmp_path / "g.pos").read_text()
     assert int((read_pos(tmp_path / "gr.pos").q == 1).sum()) == both.n_fix
