@@ -302,7 +302,8 @@ class RtkJobOptions:
 
     `base_pos_ecef_m` the base antenna phase centre (ECEF m; None: the base file's header), `direction`
     forward/backward/combined (default combined: the backward pass carries the forward's fixes back over the
-    epochs the forward spent confirming, as post-processing can and the drone cannot), `elmask_deg` the elevation mask (°), `velocity` write velocity columns,
+    epochs the forward spent confirming, as post-processing can and the drone cannot), `elmask_deg` the
+    elevation mask (°), `velocity` write velocity columns,
     `static_start` the rover stands still from its first epoch until take-off (the engine's static start:
     no process noise until its Doppler speed exceeds the take-off speed; `onboard rtk --static-start`),
     `systems` the constellations as RINEX letters (`onboard rtk --systems`: "G" the LEA-6T's GPS, "GREJ" the

@@ -1202,13 +1202,20 @@ def _code_cn0_factor(cn0_ref_dbhz: float, rov: _Receiver, bas: _Receiver) -> Arr
     return hit[0]
 
 
-def _cn0_inflation(cn0_ref_dbhz: float, cn0_dbhz: Arr | None, n: int) -> Arr:
-    """max(1, 10^((cn0_ref_dbhz − C/N0)/10)) per slot; 1 where the C/N0 is unknown (NaN, ≤ 0, or no array)."""
+def _weak_signals(cn0_ref_dbhz: float, cn0_dbhz: Arr | None, n: int) -> npt.NDArray[np.bool_]:
+    """Slots whose C/N0 is known and below `cn0_ref_dbhz`; unknown (NaN, ≤ 0 as RTCM MSM sends it, or no array)
+    counts as strong."""
     if cn0_dbhz is None:
+        return np.zeros(n, bool)
+    return np.isfinite(cn0_dbhz) & (cn0_dbhz > 0.0) & (cn0_dbhz < cn0_ref_dbhz)
+
+
+def _cn0_inflation(cn0_ref_dbhz: float, cn0_dbhz: Arr | None, n: int) -> Arr:
+    """max(1, 10^((cn0_ref_dbhz − C/N0)/10)) per slot: 1 but for _weak_signals."""
+    weak = _weak_signals(cn0_ref_dbhz, cn0_dbhz, n)
+    if cn0_dbhz is None or not weak.any():
         return np.ones(n)
-    known = np.isfinite(cn0_dbhz) & (cn0_dbhz > 0.0)
-    return np.where(known, 10.0 ** (np.maximum(cn0_ref_dbhz - np.where(known, cn0_dbhz, cn0_ref_dbhz), 0.0) / 10.0),
-                    1.0)
+    return np.where(weak, 10.0 ** ((cn0_ref_dbhz - np.where(weak, cn0_dbhz, cn0_ref_dbhz)) / 10.0), 1.0)
 
 
 def _reference_slot(idx: npt.NDArray[np.int64], el: Arr) -> int:
@@ -2077,9 +2084,8 @@ def _learn_channel_code_bias(st: RtkState, ctx: EpochContext, pos_ecef_m: Arr) -
     if ion is not None:
         resid = resid - ion[0]
     use = ctx.code_ok & (st.layout.group == st.layout.systems.index("R")) & np.isfinite(resid)
-    cn0 = ctx.rov.cn0_dbhz
-    if o.code_cn0_ref_dbhz > 0.0 and cn0 is not None:
-        use &= ~(cn0 < o.code_cn0_ref_dbhz)  # unknown (NaN) counts as strong
+    if o.code_cn0_ref_dbhz > 0.0:
+        use &= ~_weak_signals(o.code_cn0_ref_dbhz, ctx.rov.cn0_dbhz, st.ns)
     st.channel_code_bias.learn(resid, use, o.glonass_code_bias_window_epochs)
 
 
