@@ -11,6 +11,7 @@ positions are used in the WGS 84 ECEF frame of the other systems without a trans
 from __future__ import annotations
 
 import math
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -24,6 +25,9 @@ STEP_S = 60.0
 ERR_EPH_GLO_M = 5.0
 """1-σ error of a GLONASS broadcast orbit and clock, m (RTKLIB ERREPH_GLO; the variance is its square)."""
 
+
+Seconds = TypeVar("Seconds", float, npt.NDArray[np.float64])
+"""A time in s, or an array of them: the clock formulas serve one instant and many alike."""
 
 State = tuple[float, float, float, float, float, float]
 """(x, y, z, vx, vy, vz) in m and m/s. Plain floats: a 6-vector in numpy costs more in call overhead than
@@ -74,7 +78,7 @@ def _rk4_step(x: State, h: float, acc: tuple[float, float, float]) -> State:
             v2 + (a2 + 2.0 * b2 + 2.0 * c2 + d2) * wt)
 
 
-def _clock_offset_s(geph: GlonassEphemeris, dt_s: float) -> float:
+def _clock_offset_s(geph: GlonassEphemeris, dt_s: Seconds) -> Seconds:
     """The broadcast clock −τn + γn·dt (s), `dt_s` seconds after tb on the system time scale."""
     return -geph.tau_n_s + geph.gamma_n * dt_s
 
@@ -95,18 +99,90 @@ def glonass_state(geph: GlonassEphemeris, t: GpsTime) -> npt.NDArray[np.float64]
     return np.array(_integrate((*geph.pos_m, *geph.vel_m_s), t.diff_s(geph.toe), geph.acc_m_s2))
 
 
+class _Arc:
+    """One ephemeris' orbit on the grid tb + k·STEP_S: the RK4 states (x, y, z, vx, vy, vz) integrated from tb in
+    whole steps (RTKLIB's own path through those instants) and the acceleration at each, for k in [k0, k0 + K),
+    grown on demand."""
+
+    def __init__(self, geph: GlonassEphemeris) -> None:
+        self.acc = geph.acc_m_s2
+        x = (*geph.pos_m, *geph.vel_m_s)
+        self.k0 = 0
+        self.states: list[State] = [x]
+        self.accels: list[tuple[float, float, float]] = [_acceleration(*x, self.acc)]
+        self._arrays: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
+
+    def cover(self, k_lo: int, k_hi: int) -> None:
+        """Grow the grid to hold the nodes k_lo..k_hi."""
+        while self.k0 > k_lo:
+            x = _rk4_step(self.states[0], -STEP_S, self.acc)
+            self.states.insert(0, x)
+            self.accels.insert(0, _acceleration(*x, self.acc))
+            self.k0 -= 1
+            self._arrays = None
+        while self.k0 + len(self.states) - 1 < k_hi:
+            x = _rk4_step(self.states[-1], STEP_S, self.acc)
+            self.states.append(x)
+            self.accels.append(_acceleration(*x, self.acc))
+            self._arrays = None
+
+    def arrays(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """The nodes' states (K, 6) and accelerations (K, 3)."""
+        if self._arrays is None:
+            self._arrays = (np.array(self.states), np.array(self.accels))
+        return self._arrays
+
+
+def _hermite(s: Any, h: float, x0: Any, a0: Any, x1: Any, a1: Any) -> tuple[list[Any], list[Any], list[Any]]:
+    """Quintic Hermite interpolation between two nodes `h` s apart, at the fraction `s` of the step: the
+    position, velocity and acceleration matching both nodes' (position, velocity, acceleration). Written on the
+    components x0[i], a0[i] so that one body serves Python floats (one instant) and numpy arrays (many), with
+    the same operations in the same order: the same bits either way."""
+    s2 = s * s
+    s3 = s2 * s
+    s4 = s3 * s
+    s5 = s4 * s
+    # the basis of p(s) = p0 + H5·Δp + h·(H1·v0 + H4·v1) + h²·(H2·a0 + H3·a1) and its two derivatives in s
+    h1, h2, h3 = s - 6.0 * s3 + 8.0 * s4 - 3.0 * s5, 0.5 * s2 - 1.5 * s3 + 1.5 * s4 - 0.5 * s5, 0.5 * s3 - s4 + 0.5 * s5
+    h4, h5 = -4.0 * s3 + 7.0 * s4 - 3.0 * s5, 10.0 * s3 - 15.0 * s4 + 6.0 * s5
+    d1, d2, d3 = 1.0 - 18.0 * s2 + 32.0 * s3 - 15.0 * s4, s - 4.5 * s2 + 6.0 * s3 - 2.5 * s4, 1.5 * s2 - 4.0 * s3 + 2.5 * s4
+    d4, d5 = -12.0 * s2 + 28.0 * s3 - 15.0 * s4, 30.0 * s2 - 60.0 * s3 + 30.0 * s4
+    e1, e2, e3 = -36.0 * s + 96.0 * s2 - 60.0 * s3, 1.0 - 9.0 * s + 18.0 * s2 - 10.0 * s3, 3.0 * s - 12.0 * s2 + 10.0 * s3
+    e4, e5 = -24.0 * s + 84.0 * s2 - 60.0 * s3, 60.0 * s - 180.0 * s2 + 120.0 * s3
+    hh = h * h
+    pos, vel, acc = [], [], []
+    for i in range(3):
+        dp, v0, v1, g0, g1 = x1[i] - x0[i], x0[i + 3], x1[i + 3], a0[i], a1[i]
+        pos.append(x0[i] + h5 * dp + h * (h1 * v0 + h4 * v1) + hh * (h2 * g0 + h3 * g1))
+        vel.append((d5 * dp + h * (d1 * v0 + d4 * v1) + hh * (d2 * g0 + d3 * g1)) / h)
+        acc.append((e5 * dp + h * (e1 * v0 + e4 * v1) + hh * (e2 * g0 + e3 * g1)) / hh)
+    return pos, vel, acc
+
+
 class GlonassOrbits:
-    """glonass_position_velocity for epochs that follow one another: each ephemeris' last integrated state is
-    kept and the next request integrates on from it when that is nearer than tb, towards tb or away from it
-    (one 1 s step per epoch instead of up to 15 one-minute steps from tb). The step grid then differs from the
-    integration from tb by micrometres (RK4 over ≤ 60 s steps). The velocity is the forward difference over
-    `dt_s` to first order in it, v + a·dt_s/2 from one evaluation of the acceleration instead of an RK4 step of
-    four (the two differ by jerk·dt_s²/6, ~1e-11 m/s at 1 ms). Holds the last state of at most `size`
-    ephemerides."""
+    """GLONASS broadcast orbits at many instants. Each ephemeris is integrated once, from tb in whole RK4 steps
+    of STEP_S (RTKLIB's own path through the instants tb + k·STEP_S), and an instant between two such nodes is
+    read off the quintic Hermite polynomial through their positions, velocities and accelerations (the force
+    model's). It departs from RTKLIB's integration to the instant itself (the last step shortened) by tens of
+    micrometres and about a micrometre per second over the ±30 min an ephemeris is used, a millionth of the
+    broadcast orbit's 5 m error, for one polynomial per instant instead of up to 60 evaluations of the force
+    model. The velocity returned is v + a·dt_s/2: RTKLIB's forward difference over `dt_s` to first order in it
+    (the two differ by jerk·dt_s²/6, ~1e-11 m/s at 1 ms). Holds the arcs of at most `size` ephemerides."""
 
     def __init__(self, size: int = 256) -> None:
-        self._last: dict[tuple[int, int, int], tuple[float, State]] = {}
+        self._arcs: dict[tuple[int, int, int], _Arc] = {}
         self._size = size
+
+    def _arc(self, geph: GlonassEphemeris, dt_lo: float, dt_hi: float) -> _Arc:
+        """`geph`'s arc, its grid grown over [dt_lo, dt_hi] s after tb."""
+        key = (geph.slot, geph.toe.total_ns, geph.iode)
+        arc = self._arcs.get(key)
+        if arc is None:
+            if len(self._arcs) >= self._size:
+                self._arcs.pop(next(iter(self._arcs)))
+            arc = self._arcs[key] = _Arc(geph)
+        arc.cover(math.floor(dt_lo / STEP_S), math.floor(dt_hi / STEP_S) + 1)
+        return arc
 
     def position_velocity(self, geph: GlonassEphemeris, t: GpsTime, dt_s: float = 1e-3
                           ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], float, float]:
@@ -118,21 +194,29 @@ class GlonassOrbits:
                              ) -> tuple[tuple[float, float, float], tuple[float, float, float], float, float]:
         """position_velocity at `dt` s after tb (GPS time scale), as plain floats: position (m), velocity
         (m/s), clock bias (s), drift (s/s)."""
-        key = (geph.slot, geph.toe.total_ns, geph.iode)
-        start, x = 0.0, (*geph.pos_m, *geph.vel_m_s)
-        hit = self._last.get(key)
-        if hit is not None and abs(dt - hit[0]) < abs(dt):
-            # nearer than tb: before tb (dt < 0) epochs in time order step towards it, after it away from it
-            start, x = hit
-        x = _integrate(x, dt - start, geph.acc_m_s2)
-        if len(self._last) >= self._size and key not in self._last:
-            self._last.pop(next(iter(self._last)))
-        self._last[key] = (dt, x)
+        arc = self._arc(geph, dt, dt)
+        k = math.floor(dt / STEP_S)
+        i = k - arc.k0
+        p, v, a = _hermite((dt - STEP_S * k) / STEP_S, STEP_S, arc.states[i], arc.accels[i], arc.states[i + 1],
+                           arc.accels[i + 1])
         c0, c1 = _clock_offset_s(geph, dt), _clock_offset_s(geph, dt + dt_s)
-        x0, x1, x2, v0, v1, v2 = x
-        a0, a1, a2 = _acceleration(x0, x1, x2, v0, v1, v2, geph.acc_m_s2)
         h2 = dt_s / 2.0
-        return (x0, x1, x2), (v0 + a0 * h2, v1 + a1 * h2, v2 + a2 * h2), c0, (c1 - c0) / dt_s
+        return (p[0], p[1], p[2]), (v[0] + a[0] * h2, v[1] + a[1] * h2, v[2] + a[2] * h2), c0, (c1 - c0) / dt_s
+
+    def positions_velocities_at(self, geph: GlonassEphemeris, dt: npt.NDArray[np.float64], dt_s: float = 1e-3
+                                ) -> tuple[npt.NDArray[np.float64], ...]:
+        """position_velocity_at for the instants `dt` (m,) s after tb at once: position (m, 3) m, velocity
+        (m, 3) m/s, clock bias (m,) s, drift (m,) s/s; each value the same to the bit as one instant's."""
+        arc = self._arc(geph, float(dt.min()), float(dt.max()))
+        states, accels = arc.arrays()
+        k = np.floor(dt / STEP_S)
+        i = k.astype(np.int64) - arc.k0
+        p, v, a = _hermite((dt - STEP_S * k) / STEP_S, STEP_S, states[i].T, accels[i].T, states[i + 1].T,
+                           accels[i + 1].T)
+        c0, c1 = _clock_offset_s(geph, dt), _clock_offset_s(geph, dt + dt_s)
+        h2 = dt_s / 2.0
+        vel = [v[j] + a[j] * h2 for j in range(3)]
+        return np.stack(p, axis=1), np.stack(vel, axis=1), c0, (c1 - c0) / dt_s
 
 
 def glonass_clock_s(geph: GlonassEphemeris, t: GpsTime) -> float:
@@ -141,8 +225,8 @@ def glonass_clock_s(geph: GlonassEphemeris, t: GpsTime) -> float:
     return glonass_clock_at_s(geph, t.diff_s(geph.toe))
 
 
-def glonass_clock_at_s(geph: GlonassEphemeris, dt0_s: float) -> float:
-    """glonass_clock_s for a time `dt0_s` s after tb read on the satellite clock."""
+def glonass_clock_at_s(geph: GlonassEphemeris, dt0_s: Seconds) -> Seconds:
+    """glonass_clock_s for a time `dt0_s` s (or an array of them) after tb read on the satellite clock."""
     dt = dt0_s
     for _ in range(2):
         dt = dt0_s - _clock_offset_s(geph, dt)

@@ -71,7 +71,7 @@ class SatelliteState:
 
 def satellite_state(eph: AnyEphemeris, t_tx: GpsTime, orbits: GlonassOrbits | None = None) -> SatelliteState:
     """Position, velocity, clock and variance of `eph`'s satellite at GPS time `t_tx` (either ephemeris kind);
-    `orbits` carries GLONASS integrations on from one call to the next (BroadcastNavigation.state)."""
+    `orbits` keeps GLONASS orbits integrated once per ephemeris and interpolated (BroadcastNavigation.state)."""
     if isinstance(eph, GlonassEphemeris):
         pos, vel, clk, drift = (glonass_position_velocity(eph, t_tx) if orbits is None
                                 else orbits.position_velocity(eph, t_tx))
@@ -153,31 +153,36 @@ class BroadcastNavigation:
     def glonass_states(self, slot: int, t0_ns: npt.NDArray[np.int64], out: tuple[npt.NDArray[np.float64], ...],
                        ok: npt.NDArray[np.bool_]) -> None:
         """States of GLONASS `slot` at the instants `t0_ns` (m,) (ns since the GPS epoch; receiver time − pr/c),
-        epochs in time order, written into `out` = (position (m, 3) m, velocity (m, 3), clock (m,) s, drift
+        in any order, written into `out` = (position (m, 3) m, velocity (m, 3), clock (m,) s, drift
         (m,), variance (m,) m²) and `ok` (m,) where a healthy ephemeris is held: as select, the broadcast
         clock at that instant setting the transmission time (one fixed-point step is < 1 ns off), and state,
-        for each instant, without their per-call objects (the orbits integrated on from epoch to epoch)."""
+        for each instant, without their per-call objects: every instant of one ephemeris in one pass, the same
+        numbers to the bit."""
         ephs = [e for e in self._by_sat.get((GNSS_GLONASS, slot), []) if isinstance(e, GlonassEphemeris)]
         if not ephs or not t0_ns.size:
             return
         toe = np.array([e.toe.total_ns for e in ephs], np.int64)
         dt = np.abs(t0_ns[:, None] - toe[None, :]) / NS_PER_S  # as select: |t − toe| in s
-        last = (len(ephs) - 1 - np.argmin(dt[:, ::-1], axis=1)).tolist()  # the later of equally near toes
-        near = (dt[np.arange(t0_ns.size), last] <= system(GNSS_GLONASS).max_eph_age_s).tolist()
+        last = len(ephs) - 1 - np.argmin(dt[:, ::-1], axis=1)  # the later of equally near toes
+        near = dt[np.arange(t0_ns.size), last] <= system(GNSS_GLONASS).max_eph_age_s
         pos, vel, clk, drift, var = out
-        for i, (t0, k, use) in enumerate(zip(t0_ns.tolist(), last, near, strict=True)):
+        for k in np.unique(last[near]).tolist():
             eph = ephs[k]
-            if not use or eph.health != 0:
+            at = np.flatnonzero((last == k) & near)
+            if not at.size or eph.health != 0:
                 continue
             toe_ns = eph.toe.total_ns
-            t_tx = t0 + round(-glonass_clock_at_s(eph, (t0 - toe_ns) / NS_PER_S) * NS_PER_S)  # GpsTime.add_s
-            pos[i], vel[i], clk[i], drift[i] = self._orbits.position_velocity_at(eph, (t_tx - toe_ns) / NS_PER_S)
-            var[i] = ERR_EPH_GLO_M ** 2
-            ok[i] = True
+            t0 = t0_ns[at]
+            # the transmission time as GpsTime.add_s rounds it (half to even, as round())
+            t_tx = t0 + np.rint(-glonass_clock_at_s(eph, (t0 - toe_ns) / NS_PER_S) * NS_PER_S).astype(np.int64)
+            dt_tx = (t_tx - toe_ns) / NS_PER_S
+            pos[at], vel[at], clk[at], drift[at] = self._orbits.positions_velocities_at(eph, dt_tx)
+            var[at] = ERR_EPH_GLO_M ** 2
+            ok[at] = True
 
     def state(self, eph: AnyEphemeris, t_tx: GpsTime) -> SatelliteState:
-        """satellite_state of one of this store's ephemerides, GLONASS orbits integrated on from the last request
-        (epochs in time order cost one Runge–Kutta step each)."""
+        """satellite_state of one of this store's ephemerides, a GLONASS orbit integrated once per ephemeris and
+        interpolated (GlonassOrbits)."""
         return satellite_state(eph, t_tx, self._orbits)
 
     def glonass_channels(self) -> dict[int, int]:
