@@ -60,7 +60,8 @@ class ErrorModel:
     zenith troposphere residual after Saastamoinen. Differential: ionospheric gradient (slant delay change
     per km of horizontal base–rover separation, random direction per satellite). Tracking events: cycle slips
     with LLI (new ambiguity, lock time reset) and without (integer jump only), half-cycle ambiguity after
-    acquisition. `noise_free()` switches all of these off (ambiguities stay random integers).
+    acquisition. A receiver unit's own GLONASS code delay per frequency channel. `noise_free()` switches all of
+    these off (ambiguities stay random integers).
     """
 
     code_sigma_zenith_m: float = 0.15
@@ -108,6 +109,11 @@ class ErrorModel:
     half_cycle_probability: float = 0.5
     half_cycle_resolve_s: float = 2.0
     clock_drift_rw_s_s_per_sqrt_s: float = 2e-12
+    glonass_unit_code_sigma_m: float = 1.0
+    """σ (m) of each receiver unit's own code delay per GLONASS frequency channel (its antenna and front end),
+    constant, drawn per receiver: two units of one type do not cancel it (hil_sim.constellations.glonass_ifb
+    holds the type's part, which does). Fitted to the channel biases our engine learns between the two M8Ps of
+    the Galway sets (docs/hil-sim-error-model.md)."""
 
     @classmethod
     def noise_free(cls) -> ErrorModel:
@@ -117,7 +123,7 @@ class ErrorModel:
             mp_code_sigma_zenith_m=0.0, mp_phase_sigma_zenith_m=0.0, cn0_sigma_dbhz=0.0, orbit_sigma_m=0.0,
             sat_clock_sigma_m=0.0, iono_model_error_fraction=0.0, iono_gradient_mm_per_km=0.0,
             tropo_residual_zenith_sigma_m=0.0, slip_lli_rate_per_h=0.0, slip_undetected_rate_per_h=0.0,
-            half_cycle_probability=0.0, clock_drift_rw_s_s_per_sqrt_s=0.0,
+            half_cycle_probability=0.0, clock_drift_rw_s_s_per_sqrt_s=0.0, glonass_unit_code_sigma_m=0.0,
         )
 
 

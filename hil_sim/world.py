@@ -108,7 +108,7 @@ from hil_sim.flight import Trajectory
 from hil_sim.scenario import ReceiverModel, RoverEnvironment, Scenario
 from onboard.errors import InputError
 from onboard.gnsstime import NS_PER_S, GpsTime, leap_seconds_at_utc
-from onboard.rtk.consts import CLIGHT_M_S, FREQ_L1_HZ, OMEGA_E_RAD_S
+from onboard.rtk.consts import CLIGHT_M_S, FREQ_L1_HZ, GLO_FCN_MAX, GLO_FCN_MIN, OMEGA_E_RAD_S
 from onboard.rtk.ephemeris import eph_position, eph_position_velocity
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.glonass import glonass_position
@@ -370,14 +370,17 @@ class World:
             self._clock[rcv] = _Clock(models[rcv], self._fast, sc.start.total_ns, em.clock_drift_rw_s_s_per_sqrt_s,
                                       _rng(seed, _P_CLOCK, 0 if same_clock else r_idx))
             self._tracks[rcv] = self._build_tracks(r_idx, rcv)
-        # GLONASS inter-frequency biases per receiver type (identical for two receivers of one type)
+        # GLONASS inter-frequency biases per receiver type (identical for two receivers of one type), and each
+        # unit's own code delay per channel (not: the two M8Ps of the real sets differ by metres on some channels)
         self._code_ifb_m: dict[str, Vec] = {}
         self._phase_ifb_m: dict[str, Vec] = {}
         glo = self._glo_fcn != FCN_NONE
-        for rcv in RECEIVERS:
+        for r_idx, rcv in enumerate(RECEIVERS):
             code, phase = np.zeros(n_cols), np.zeros(n_cols)
             if glo.any():
                 code[glo], phase[glo] = glonass_ifb(models[rcv].ifb_type, self._glo_fcn[glo], (seed, _P_IFB))
+                unit = _rng(seed, _P_IFB, r_idx, 1).standard_normal(GLO_FCN_MAX - GLO_FCN_MIN + 1)
+                code[glo] += em.glonass_unit_code_sigma_m * unit[self._glo_fcn[glo] - GLO_FCN_MIN]
             self._code_ifb_m[rcv], self._phase_ifb_m[rcv] = code, phase
         self._last_obs: dict[str, tuple[int, int] | None] = {"rover": None, "base": None}
 

@@ -23,8 +23,10 @@ from onboard.rtk.consts import CLIGHT_M_S, DFREQ_G1_HZ, FREQ_G1_HZ, FREQ_L1_HZ
 from onboard.rtk.types import FCN_NONE, GNSS_GALILEO, GNSS_GLONASS, GNSS_GPS, GNSS_QZSS
 
 
-def _static_world(world: str, rover_ifb: str = "ublox-m8", base_ifb: str = "ublox-m8", **over: object) -> World:
-    sc = Scenario.multi(world, duration_s=300.0, errors=ErrorModel.noise_free(), flight=FlightPlan(fly=False),
+def _static_world(world: str, rover_ifb: str = "ublox-m8", base_ifb: str = "ublox-m8",
+                  glonass_unit_code_sigma_m: float = 0.0, **over: object) -> World:
+    errors = dataclasses.replace(ErrorModel.noise_free(), glonass_unit_code_sigma_m=glonass_unit_code_sigma_m)
+    sc = Scenario.multi(world, duration_s=300.0, errors=errors, flight=FlightPlan(fly=False),
                         base_offset_enu_m=(600.0, -400.0, 3.0), **over)
     sc = dataclasses.replace(sc, rover_receiver=dataclasses.replace(sc.rover_receiver, ifb_type=rover_ifb),
                              base_receiver=dataclasses.replace(sc.base_receiver, ifb_type=base_ifb))
@@ -85,6 +87,28 @@ def test_glonass_code_ifb_cancels_for_one_type_and_not_for_two() -> None:
     slope = np.polyfit(ks, dp, 1)[0]
     t1, t2 = IFB_TYPES["ublox-m8"], IFB_TYPES["other"]
     assert slope == pytest.approx(t2.phase_slope_mm_per_k - t1.phase_slope_mm_per_k, abs=0.5)
+
+
+def test_each_receiver_unit_carries_its_own_glonass_code_delay_per_channel() -> None:
+    """Two u-blox units of one type: the type's code IFB cancels between them, each unit's own delay per channel
+    (ErrorModel.glonass_unit_code_sigma_m) does not; GPS code carries none; noise_free() switches it off."""
+    world = _static_world("gr-2012", glonass_unit_code_sigma_m=1.0)
+    t = world.start.add_s(60)
+    (rov, d_r), (bas, d_b) = world.observe_detailed("rover", t), world.observe_detailed("base", t)
+    glo_r = {int(s): float(c) for g, s, c in zip(rov.gnss_id, rov.sv_id, d_r["code_ifb_m"], strict=True)
+             if g == GNSS_GLONASS}
+    glo_b = {int(s): float(c) for g, s, c in zip(bas.gnss_id, bas.sv_id, d_b["code_ifb_m"], strict=True)
+             if g == GNSS_GLONASS}
+    sd = np.array([glo_r[s] - glo_b[s] for s in sorted(glo_r.keys() & glo_b.keys())])
+    assert sd.size >= 4
+    assert 0.3 < float(np.std(sd)) < 3.0, sd  # metres between channels, as between the two real M8Ps
+    assert np.all(d_r["code_ifb_m"][rov.gnss_id == GNSS_GPS] == 0.0)
+    quiet = _static_world("gr-2012")
+    (qr, q_r), (qb, q_b) = quiet.observe_detailed("rover", t), quiet.observe_detailed("base", t)
+    assert np.array_equal(q_r["code_ifb_m"][qr.gnss_id == GNSS_GLONASS], q_b["code_ifb_m"][qb.gnss_id == GNSS_GLONASS])
+    # the same units in another flight of the same seed: constant, a property of the hardware
+    again = _static_world("gr-2012", glonass_unit_code_sigma_m=1.0).observe_detailed("rover", t)[1]["code_ifb_m"]
+    assert np.array_equal(again, d_r["code_ifb_m"])
 
 
 def test_fdma_wavelength_of_the_simulated_phase_doppler_times_lambda_is_the_range_rate() -> None:
