@@ -70,13 +70,14 @@ class RtkOptions:
     its residuals must still fit). Why: after a hold is released the float of a static rover is known to
     millimetres yet off by the centimetre multipath the hold kept out, and rejects the validated integers until
     they settle (M8P static with the RAWX base, GPS+GLONASS: 86 s unfixed)."""
-    float_fix_gate_scale: float = 4.0
+    float_fix_gate_scale: float = 6.0
     """The float's position covariance is multiplied by this in the float-fix consistency test (the
     Mahalanobis distance of the fixed from the float position, against χ²(3) at 99.9 %) when the code has been
     measured u-blox-like (code_variance_scale ≥ 0.5) and the integer set has at least float_fix_gate_min_dd
-    double differences. Why: u-blox code multipath under trees is correlated over tens of seconds, so the
-    float's covariance is too small along the directions it leaves loose and rejects the right set for
-    minutes; a set of many double differences is refuted by its own fixed phase residuals instead. 1 disables."""
+    double differences. Why: u-blox code multipath under trees is correlated over tens of seconds, and two
+    units' GLONASS code differs by metres per channel until the biases are learned, so the float's covariance
+    is too small along the directions it leaves loose and rejects the right set for minutes; a set of many
+    double differences is refuted by its own fixed phase residuals instead. 1 disables."""
     float_fix_gate_min_dd: int = 10
     """Fewest double differences (beyond the three position unknowns, seven redundant) a fix needs for
     float_fix_gate_scale. Why: the fewer double differences, the less the fixed solution's own phase residuals
