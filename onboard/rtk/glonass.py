@@ -135,9 +135,8 @@ class _Arc:
 
 def _hermite(s: Any, h: float, x0: Any, a0: Any, x1: Any, a1: Any) -> tuple[list[Any], list[Any], list[Any]]:
     """Quintic Hermite interpolation between two nodes `h` s apart, at the fraction `s` of the step: the
-    position, velocity and acceleration matching both nodes' (position, velocity, acceleration). Written on the
-    components x0[i], a0[i] so that one body serves Python floats (one instant) and numpy arrays (many), with
-    the same operations in the same order: the same bits either way."""
+    position, velocity and acceleration matching both nodes' (position, velocity, acceleration), on the
+    components x0[i], a0[i] (arrays over the instants)."""
     s2 = s * s
     s3 = s2 * s
     s4 = s3 * s
@@ -194,19 +193,14 @@ class GlonassOrbits:
                              ) -> tuple[tuple[float, float, float], tuple[float, float, float], float, float]:
         """position_velocity at `dt` s after tb (GPS time scale), as plain floats: position (m), velocity
         (m/s), clock bias (s), drift (s/s)."""
-        arc = self._arc(geph, dt, dt)
-        k = math.floor(dt / STEP_S)
-        i = k - arc.k0
-        p, v, a = _hermite((dt - STEP_S * k) / STEP_S, STEP_S, arc.states[i], arc.accels[i], arc.states[i + 1],
-                           arc.accels[i + 1])
-        c0, c1 = _clock_offset_s(geph, dt), _clock_offset_s(geph, dt + dt_s)
-        h2 = dt_s / 2.0
-        return (p[0], p[1], p[2]), (v[0] + a[0] * h2, v[1] + a[1] * h2, v[2] + a[2] * h2), c0, (c1 - c0) / dt_s
+        p, v, c0, drift = self.positions_velocities_at(geph, np.array([dt]), dt_s)
+        return (float(p[0, 0]), float(p[0, 1]), float(p[0, 2])), (float(v[0, 0]), float(v[0, 1]), float(v[0, 2])), \
+            float(c0[0]), float(drift[0])
 
     def positions_velocities_at(self, geph: GlonassEphemeris, dt: npt.NDArray[np.float64], dt_s: float = 1e-3
                                 ) -> tuple[npt.NDArray[np.float64], ...]:
         """position_velocity_at for the instants `dt` (m,) s after tb at once: position (m, 3) m, velocity
-        (m, 3) m/s, clock bias (m,) s, drift (m,) s/s; each value the same to the bit as one instant's."""
+        (m, 3) m/s, clock bias (m,) s, drift (m,) s/s."""
         arc = self._arc(geph, float(dt.min()), float(dt.max()))
         states, accels = arc.arrays()
         k = np.floor(dt / STEP_S)
