@@ -24,8 +24,9 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -313,6 +314,69 @@ def stream_losses(times_s: Sequence[float], period_s: float = 1.0) -> dict[str, 
     runs = np.diff(np.flatnonzero(np.diff(np.concatenate(([1], got.astype(int), [1]))) != 0))[::2]
     return {"lost_fraction": float(1.0 - got.mean()), "p_loss_after_ok": p_ok, "p_loss_after_loss": p_loss,
             "mean_run_s": float(runs.mean() * period_s) if runs.size else 0.0}
+
+
+IONO_JUMP_M = 0.3
+"""A 1-s step of a slant-ionosphere series larger than this (m), the epoch's median step removed, is a cycle
+slip of the geometry-free phase: the series is not differenced across it."""
+
+
+def iono_change_stats(series: Mapping[Any, Mapping[int, float]], lags_s: Sequence[int] = (1, 5, 10, 20),
+                      fit_s: int = 20, ahead_s: Sequence[int] = (5, 10, 20)) -> dict[str, dict[int, float]]:
+    """How fast the slant ionosphere changes between satellites: what a rover differenced with a base epoch
+    `lag` seconds old sees in its double differences.
+
+    `series`: per satellite, slant L1 ionospheric delay (m, any constant offset) by whole second. Returns
+    "rms_mm"/"p95_mm" per lag: the change over the lag, the epoch's median over satellites taken off (the part
+    common to all cancels in double differences), RMS and 95th percentile of |·| over satellites and epochs;
+    "fit_rms_mm" per `ahead_s`: the same for the miss of a straight line fitted over the previous `fit_s`
+    seconds and carried that far ahead (the engine's carry-forward of an aged base, every 5th epoch)."""
+    keys = list(series)
+    times = sorted({t for s in series.values() for t in s})
+    out: dict[str, dict[int, float]] = {"rms_mm": {}, "p95_mm": {}, "fit_rms_mm": {}}
+    if not keys or not times:
+        return out
+    t0 = times[0]
+    m = np.full((times[-1] - t0 + 1, len(keys)), np.nan)
+    for j, k in enumerate(keys):
+        for t, iono_m in series[k].items():
+            m[t - t0, j] = iono_m
+    with np.errstate(all="ignore"):
+        step = np.diff(m, axis=0)
+        common = np.nanmedian(np.where(np.isfinite(step), step, np.nan), axis=1, keepdims=True) \
+            if np.isfinite(step).any() else np.zeros((step.shape[0], 1))
+        broken = ~(np.abs(step - common) <= IONO_JUMP_M)  # NaN steps (gaps) break an arc too
+    cum = np.vstack([np.zeros((1, len(keys)), int), np.cumsum(broken, axis=0)])  # breaks before each epoch
+
+    def between(d: Vec) -> Vec:  # epochs with two satellites or more: one alone has nothing to differ from
+        ok = np.isfinite(d)
+        med = np.array([np.median(r[o]) if np.count_nonzero(o) >= 2 else np.nan for r, o in zip(d, ok)])
+        return (d - med[:, None])[ok & np.isfinite(med)[:, None]]
+
+    for lag in lags_s:
+        if lag >= m.shape[0]:
+            continue
+        d = m[lag:] - m[:-lag]
+        d[cum[lag:] != cum[:-lag]] = np.nan
+        v = between(d)
+        if v.size:
+            out["rms_mm"][lag] = float(np.sqrt(np.mean(v**2)) * 1e3)
+            out["p95_mm"][lag] = float(np.percentile(np.abs(v), 95) * 1e3)
+    tk = np.arange(-fit_s, 1, dtype=float)
+    a = np.vstack([np.ones_like(tk), tk]).T
+    for h in ahead_s:
+        miss: list[Vec] = []
+        for i in range(fit_s, m.shape[0] - h, 5):
+            ok = np.all(np.isfinite(m[i - fit_s:i + 1]), axis=0) & np.isfinite(m[i + h]) \
+                & (cum[i - fit_s] == cum[i + h])
+            if np.count_nonzero(ok) < 4:
+                continue
+            coef = np.linalg.lstsq(a, m[i - fit_s:i + 1][:, ok], rcond=None)[0]
+            e = m[i + h, ok] - (coef[0] + coef[1] * h)
+            miss.append(e - np.median(e))
+        if miss:
+            out["fit_rms_mm"][h] = float(np.sqrt(np.mean(np.concatenate(miss) ** 2)) * 1e3)
+    return out
 
 
 def fit_environment(stats: dict[int, SystemStats], phase_sigma_ref_m: float) -> RoverEnvironment:

@@ -35,6 +35,9 @@ class MultiWorld:
     site_lat_deg: float
     site_lon_deg: float
     site_h_m: float
+    iono_model_error_tau_s: float | None = None
+    """The sky's own ErrorModel.iono_model_error_tau_s (None: the default), fitted to real dual-frequency data
+    of that day and place (docs/hil-sim-error-model.md, "The ionosphere's rate")."""
 
 
 MULTI_WORLDS: dict[str, MultiWorld] = {
@@ -43,7 +46,8 @@ MULTI_WORLDS: dict[str, MultiWorld] = {
         GpsTime(1712, (259_200 + 2 * 3600) * 1_000_000_000), 35.68, 139.77, 40.0),
     "gej-2021": MultiWorld(
         (DATA_DIR / "geonet-3034-sept-20210922" / "SEPT2650.21P.gz",), "GEJ",
-        GpsTime(2176, (259_200 + 6 * 3600 + 1800) * 1_000_000_000), 35.342, 139.522, 60.0),
+        GpsTime(2176, (259_200 + 6 * 3600 + 1800) * 1_000_000_000), 35.342, 139.522, 60.0,
+        iono_model_error_tau_s=45_000.0),
 }
 """2012-10-31 02:00 GPST (GPS + GLONASS FDMA, RTKLIB test data, BSD-2) over Tokyo (QZS-1's file is read too but
 it broadcast itself unhealthy all that day: systems "GRJ" simulates no QZSS there); 2021-09-22 06:30 GPST
@@ -100,6 +104,10 @@ class ErrorModel:
     sat_clock_tau_s: float = 3600.0
     iono_model_error_fraction: float = 0.2
     iono_model_error_tau_s: float = 1800.0
+    """Correlation time of the fraction above; with it σ sets the ionosphere's rate, which a rover differenced
+    with an aged base epoch (radio gaps) sees. 1800 s: between two satellites 68 mm change in 20 s on the
+    gr-2012 sky, 59 mm in the real GMSD MSM7 stream (L1−L2 phase, 2012-10-14, Japan). A MultiWorld can carry
+    its own (docs/hil-sim-error-model.md)."""
     iono_gradient_mm_per_km: float = 1.0
     tropo_residual_zenith_sigma_m: float = 0.02
     tropo_residual_tau_s: float = 1800.0
@@ -327,6 +335,8 @@ class Scenario:
             "nav_path": w.nav_paths[0], "extra_nav_paths": w.nav_paths[1:], "systems": systems or w.systems,
             "start": w.start, "site_lat_deg": w.site_lat_deg, "site_lon_deg": w.site_lon_deg,
             "site_h_m": w.site_h_m}
+        if w.iono_model_error_tau_s is not None:
+            values["errors"] = ErrorModel(iono_model_error_tau_s=w.iono_model_error_tau_s)
         if model == "m8t":  # 32 tracking channels: a multi-constellation sky fills more than 16
             values["rover_receiver"] = ReceiverModel.m8t(max_sats=32)
             values["base_receiver"] = ReceiverModel.m8t(clock_bias0_s=0.21e-3, clock_drift_s_s=0.12e-6, max_sats=32)
