@@ -63,6 +63,7 @@ def test_rawx_every_constellation_equals_rtklib() -> None:
         assert (a[5] != FCN_NONE) == (key[1] == GNSS_GLONASS), key
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["rover-20181004-1532", "base-20181004-1452"])
 def test_m8p_rawx_glonass_channels_and_qzss(name: str) -> None:
     """M8P RXM-RAWX (version 0: no signal ids): GPS, GLONASS and QZSS; each GLONASS entry carries the channel of

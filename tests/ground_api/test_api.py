@@ -86,6 +86,7 @@ def test_path_traversing_upload_names_are_refused(live: LiveServer, tmp_path: Pa
     assert not (data / "evil").exists() and not (data.parent / "evil").exists()
 
 
+@pytest.mark.slow
 def test_sub_folder_files_upload_byte_identical_and_stay_inside(live: LiveServer, tmp_path: Path) -> None:
     """A flight with the radio/ corrections journal: every file, sub-folder included, reaches the server
     byte-identical (SHA-256 confirmed), with roles by place; `radio/../` or `radio/.partial/` names write nothing."""
@@ -461,6 +462,7 @@ def test_a_drone_flight_is_rtk_processed_as_uploaded(live: LiveServer, tmp_path:
     assert np.linalg.norm(np.median(traj.pos_ecef_m, axis=0) - [3774088.9931, -601661.8217, 5089321.3853]) < 0.05
 
 
+@pytest.mark.slow
 def test_office_files_added_to_a_drone_flight(live: LiveServer, tmp_path: Path) -> None:
     """Uploader.add_files: the office's files join the drone's flight (POST /flights/{id}/files, then the same
     resumable PUT), byte-identical with their roles; a file named like the flight's radio/ folder is refused."""

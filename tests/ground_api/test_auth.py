@@ -195,6 +195,7 @@ class _Ids(dict[str, str]):
         return "0" * 32
 
 
+@pytest.mark.slow
 def test_every_operation_refuses_exactly_the_roles_outside_its_x_roles(live: LiveServer) -> None:
     """Walk the OpenAPI operations: for every caller (no token, revoked, each role) the answer is 401/403
     exactly when the caller is outside the operation's `x-roles`, and never 401/403 inside them."""

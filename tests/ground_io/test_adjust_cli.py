@@ -91,6 +91,7 @@ def test_adjust_fixed_values_are_kept(tmp_path: Path) -> None:
     assert res["lever_arm_sigma_m"] == [0.0, 0.0, 0.0]
 
 
+@pytest.mark.slow
 def test_adjust_failures_exit_with_clear_messages(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Datum mix (2), missing geoid grid (2), lever arm free without GCP (3, refused), corrupt events (2)."""
     write_synthetic_flight(tmp_path, n_lines=1)

@@ -91,6 +91,7 @@ def test_radio_loss_model_reproduces_its_gilbert_parameters() -> None:
     assert st["p_loss_after_loss"] == pytest.approx(HARSH_RADIO_LOSS[1], abs=0.02)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not M8P.is_dir(), reason="needs ../shared/data/gnss/ublox-m8p-galway-2018 (not redistributable)")
 def test_harsh_is_the_fit_of_the_real_walk() -> None:
     from hil_sim.constellations import read_navigation

@@ -47,6 +47,7 @@ def _world_iono(world: str, seed: int, seconds: int = 300) -> dict[tuple[int, in
     return out
 
 
+@pytest.mark.slow
 def test_gej_2021_sky_moves_as_geonet_3034_did() -> None:
     # GEONET 3034's geometry-free phase, same day, hour and place: 15.1 mm RMS between satellites over 20 s
     # (14.4 mm without the combination's phase noise); the default model error's rate gave 53 mm there
@@ -67,6 +68,7 @@ def _bench() -> ModuleType:
     return module
 
 
+@pytest.mark.slow
 def test_real_geometry_free_ionosphere_of_both_skies() -> None:
     # the real figures the worlds are compared with, read by bench/iono_rate.py and the same statistic
     bench = _bench()

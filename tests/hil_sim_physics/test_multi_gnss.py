@@ -89,6 +89,7 @@ def test_glonass_code_ifb_cancels_for_one_type_and_not_for_two() -> None:
     assert slope == pytest.approx(t2.phase_slope_mm_per_k - t1.phase_slope_mm_per_k, abs=0.5)
 
 
+@pytest.mark.slow
 def test_each_receiver_unit_carries_its_own_glonass_code_delay_per_channel() -> None:
     """Two u-blox units of one type: the type's code IFB cancels between them, each unit's own delay per channel
     (ErrorModel.glonass_unit_code_sigma_m) does not; GPS code carries none; noise_free() switches it off."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from hil_sim.rtk_scenarios import SimCase, scenario_for, simulate
 from onboard.rtk.types import FCN_NONE, GNSS_GLONASS, GNSS_GPS
@@ -15,6 +16,7 @@ def test_gps_cases_keep_the_gps_world() -> None:
     assert sc.systems == "G" and sc.extra_nav_paths == () and sc.rover_environment is None
 
 
+@pytest.mark.slow
 def test_a_multi_constellation_case_reaches_the_engine_inputs_through_the_byte_paths() -> None:
     case = SimCase("multi", "", duration_s=60.0, systems="GREJ", world="gr-2012")
     data = simulate(case, "m8t")
@@ -39,6 +41,7 @@ def test_the_lea6t_sees_gps_only_and_the_radio_loss_drops_seconds() -> None:
     assert replace(case, systems="G").multi is False
 
 
+@pytest.mark.slow
 def test_a_base_with_few_gps_satellites_is_checked_on_every_constellation_it_tracks() -> None:
     """Five satellites, three or four of them GPS: the base's GPS-alone single points are rare and tens of
     metres off (GDOP ~37), so a check on GPS alone refused the right base position and the whole run; on GPS and

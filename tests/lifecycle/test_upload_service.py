@@ -214,6 +214,7 @@ def test_delete_after_upload_only_confirmed_files(tmp_path: Path, live: LiveServ
         n for n in names if n not in ("manifest.json", "radio/manifest.json")]
 
 
+@pytest.mark.slow
 def test_delete_after_upload_removes_the_whole_flight(tmp_path: Path, live: LiveServer) -> None:
     data = tmp_path / "data"
     flight = make_flight(data, "flight-20260501T100000Z", 100_000, 8, radio_bytes=20_000)

@@ -75,6 +75,7 @@ def test_m8p_msm7_gps_glonass_equal_convbin(name: str, common: int, rows: int, o
     ("rtcm/pygnssutils_ntrip_encode_none.bin", None, {GNSS_GPS: 297, GNSS_GLONASS: 264, GNSS_GALILEO: 231,
                                                       GNSS_BEIDOU: 320}),
 ])
+@pytest.mark.slow
 def test_msm7_every_constellation_equals_rtklib(file: str, reference: GpsTime | None,
                                                 systems: dict[int, int]) -> None:
     """GPS, GLONASS, Galileo, QZSS and BeiDou MSM7 of real streams: the same rows as RTKLIB's decoder (each
@@ -95,6 +96,7 @@ def test_msm7_every_constellation_equals_rtklib(file: str, reference: GpsTime | 
         assert abs(a[3] - cn0) <= 1e-3 and a[4] == lli and a[5] == code, key
 
 
+@pytest.mark.slow
 def test_split_base_epochs_reassembled_on_the_real_stream() -> None:
     """The M8P base sends 1077 (multiple-message bit set) then 1087 per epoch; the radio lost either. Each message
     lands in its own epoch (GLONASS time of day converted to GPS time), nothing is lost, and a pairing takes each
@@ -121,6 +123,7 @@ def test_split_base_epochs_reassembled_on_the_real_stream() -> None:
     assert latest_base_epoch(col.gnss_epochs, t, GNSS_GALILEO, 30.0) is None
 
 
+@pytest.mark.slow
 def test_stream_with_one_system_off_in_time_keeps_the_others() -> None:
     """GMSD7 writes GPS time into BeiDou's DF427 (its BeiDou epochs come out 14 s after the others): RTKLIB then
     drops every GPS/GLONASS/QZSS epoch; we keep each system's epochs (incomplete where BeiDou was to close them)."""
@@ -136,6 +139,7 @@ def test_stream_with_one_system_off_in_time_keeps_the_others() -> None:
     assert first_gps.time == ref and not first_gps.complete
 
 
+@pytest.mark.slow
 def test_glonass_channels_from_msm7_and_1020_and_biases_from_1230() -> None:
     col = _m8p_stream("base-20181004-1236")
     # the same channels as convbin's header (from the same stream's DF419)

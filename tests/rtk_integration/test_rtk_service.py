@@ -152,6 +152,7 @@ def test_radio_gaps_degrade_without_wrong_fixes_and_fix_again_after(world, tmp_p
     np.testing.assert_allclose(again.antenna_pos_ecef_m, world.base_ecef_m, atol=1e-3)
 
 
+@pytest.mark.slow
 def test_an_rxm_raw_rover_stays_gps_only_whatever_receiver_gnss_says(world, tmp_path) -> None:
     """The LEA-6T path: with the systems the shipped configuration derives (GREJ for an RXM-RAWX receiver), a
     rover sending RXM-RAW runs the GPS engine, with the same options as without any derivation; it fixes."""
