@@ -76,6 +76,8 @@ class SystemStats:
     cn0_fit_dbhz: tuple[float, float] = (math.nan, math.nan)
     """(horizon, zenith) of C/N0 = horizon + (zenith − horizon)·sin(el), least squares on every sample."""
     cn0_resid_std_db: float = math.nan
+    cn0_acf: dict[int, float] = field(default_factory=dict)
+    """Autocorrelation of each satellite's C/N0 deviation from that law at lags of CN0_ACF_LAGS_S seconds."""
 
 
 def _lam(gnss: int, fcn: int, fcn_of: dict[int, int], sv: int) -> float | None:
@@ -110,15 +112,15 @@ def tracking_stats(epochs: Sequence[ObsEpoch], nav: BroadcastNavigation, approx_
     rows: list[dict[tuple[int, int], _Row]] = []
     tt: list[float] = []
     cmc: dict[tuple[int, int], list[tuple[float, float, float, int]]] = {}
-    cn0_el: dict[int, list[tuple[float, float]]] = {g: [] for g in systems}
+    cn0_el: dict[int, list[tuple[float, float, float, int]]] = {g: [] for g in systems}  # C/N0, el, t, sv
     for k_ep, ep in enumerate(epochs):
         approx = pos_all if pos_all.ndim == 1 else pos_all[k_ep]
         t = ep.time.diff_s(t0)
         here: dict[tuple[int, int], int] = {}
-        for i in range(len(ep)):
-            key = (int(ep.gnss_id[i]), int(ep.sv_id[i]))
-            if key[0] in systems and math.isfinite(float(ep.cp_cyc[i])) and float(ep.cp_cyc[i]) != 0.0:
-                here[key] = i
+        for j in range(len(ep)):
+            key = (int(ep.gnss_id[j]), int(ep.sv_id[j]))
+            if key[0] in systems and math.isfinite(float(ep.cp_cyc[j])) and float(ep.cp_cyc[j]) != 0.0:
+                here[key] = j
         row = {}
         for key in sats:
             eph = nav.select(*key, ep.time)
@@ -126,10 +128,10 @@ def tracking_stats(epochs: Sequence[ObsEpoch], nav: BroadcastNavigation, approx_
                 continue
             i = here.get(key)
             tau = float(ep.pr_m[i]) / CLIGHT_M_S if i is not None else 0.075
-            st = satellite_state(eph, ep.time.add_s(-tau))
-            if not st.healthy:
+            sat = satellite_state(eph, ep.time.add_s(-tau))
+            if not sat.healthy:
                 continue
-            enu = r_enu @ (st.pos_m - approx)
+            enu = r_enu @ (sat.pos_m - approx)
             az, el = math.atan2(enu[0], enu[1]) % (2 * math.pi), math.atan2(enu[2], math.hypot(enu[0], enu[1]))
             if el < mask:
                 continue
@@ -139,11 +141,11 @@ def tracking_stats(epochs: Sequence[ObsEpoch], nav: BroadcastNavigation, approx_
             lam = _lam(key[0], int(ep.glo_fcn[i]) if ep.glo_fcn.size else FCN_NONE, fcn_of, key[1])
             if lam is None:
                 continue
-            rng = float(np.linalg.norm(st.pos_m - approx))
-            row[key] = (float(ep.cp_cyc[i]), lam, rng - CLIGHT_M_S * st.clock_s, int(ep.lli[i]), el, az)
+            rng = float(np.linalg.norm(sat.pos_m - approx))
+            row[key] = (float(ep.cp_cyc[i]), lam, rng - CLIGHT_M_S * sat.clock_s, int(ep.lli[i]), el, az)
             cmc.setdefault(key, []).append((t, float(ep.pr_m[i]) - lam * float(ep.cp_cyc[i]),
                                             float(ep.cn0_dbhz[i]), int(ep.lli[i])))
-            cn0_el[key[0]].append((float(ep.cn0_dbhz[i]), el))
+            cn0_el[key[0]].append((float(ep.cn0_dbhz[i]), el, t, key[1]))
         rows.append(row)
         tt.append(t)
     unflagged = _tdcp_slips(rows, tt)
@@ -203,7 +205,7 @@ def tracking_stats(epochs: Sequence[ObsEpoch], nav: BroadcastNavigation, approx_
         st.half_cycle_run_s = float(np.mean(runs)) * (tt[1] - tt[0] if len(tt) > 1 else 1.0) if runs else math.nan
         st.unflagged_slips_per_h = (sum(1 for key in unflagged if key[0] == g) / st.tracked_sat_h
                                     if st.tracked_sat_h else math.nan)
-        c = np.array(cn0_el[g]) if cn0_el[g] else np.zeros((0, 2))
+        c = np.array(cn0_el[g]) if cn0_el[g] else np.zeros((0, 4))
         if c.size:
             st.cn0_p10_p50_p90 = tuple(float(x) for x in np.percentile(c[:, 0], (10, 50, 90)))  # type: ignore[assignment]
             for lo, hi in itertools.pairwise(EL_BANDS_DEG):
@@ -213,9 +215,41 @@ def tracking_stats(epochs: Sequence[ObsEpoch], nav: BroadcastNavigation, approx_
             coef, *_ = np.linalg.lstsq(a_mat, c[:, 0], rcond=None)
             st.cn0_fit_dbhz = (float(coef[0]), float(coef[1]))
             st.cn0_resid_std_db = float(np.std(c[:, 0] - a_mat @ coef))
+            st.cn0_acf = _lag_correlation(c[:, 3], c[:, 2], c[:, 0] - a_mat @ coef, CN0_ACF_LAGS_S)
         st.code_rms_by_cn0, st.code_sigma_at_ref_m = _code_by_cn0({k: v for k, v in cmc.items() if k[0] == g})
         out[g] = st
     return out
+
+
+CN0_ACF_LAGS_S = (1, 2, 5, 10, 20, 30, 60)
+
+
+def _lag_correlation(sat: Vec, t_s: Vec, x: Vec, lags_s: Sequence[int]) -> dict[int, float]:
+    """Correlation of x with itself `lag` whole seconds later on the same satellite, per lag (NaN: no pair)."""
+    index = {(int(s), round(t)): v for s, t, v in zip(sat.tolist(), t_s.tolist(), x.tolist())}
+    out: dict[int, float] = {}
+    for lag in lags_s:
+        pairs = [(v, index[(s, t + lag)]) for (s, t), v in index.items() if (s, t + lag) in index]
+        out[lag] = float(np.corrcoef(np.array(pairs).T)[0, 1]) if len(pairs) > 30 else math.nan
+    return out
+
+
+def fit_cn0_tau_s(acf: dict[int, float]) -> tuple[float, ...]:
+    """(fast, slow) correlation times (s) of two first-order Gauss-Markov processes with equal shares of the
+    variance whose autocorrelation is closest (least squares over the lags) to `acf`; () without any lag."""
+    lags = [k for k, v in acf.items() if math.isfinite(v)]
+    if not lags:
+        return ()
+    target = np.array([acf[k] for k in lags])
+    lag_s = np.array(lags, float)
+    best: tuple[float, tuple[float, ...]] = (math.inf, ())
+    for fast in (1.0, 2.0, 3.0, 5.0, 7.0, 10.0, 15.0):
+        for slow in (20.0, 30.0, 45.0, 60.0, 90.0, 120.0, 180.0, 300.0, 600.0):
+            model = 0.5 * (np.exp(-lag_s / fast) + np.exp(-lag_s / slow))
+            err = float(np.sum((model - target) ** 2))
+            if err < best[0]:
+                best = (err, (fast, slow))
+    return best[1]
 
 
 def _slip_structure(rows: list[dict[tuple[int, int], _Row]], g: int) -> tuple[int, int, list[int]]:
@@ -409,6 +443,7 @@ def fit_environment(stats: dict[int, SystemStats], phase_sigma_ref_m: float) -> 
         unflagged_slips_per_h=pooled([st.unflagged_slips_per_h for st in sys_]),
         half_cycle_resolve_s=pooled([st.half_cycle_run_s for st in sys_]),
         cn0_horizon_dbhz=gps.cn0_fit_dbhz[0], cn0_zenith_dbhz=gps.cn0_fit_dbhz[1],
-        cn0_sigma_dbhz=gps.cn0_resid_std_db, cn0_ref_dbhz=CN0_REF_DBHZ, code_sigma_ref_m=gps.code_sigma_at_ref_m,
+        cn0_sigma_dbhz=gps.cn0_resid_std_db, cn0_tau_s=fit_cn0_tau_s(gps.cn0_acf), cn0_ref_dbhz=CN0_REF_DBHZ,
+        code_sigma_ref_m=gps.code_sigma_at_ref_m,
         phase_sigma_ref_m=phase_sigma_ref_m, glonass_code_factor=glo_factor,
     )

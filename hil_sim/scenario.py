@@ -149,7 +149,8 @@ class RoverEnvironment:
     Noise: code (white and multipath, split as in the ErrorModel) of total σ `code_sigma_ref_m` and white
     phase `phase_sigma_ref_m` at `cn0_ref_dbhz`, scaled by 10^((ref − C/N0)/20) (thermal noise ∝ 1/√(C/N0),
     what the measured code RMS per C/N0 bin follows); GLONASS code × `glonass_code_factor` (its C/A chip is
-    twice as long). C/N0 = `cn0_horizon_dbhz` + (`cn0_zenith_dbhz` − horizon)·sin(el) + N(0, `cn0_sigma_dbhz`).
+    twice as long). C/N0 = `cn0_horizon_dbhz` + (`cn0_zenith_dbhz` − horizon)·sin(el) + N(0, `cn0_sigma_dbhz`),
+    the deviation correlated over `cn0_tau_s`.
     `HARSH` holds the values fitted to the real M8P walk (hil_sim.obs_stats.fit_environment;
     docs/hil-sim-error-model.md).
     """
@@ -165,6 +166,10 @@ class RoverEnvironment:
     cn0_horizon_dbhz: float = 35.0
     cn0_zenith_dbhz: float = 50.0
     cn0_sigma_dbhz: float = 1.0
+    cn0_tau_s: tuple[float, ...] = ()
+    """Correlation times (s) of the C/N0 deviation from the law, each an equal share of its variance. ():
+    white, the receiver's estimate scattering about the law, the noise following the law. Otherwise the
+    deviation is the signal's own attenuation (foliage, the walker's body) and the noise follows it."""
     cn0_ref_dbhz: float = 45.0
     code_sigma_ref_m: float = 0.5
     phase_sigma_ref_m: float = 0.001
@@ -175,8 +180,8 @@ HARSH = RoverEnvironment(
     el_bands_deg=(10.0, 20.0, 30.0, 45.0, 60.0), unavailability=(0.100, 0.066, 0.010, 0.009, 0.007),
     az_factor=(0.30, 0.57, 0.92, 3.47, 0.40, 1.33, 0.28, 0.72), outage_mean_s=2.7, lli_slips_per_h=38.1,
     common_slip_events_per_h=4.6, unflagged_slips_per_h=2.6, half_cycle_resolve_s=2.9, cn0_horizon_dbhz=34.6,
-    cn0_zenith_dbhz=51.1, cn0_sigma_dbhz=3.5, cn0_ref_dbhz=45.0, code_sigma_ref_m=0.93, phase_sigma_ref_m=0.0018,
-    glonass_code_factor=2.43,
+    cn0_zenith_dbhz=51.1, cn0_sigma_dbhz=3.5, cn0_tau_s=(5.0, 90.0), cn0_ref_dbhz=45.0, code_sigma_ref_m=0.93,
+    phase_sigma_ref_m=0.0018, glonass_code_factor=2.43,
 )
 """The u-blox M8P walking a river trail under trees (Galway 2018, set 20181004-1532, GPS + GLONASS, 10° mask):
 `hil_sim.obs_stats.fit_environment` of its RINEX (bench/error_stats.py --harsh prints the fit and the

@@ -137,7 +137,7 @@ MOVING_SPEED_M_S = 0.5
 """Rover speed above which its code multipath follows the moving-antenna process (ErrorModel.mp_tau_moving_s)."""
 
 # Purposes of the random streams (part of every seed so streams never overlap).
-_P_ORBIT, _P_SATCLK, _P_IONO, _P_TROPO, _P_GRAD, _P_MP, _P_CLOCK, _P_TRACK, _P_EPOCH, _P_IFB, _P_BLOCK = range(1, 12)
+_P_ORBIT, _P_SATCLK, _P_IONO, _P_TROPO, _P_GRAD, _P_MP, _P_CLOCK, _P_TRACK, _P_EPOCH, _P_IFB, _P_BLOCK, _P_CN0 = range(1, 13)
 
 
 def _sat_position(eph: AnyEphemeris, t: GpsTime) -> Vec:
@@ -363,6 +363,12 @@ class World:
         self._model = models
         # the moving rover's code multipath: its own process (new reflection geometry at every metre)
         self._mp_code_moving = _gauss_markov(_rng(seed, _P_MP, 0, 2), nf, n_cols, FAST_DT_S, em.mp_tau_moving_s)
+        # the rover's C/N0 deviation when it is the signal's own attenuation (RoverEnvironment.cn0_tau_s), dB
+        env = sc.rover_environment
+        self._cn0_dev_db: Vec | None = None
+        if env is not None and env.cn0_tau_s:
+            parts = [_gauss_markov(_rng(seed, _P_CN0, k), nf, n_cols, FAST_DT_S, tau) for k, tau in enumerate(env.cn0_tau_s)]
+            self._cn0_dev_db = env.cn0_sigma_dbhz * np.sum(parts, axis=0) / math.sqrt(len(parts))
         for r_idx, rcv in enumerate(RECEIVERS):
             self._mp_code[rcv] = _gauss_markov(_rng(seed, _P_MP, r_idx, 0), nf, n_cols, FAST_DT_S, em.mp_tau_s)
             self._mp_phase[rcv] = _gauss_markov(_rng(seed, _P_MP, r_idx, 1), nf, n_cols, FAST_DT_S, em.mp_tau_s)
@@ -696,6 +702,8 @@ class World:
             half_ns = round(em.half_cycle_resolve_s * NS_PER_S)
         else:  # C/N0 drives the noise (RoverEnvironment)
             cn0_model = env.cn0_horizon_dbhz + (env.cn0_zenith_dbhz - env.cn0_horizon_dbhz) * np.sin(np.maximum(el, 0.0))
+            if self._cn0_dev_db is not None:  # an attenuated signal: weaker, and noisier with it
+                cn0_model = cn0_model + self._fast.interp(self._cn0_dev_db, t)[col]
             scale = 10.0 ** ((env.cn0_ref_dbhz - cn0_model) / 20.0)
             code_scale = scale * np.where(gnss_arr == GNSS_GLONASS, env.glonass_code_factor, 1.0)
             tot = math.hypot(em.code_sigma_zenith_m, em.mp_code_sigma_zenith_m)
@@ -703,7 +711,7 @@ class World:
             mp_code = env.code_sigma_ref_m * m_frac * code_scale * self._fast.interp(mp_src, t)[col]
             eps_code = env.code_sigma_ref_m * w_frac * code_scale * noise[0, col]
             eps_phase = env.phase_sigma_ref_m * scale * noise[1, col]
-            cn0 = cn0_model + env.cn0_sigma_dbhz * noise[3, col]
+            cn0 = cn0_model if self._cn0_dev_db is not None else cn0_model + env.cn0_sigma_dbhz * noise[3, col]
             pr_std = env.code_sigma_ref_m * code_scale
             half_ns = round(env.half_cycle_resolve_s * NS_PER_S)
 

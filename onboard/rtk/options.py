@@ -110,6 +110,11 @@ class RtkOptions:
     min_success_rate, over confirm_fix_span_s instead of consistent_fix_span_s). Why: a partial set is the
     survivor of several ratio tests, which inflates the chance that a biased float passes one by luck; the
     full set is one test on every ambiguity."""
+    full_set_min_dd: int = 7
+    """With measured u-blox-like code, a full set counts as full (full_set_confirm_epochs) only with at least
+    this many double differences; a smaller one waits the spans of a partial set. Why: GPS alone under trees
+    (hil_sim harsh, M8T, the C/N0 deviation as attenuation) fixed full sets of 6-7 double differences on a
+    float 1.3-1.6 m off after two winning epochs."""
     min_success_rate_minimal_set: float = 0.999
     """Success rate a fix resting on the bare minimum of double differences (`min_fix_sats` satellites, nothing held)
     needs, besides twice the ratio."""

@@ -1588,7 +1588,8 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
             # full set needs its win confirmed at full_set_confirm_epochs consecutive epochs (and, below the
             # success rate, over confirm_fix_span_s), a partial one the wall-time spans.
             seen_candidate = True
-            full = _drop == 0
+            # with measured u-blox-like code, a full set of few double differences is no stronger than a partial one
+            full = _drop == 0 and (others.size >= o.full_set_min_dd or not _ublox_code(st))
             key = (ref_key, tuple(others.tolist()), tuple(np.rint(res.fixed[:, 0]).astype(int).tolist()))
             slot_ints = _slot_integers(ref, others, res.fixed[:, 0], st.ns)
             pf = st.pending_fix

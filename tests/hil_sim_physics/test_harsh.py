@@ -46,6 +46,13 @@ def test_harsh_scenario_statistics_are_within_bounds_of_the_fitted_ones() -> Non
     assert fit.cn0_horizon_dbhz == pytest.approx(HARSH.cn0_horizon_dbhz, abs=1.5)
     assert fit.cn0_zenith_dbhz == pytest.approx(HARSH.cn0_zenith_dbhz, abs=1.5)
     assert fit.cn0_sigma_dbhz == pytest.approx(HARSH.cn0_sigma_dbhz, abs=0.5)
+    # the C/N0 deviation is a correlated attenuation, as on the walk (its GPS ACF 0.85 / 0.64 / 0.41 at 1 / 5 /
+    # 20 s), not the white scatter of an estimate
+    acf = stats[GNSS_GPS].cn0_acf
+    assert acf[1] == pytest.approx(0.85, abs=0.1) and acf[5] == pytest.approx(0.64, abs=0.12)
+    assert acf[20] == pytest.approx(0.41, abs=0.15)
+    fast, slow = fit.cn0_tau_s
+    assert 2.0 <= fast <= 10.0 and 30.0 <= slow <= 300.0
     assert fit.code_sigma_ref_m == pytest.approx(MEASURED_CODE_SIGMA_AT_45_M, rel=0.15)
     assert fit.glonass_code_factor == pytest.approx(HARSH.glonass_code_factor, rel=0.2)
     # the open-sky base is untouched by the rover's environment
@@ -113,3 +120,24 @@ def test_harsh_is_the_fit_of_the_real_walk() -> None:
             assert np.allclose(a, b, atol=0.01 if f.name == "unavailability" else 0.05), f.name
         else:
             assert math.isclose(a, b, abs_tol=0.06), (f.name, a, b)
+
+
+@pytest.mark.slow
+def test_an_attenuated_signal_is_noisier() -> None:
+    # with the C/N0 deviation correlated (HARSH.cn0_tau_s) it is the signal's attenuation and the code error
+    # follows it; as a white scatter of the receiver's estimate it tells nothing about the error
+    def code_error_by_cn0(env: RoverEnvironment) -> tuple[float, float]:
+        world = World(Scenario.multi("gr-2012", duration_s=400.0, seed=7, rover_environment=env))
+        err, cn0 = [], []
+        for k in range(0, 360, 2):
+            ep, d = world.observe_detailed("rover", world.start.add_s(k))
+            gps = ep.gnss_id == GNSS_GPS
+            err += (d["mp_code_m"] + d["eps_code_m"])[gps].tolist()
+            cn0 += ep.cn0_dbhz[gps].tolist()
+        e, c = np.array(err), np.array(cn0)
+        return float(np.sqrt(np.mean(e[c < 38.0] ** 2))), float(np.sqrt(np.mean(e[c >= 45.0] ** 2)))
+
+    weak, strong = code_error_by_cn0(HARSH)
+    weak_w, strong_w = code_error_by_cn0(dataclasses.replace(HARSH, cn0_tau_s=()))
+    # white: the weak ones are noisier only by their lower elevations; attenuated: by their own signal too
+    assert weak / strong > 1.5 * (weak_w / strong_w)
