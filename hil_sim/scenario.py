@@ -105,9 +105,9 @@ class ErrorModel:
     iono_model_error_fraction: float = 0.2
     iono_model_error_tau_s: float = 1800.0
     """Correlation time of the fraction above; with it σ sets the ionosphere's rate, which a rover differenced
-    with an aged base epoch (radio gaps) sees. 1800 s: between two satellites 68 mm change in 20 s on the
-    gr-2012 sky, 59 mm in the real GMSD MSM7 stream (L1−L2 phase, 2012-10-14, Japan). A MultiWorld can carry
-    its own (docs/hil-sim-error-model.md)."""
+    with an aged base epoch (radio gaps) sees. 1800 s: between two satellites 69-102 mm RMS change in 20 s on
+    the gr-2012 sky (seeds 1-8), 59 mm in the real GMSD MSM7 stream (L1−L2 phase, 2012-10-14, Japan). A
+    MultiWorld can carry its own (docs/hil-sim-error-model.md)."""
     iono_gradient_mm_per_km: float = 1.0
     tropo_residual_zenith_sigma_m: float = 0.02
     tropo_residual_tau_s: float = 1800.0
