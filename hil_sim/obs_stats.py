@@ -377,8 +377,8 @@ def iono_change_stats(series: Mapping[Any, Mapping[int, float]], lags_s: Sequenc
             m[t - t0, j] = iono_m
     with np.errstate(all="ignore"):
         step = np.diff(m, axis=0)
-        common = np.nanmedian(np.where(np.isfinite(step), step, np.nan), axis=1, keepdims=True) \
-            if np.isfinite(step).any() else np.zeros((step.shape[0], 1))
+        common = np.nanmedian(step, axis=1, keepdims=True) if np.isfinite(step).any() \
+            else np.zeros((step.shape[0], 1))
         broken = ~(np.abs(step - common) <= IONO_JUMP_M)  # NaN steps (gaps) break an arc too
     cum = np.vstack([np.zeros((1, len(keys)), int), np.cumsum(broken, axis=0)])  # breaks before each epoch
 
