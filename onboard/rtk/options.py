@@ -288,6 +288,11 @@ class RtkOptions:
     """Growth (m/s) of the phase σ of an aged base epoch after it is carried forward (RTKLIB demo5's sclkstab
     term, smaller since the rate is removed). Why: lets the hold's residual check and the fix's σ widen with
     the age instead of releasing a good fix late in a gap."""
+    resume_hold_after_gap: bool = True
+    """A hold released while the base was carried forward (a radio gap) is tried again, integers as they were, at
+    the first new base epoch: fixed and held at once when every fixed phase residual fits, without the ratio test
+    and the float-fix check. Why: the carried base's drift, not the integers, made the held set misfit, and the
+    float it left behind needs 15-30 s of fresh data to win the ratio test again (gr-2012 radio gaps)."""
     base_extrapolate_min_age_s: float = 5.0
     """Base epochs older than this (s) are carried forward along the correction rate, from this age on (the
     correction grows from zero, it does not jump by rate × age when carrying starts). Younger ones (1 Hz base,
@@ -368,6 +373,7 @@ TOML_KEYS: dict[str, tuple[str, Any]] = {
     "accel_h_sigma_m_s2": ("accel_h_sigma_m_s2", float),
     "accel_v_sigma_m_s2": ("accel_v_sigma_m_s2", float),
     "max_age_s": ("max_age_s", float),
+    "resume_hold_after_gap": ("resume_hold_after_gap", bool),
     "max_outage_epochs": ("max_outage_epochs", int),
     "static_start": ("static_start", bool),
     "takeoff_speed_m_s": ("takeoff_speed_m_s", float),

@@ -337,6 +337,12 @@ class RtkState:
     """Integer SD-ambiguity offsets (cycles, relative to one member) of the last held set, NaN off it; a slot
     leaves it on any reset (slip, outage, outlier), so the rest stays tracked without a slip since validation.
     Survives the release of a hold, whose misfitting satellites are reset."""
+    gap_int: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
+    """validated_int as it was when a hold was released on a base carried forward (a radio gap), NaN elsewhere;
+    slots leave it on a reset as they leave validated_int (see RtkOptions.resume_hold_after_gap)."""
+    gap_base_time: GpsTime | None = None
+    """The base epoch of that release: the set is tried again at the first epoch paired with a newer one. None
+    when no such try is due."""
     static: bool = False
     init_pos_ecef_m: Arr | None = None
     fail_count: int = 0
@@ -389,7 +395,7 @@ def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkStat
         st.layout, st.ns, st.nxi = layout, n, NX0 + n
         st.x, st.p = np.zeros(NX0 + n), np.zeros((NX0 + n, NX0 + n))
         for name in ("lock", "outage", "half_cycle", "prev_cp_r", "prev_dop_r", "prev_phase_r", "last_t_r_ns",
-                     "prev_zb", "held_prns", "known_amb", "validated_int", "pending_slip", "prev_sat_clk_r",
+                     "prev_zb", "held_prns", "known_amb", "validated_int", "gap_int", "pending_slip", "prev_sat_clk_r",
                      "prev_sat_ok_r"):
             old = getattr(st, name)
             setattr(st, name, np.full(n, old[0], old.dtype))
@@ -609,6 +615,7 @@ def _reset_amb(st: RtkState, k: npt.NDArray[np.int64]) -> None:
     st.held_prns[k] = False
     st.known_amb[k] = False
     st.validated_int[k] = np.nan
+    st.gap_int[k] = np.nan
 
 
 def _process_noise(st: RtkState, dt: float, pos: Arr) -> Arr:
@@ -1483,6 +1490,8 @@ class _Fix:
     revalidated: bool = False
     """No set is held and this one re-fixes the last validated integers on at least min_fix_sats satellites
     tracked without a slip since (see _agrees_with_validated)."""
+    resumed: bool = False
+    """The set held before a radio gap, tried again on the base's return (_resume_gap_hold): held at once."""
 
 
 def _slot_integers(ref: int | npt.NDArray[np.int64], others: npt.NDArray[np.int64], ints: Arr,
@@ -1984,6 +1993,11 @@ def _check_hold(st: RtkState, ctx: EpochContext) -> None:
         log.info("%s: held fix released (%d phase residuals out of bounds)", ctx.time, bad_phase.size)
         st.held_prns[:] = False
         st.fix_count = 0
+        if st.options.resume_hold_after_gap and ctx.base_age_var_m2 > 0.0:
+            # on a carried base the drift of what it observes, not the integers, is the likelier misfit: the set
+            # is tried again on the base's return (_resume_gap_hold)
+            st.gap_int = st.validated_int.copy()
+            st.gap_base_time = st.prev_time_b
         if bad_phase.size > 1:
             # several misfits point at the set rather than at one satellite: it no longer vouches for a re-fix
             st.validated_int[:] = np.nan
@@ -2011,6 +2025,11 @@ def _resolve(st: RtkState, ctx: EpochContext) -> _Fix | None:
     locked = (st.lock > o.min_lock_epochs) | st.known_amb
     cand = use_phase & (el >= math.radians(o.ar_elmask_deg)) & ~ctx.half & locked & (amb_var > 0)
     fix = _resamb_lambda(st, ctx, cand)
+    if st.gap_base_time is not None and st.prev_time_b != st.gap_base_time:
+        # the first epoch with new base data since a hold was released in a radio gap: one try of that set
+        st.gap_base_time = None
+        if fix is None and ctx.base_age_var_m2 == 0.0 and not st.held_prns.any():
+            fix = _resume_gap_hold(st, ctx, cand)
     for _try in range(FIX_TRIES):
         if fix is None:
             break
@@ -2051,6 +2070,32 @@ def _resolve(st: RtkState, ctx: EpochContext) -> _Fix | None:
             fix = _resamb_lambda(st, ctx, retry)
             st.pending_fix = pending
     return fix
+
+
+def _resume_gap_hold(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_]) -> _Fix | None:
+    """The fix of the integers held before a radio gap (RtkState.gap_int) on the `cand` slots still tracked
+    without a slip, None when fewer than min_fix_sats satellites are left. The caller validates its phase
+    residuals; as a revalidated set it skips the float-fix check (the float drifted with the carried base)."""
+    o = st.options
+    idx = (cand & np.isfinite(st.gap_int)).nonzero()[0]
+    if idx.size < o.min_fix_sats:
+        return None
+    others, ref = _dd_pairs(st, idx, ctx.el)
+    if others.size + 1 < o.min_fix_sats:
+        return None
+    if st.layout.gps_only:
+        a, qa, qba, qia = _dd_ambiguities(st.x, st.p, idx, int(ref[0]))
+    else:
+        a, qa, qba, qia = _dd_ambiguities_multi(st.x, st.p, others, ref, st.ns)
+    ints = st.gap_int[others] - st.gap_int[ref]
+    try:
+        gain = solve(qa, qba.T).T
+        iono = st.x[st.nxi:st.nxi + st.ns] - qia @ solve(qa, a - ints) if st.iono_on and qia is not None else None
+    except LinAlgError:
+        return None
+    log.debug("%s: the set held before the radio gap tried again (%d satellites)", ctx.time, idx.size)
+    return _Fix(st.x[:3] - gain @ (a - ints), st.p[:3, :3] - gain @ qba.T, st.last_ratio, others, ref, ints,
+                others.size, iono=iono, revalidated=True, resumed=True)
 
 
 def _float_fix_gate_scale(st: RtkState, fix: _Fix) -> float:
@@ -2108,7 +2153,7 @@ def _epoch_solution(st: RtkState, ctx: EpochContext, fix: _Fix | None) -> Soluti
                     ctx.age_s, fix.ratio)
     if st.channel_code_bias is not None and not weak and st.fix_count >= o.min_hold_epochs:
         _learn_channel_code_bias(st, ctx, fix.pos)
-    if o.ar_mode == "fix-and-hold" and st.fix_count >= o.min_hold_epochs:
+    if o.ar_mode == "fix-and-hold" and (st.fix_count >= o.min_hold_epochs or fix.resumed):
         _holdamb(st, fix, ctx.el)
     elif o.ar_mode == "instantaneous":
         _reset_amb(st, np.arange(st.ns))
