@@ -174,21 +174,33 @@ class RoverEnvironment:
     code_sigma_ref_m: float = 0.5
     phase_sigma_ref_m: float = 0.001
     glonass_code_factor: float = 1.0
+    arc_code_sigma_ref_m: float = 0.0
+    """σ (m, at cn0_ref_dbhz, scaled by the same C/N0 law) of a code error drawn at each acquisition or slip and
+    kept for the whole arc: the slow part of a real rover's code under trees, which its own code minus carrier
+    cannot see (docs/hil-sim-error-model.md). 0: none."""
+    acq_code_sigma_ref_m: float = 0.0
+    """σ (m, likewise) of a further code error at acquisition that decays over `acq_code_tau_s` (s): the real
+    walk's first 30 s of an arc are 1.4-1.6 times worse than the rest. 0: none."""
+    acq_code_tau_s: float = 15.0
 
 
 HARSH = RoverEnvironment(
     el_bands_deg=(10.0, 20.0, 30.0, 45.0, 60.0), unavailability=(0.100, 0.066, 0.010, 0.009, 0.007),
     az_factor=(0.30, 0.57, 0.92, 3.47, 0.40, 1.33, 0.28, 0.72), outage_mean_s=2.7, lli_slips_per_h=38.1,
     common_slip_events_per_h=4.6, unflagged_slips_per_h=2.6, half_cycle_resolve_s=2.9, cn0_horizon_dbhz=34.6,
-    cn0_zenith_dbhz=51.1, cn0_sigma_dbhz=3.5, cn0_tau_s=(5.0, 90.0), cn0_ref_dbhz=45.0, code_sigma_ref_m=0.93,
-    phase_sigma_ref_m=0.0018, glonass_code_factor=2.43,
+    cn0_zenith_dbhz=51.1, cn0_sigma_dbhz=3.5, cn0_tau_s=(5.0, 90.0), cn0_ref_dbhz=45.0, code_sigma_ref_m=0.85,
+    phase_sigma_ref_m=0.0018, glonass_code_factor=2.6, arc_code_sigma_ref_m=1.2, acq_code_sigma_ref_m=2.5,
+    acq_code_tau_s=15.0,
 )
 """The u-blox M8P walking a river trail under trees (Galway 2018, set 20181004-1532, GPS + GLONASS, 10° mask):
 `hil_sim.obs_stats.fit_environment` of its RINEX (bench/error_stats.py --harsh prints the fit and the
 simulated statistics beside the real ones). Phase σ: not measurable there (no truth for a moving antenna): the
-static M8P's 1 mm zenith (C/N0 ≈ 50 dB-Hz) carried to 45 dB-Hz by the same 10^(Δ/20) law. Code σ: 0.93 m
-in, because the estimator (a quadratic removed per arc takes some multipath with it) returns 0.79 m, the
-walk's figure, for it on the simulated flight."""
+static M8P's 1 mm zenith (C/N0 ≈ 50 dB-Hz) carried to 45 dB-Hz by the same 10^(Δ/20) law. Code σ: 0.85 m
+and GLONASS × 2.6 in, because the estimator (a quadratic removed per arc takes some multipath with it, the
+per-arc error's decay adds some) returns 0.80 m and × 2.0 on the simulated flight, the walk's 0.79 m and × 2.43
+(seed 5). The per-arc code error (arc_code_sigma_ref_m, acq_code_sigma_ref_m) is the one part not seen by the
+rover-only estimator: set from the walk's code residuals at the M8P's own RTK fixes, per arc
+(docs/hil-sim-error-model.md)."""
 
 
 @dataclass(frozen=True)

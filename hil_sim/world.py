@@ -69,7 +69,8 @@ and reproduces bit for bit.
 
 `Scenario.rover_environment` (e.g. HARSH, fitted to a real walk under trees, docs/hil-sim-error-model.md)
 adds, for the rover only, blockage by elevation/azimuth with reacquisition arcs, receiver-wide and independent
-LLI slips, slips without LLI, and C/N0-driven noise in place of the 1/sin(el) law.
+LLI slips, slips without LLI, C/N0-driven noise in place of the 1/sin(el) law, and a code error per arc (drawn
+at each acquisition or slip: a constant plus a part decaying over the arc's first seconds).
 
 The common slowly varying errors (orbit, satellite clock, ionosphere model error, troposphere residual) are
 Gauss–Markov samples every `SMOOTH_DT_S` (300 s) joined by cubic splines: their σ and τ as stated, their rates
@@ -137,7 +138,8 @@ MOVING_SPEED_M_S = 0.5
 """Rover speed above which its code multipath follows the moving-antenna process (ErrorModel.mp_tau_moving_s)."""
 
 # Purposes of the random streams (part of every seed so streams never overlap).
-_P_ORBIT, _P_SATCLK, _P_IONO, _P_TROPO, _P_GRAD, _P_MP, _P_CLOCK, _P_TRACK, _P_EPOCH, _P_IFB, _P_BLOCK, _P_CN0 = range(1, 13)
+_P_ORBIT, _P_SATCLK, _P_IONO, _P_TROPO, _P_GRAD, _P_MP, _P_CLOCK, _P_TRACK, _P_EPOCH, _P_IFB, _P_BLOCK, _P_CN0, _P_ARC = (
+    range(1, 14))
 
 
 def _sat_position(eph: AnyEphemeris, t: GpsTime) -> Vec:
@@ -389,6 +391,8 @@ class World:
                 code[glo] += em.glonass_unit_code_sigma_m * unit[self._glo_fcn[glo] - GLO_FCN_MIN]
             self._code_ifb_m[rcv], self._phase_ifb_m[rcv] = code, phase
         self._last_obs: dict[str, tuple[int, int] | None] = {"rover": None, "base": None}
+        self._arc_draws: dict[tuple[int, int], tuple[float, float]] = {}
+        """The rover's per-arc code error draws (persistent, at acquisition) by (column, reset index)."""
 
     # ------------------------------------------------------------------------------- public queries
     def ephemerides(self) -> list[Ephemeris]:
@@ -621,6 +625,26 @@ class World:
                 return False
         return bool(self._slow.interp(el[:, col], t) >= mask)
 
+    def _arc_code_m(self, env: RoverEnvironment, r_idx: int, col: Vec, t: GpsTime, scale: Vec) -> Vec:
+        """The rover's code error of each satellite's current arc (m): a constant drawn at its acquisition (or
+        slip) plus a part decaying from it over acq_code_tau_s, both at σ env.*_ref_m × `scale` (the C/N0 law
+        of this epoch, without GLONASS's chip factor). See RoverEnvironment.arc_code_sigma_ref_m."""
+        out = np.zeros(col.size)
+        tracks = self._tracks[RECEIVERS[r_idx]]
+        seed = self.scenario.seed
+        for i, c in enumerate(col.tolist()):
+            tr = tracks[c]
+            assert tr is not None
+            k = max(int(np.searchsorted(tr.resets_ns, t.total_ns, side="right")) - 1, 0)
+            draw = self._arc_draws.get((c, k))
+            if draw is None:
+                z = _rng(seed, _P_ARC, r_idx, c, k).standard_normal(2)
+                draw = self._arc_draws[(c, k)] = (float(z[0]), float(z[1]))
+            age_s = (t.total_ns - tr.resets_ns[k]) / NS_PER_S
+            out[i] = scale[i] * (env.arc_code_sigma_ref_m * draw[0]
+                                 + env.acq_code_sigma_ref_m * draw[1] * math.exp(-max(age_s, 0.0) / env.acq_code_tau_s))
+        return out
+
     def _simulate(self, receiver: str, t_nom: GpsTime, update_state: bool = True) -> tuple[ObsEpoch, dict[str, Any]]:
         if receiver not in RECEIVERS:
             raise ValueError(f"unknown receiver {receiver!r} (expected 'rover' or 'base')")
@@ -743,7 +767,10 @@ class World:
 
         code_ifb = self._code_ifb_m[receiver][col]
         phase_ifb = self._phase_ifb_m[receiver][col]
-        pr = rho + clocks_m + tropo + iono + mp_code + eps_code + code_ifb
+        arc_code = np.zeros(n)
+        if env is not None and (env.arc_code_sigma_ref_m > 0.0 or env.acq_code_sigma_ref_m > 0.0):
+            arc_code = self._arc_code_m(env, r_idx, col, t, scale)
+        pr = rho + clocks_m + tropo + iono + mp_code + eps_code + code_ifb + arc_code
         cp = (rho + clocks_m + tropo - iono + mp_phase + eps_phase + phase_ifb) / lam + amb + half
         dop = -(rho_dot + CLIGHT_M_S * (timing.clock_drift_s_s - dts_dot) + atmo_rate) / lam + eps_dop
         cp_std = pll_thermal_sigma_cyc(cn0)
@@ -767,5 +794,6 @@ class World:
             "eps_code_m": eps_code, "eps_phase_m": eps_phase, "eps_dop_hz": eps_dop, "ambiguity_cyc": amb,
             "half_cycle_cyc": half, "clock_bias_s": b, "freq_l1_hz": FREQ_L1_HZ, "gnss_id": gnss_arr,
             "freq_hz": self._freq_hz[col], "lambda_m": lam, "code_ifb_m": code_ifb, "phase_ifb_m": phase_ifb,
+            "arc_code_m": arc_code,
         }
         return epoch, details

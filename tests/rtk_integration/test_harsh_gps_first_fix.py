@@ -1,9 +1,10 @@
 """GPS alone under trees (hil_sim's harsh rover, M8T): no first fix on a small full set's two wins.
 
 With the C/N0 deviation simulated as the signal's attenuation (the code noisier where the signal is weak, for
-tens of seconds), seed 3 builds a float 1.3-1.6 m off whose full set of 6-7 double differences wins the ratio
+tens of seconds), seed 3 built a float 1.3-1.6 m off whose full set of 6-7 double differences won the ratio
 test (3.0-5.6); confirmed by two consecutive wins it was fixed, 4 epochs wrong (docs/rtk-defaults.md,
-`full_set_min_dd`).
+`full_set_min_dd`). With the per-arc code error simulated as well (docs/hil-sim-error-model.md), seed 18 is the
+flight where the rule makes the difference.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ def _wrong_fixed_epochs(data: SimData, options: RtkOptions) -> tuple[int, int]:
 
 @pytest.mark.slow
 def test_gps_alone_under_trees_does_not_fix_a_small_full_set_on_two_wins() -> None:
-    data = simulate(SimCase("harsh", "", harsh=True, radio_loss=HARSH_RADIO_LOSS, seed=3), "m8t")
+    data = simulate(SimCase("harsh", "", harsh=True, radio_loss=HARSH_RADIO_LOSS, seed=18), "m8t")
     wrong, fixed = _wrong_fixed_epochs(data, RtkOptions())
     assert wrong == 0 and fixed > 50
     # the rule is what keeps them out: without it the same flight fixes the wrong full sets
