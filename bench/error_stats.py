@@ -32,7 +32,15 @@ GLONASS world gr-2012) through hil_sim.obs_stats, per constellation: availabilit
 outages, arcs, slips with and without LLI, half-cycle time, C/N0 distribution, code RMS by C/N0, and the base
 RTCM stream's loss pattern; then the environment fitted to each (the real fit is HARSH, rounded).
 
-Run: `.venv/bin/python bench/error_stats.py [--no-sim] [--seed N] [--harsh]` (about 1 min; --harsh 20 s).
+Code by arc (`--code-arcs`): the rover's single-differenced code (rover − base) at the reference antenna
+position (the walk: the M8P's own RTK fixes; hil_sim: the truth), GPS, the median of each epoch removed (the
+clocks), base epochs at most 10 s older (metres of code against millimetres of atmosphere and clock
+drift); RMS by the rover's C/N0, split by the length of the rover's phase arc
+the sample belongs to (LLI or a gap > 1.5 s ends it) and by its age in the arc: the per-arc code error that the
+code minus carrier of one receiver cannot see (docs/hil-sim-error-model.md).
+
+Run: `.venv/bin/python bench/error_stats.py [--no-sim] [--seed N] [--harsh] [--code-arcs]` (about 1 min;
+--harsh 20 s, --code-arcs 30 s).
 """
 
 from __future__ import annotations
@@ -515,13 +523,124 @@ def harsh(seed: int) -> None:
     print(f"\nfit of the real walk: {fit_real}\nrefit of the simulation: {fit_sim}")
 
 
+ARC_CN0_BINS_DBHZ = (30, 35, 40, 45, 60)
+
+
+def code_by_arc(rov: Series, base: Series, pair_tol_s: float = 10.0, gap_s: float = 1.5) -> dict[str, dict[str, float]]:
+    """RMS (m) of the rover − base code at the reference positions (`rng_m` of both series; rover samples
+    without one are left out of the residuals but still make its arcs), each epoch's median removed, per C/N0
+    bin of the rover: over all samples, samples of arcs shorter / not shorter than 60 s, samples in their arc's
+    first 30 s / later. An entry is NaN with fewer than 10 samples."""
+    ra, ba = rov.arrays(), base.arrays()
+    # the rover's arcs: by satellite, split at LLI (slip or half cycle) and at gaps
+    arc_len = np.full(ra["t_s"].size, np.nan)
+    arc_age = np.full(ra["t_s"].size, np.nan)
+    for prn in np.unique(ra["prn"]):
+        idx = np.flatnonzero(ra["prn"] == prn)
+        idx = idx[np.argsort(ra["t_s"][idx], kind="stable")]
+        t = ra["t_s"][idx]
+        brk = np.ones(idx.size, bool)
+        brk[1:] = (np.diff(t) > gap_s) | ((ra["lli"][idx][1:] & (LLI_SLIP | LLI_HALF_CYCLE)) != 0)
+        starts = np.flatnonzero(brk)
+        for a, b in zip(starts, [*starts[1:], idx.size], strict=True):
+            arc_len[idx[a:b]] = t[b - 1] - t[a]
+            arc_age[idx[a:b]] = t[a:b] - t[a]
+    base_of = {(round(float(t), 3), int(p)): k for k, (t, p) in enumerate(zip(ba["t_s"], ba["prn"], strict=True))}
+    bt = np.unique(ba["t_s"])
+    rows: list[tuple[float, float, float, float, float]] = []  # t, residual, C/N0, arc length, age
+    for t in np.unique(ra["t_s"][np.isfinite(ra["rng_m"])]):
+        j = int(np.searchsorted(bt, t, side="right")) - 1  # the latest base epoch at or before the rover's
+        if j < 0 or t - bt[j] > pair_tol_s:
+            continue
+        ks = np.flatnonzero((ra["t_s"] == t) & np.isfinite(ra["rng_m"]))
+        sd, keep = [], []
+        for k in ks:
+            m = base_of.get((round(float(bt[j]), 3), int(ra["prn"][k])))
+            if m is None or not np.isfinite(ba["rng_m"][m]):
+                continue
+            sd.append((ra["pr_m"][k] - ra["rng_m"][k]) - (ba["pr_m"][m] - ba["rng_m"][m]))
+            keep.append(k)
+        if len(sd) < 4:
+            continue
+        res = np.array(sd) - float(np.median(sd))
+        rows += [(float(t), float(r), float(ra["cn0"][k]), float(arc_len[k]), float(arc_age[k]))
+                 for r, k in zip(res, keep, strict=True)]
+    x = np.array(rows).reshape(-1, 5)
+    out: dict[str, dict[str, float]] = {}
+    for lo, hi in itertools.pairwise(ARC_CN0_BINS_DBHZ):
+        m = (x[:, 2] >= lo) & (x[:, 2] < hi)
+        parts = {"all": m, "arc < 60 s": m & (x[:, 3] < 60.0), "arc >= 60 s": m & (x[:, 3] >= 60.0),
+                 "first 30 s": m & (x[:, 4] < 30.0), "later": m & (x[:, 4] >= 30.0)}
+        out[f"{lo}-{hi}"] = {name: float(np.sqrt(np.mean(x[sel, 1] ** 2))) if sel.sum() >= 10 else math.nan
+                             for name, sel in parts.items()}
+        out[f"{lo}-{hi}"]["n"] = float(m.sum())
+    return out
+
+
+def _walk_reference() -> Callable[[float], np.ndarray | None]:
+    """The M8P's own RTK fixes of the walk by time of week (within 0.06 s), None elsewhere."""
+    import csv
+
+    with open(M8P / "ref/rover-20181004-1532.m8p_rtk_fixed.csv") as f:
+        ref = {round(float(r["tow"]), 1): np.array([float(r["x"]), float(r["y"]), float(r["z"])])
+               for r in csv.DictReader(f)}
+
+    def at(tow: float) -> np.ndarray | None:
+        return ref.get(round(round(tow / 1.0) * 1.0, 1)) if abs(tow - round(tow)) <= 0.06 else None
+
+    return at
+
+
+def code_arcs(seed: int) -> None:
+    """Print code_by_arc of the M8P walk (its own RTK fixes as truth, its RAWX base) beside the harsh flight's."""
+    from hil_sim.rtk_scenarios import HARSH_RADIO_LOSS, SimCase, simulate
+
+    walk = read_rinex_obs(M8P / "rinex/rover-20181004-1532.obs.gz").epochs
+    wbase = read_rinex_obs(M8P / "rinex/base-20181004-1452.rawx.obs.gz").epochs
+    nav = _nav_store(*(M8P / p for p in WALK_NAV[:2]))
+    ref = _walk_reference()
+    base_pos = np.array([3774085.6456, -601662.5769, 5089316.3970])  # bench_rtk's walk base position
+    t0 = walk[0].time
+    s_r = series_from_epochs(walk, nav, lambda k: ref(walk[k].time.tow_s), base_pos)
+    wbase = [e for e in wbase if e.time.diff_s(t0) >= -2.0]
+    s_b = series_from_epochs(wbase, nav, lambda k: base_pos, base_pos)
+    _shift(s_b, wbase[0].time.diff_s(t0))
+    tables = {"M8P walk (real)": code_by_arc(s_r, s_b)}
+    # the phase at the same reference: what moves within an arc (a constant is the ambiguity's)
+    at_ref = Series(**{k: [v for v, r in zip(vals, s_r.rng_m, strict=True) if math.isfinite(r)]
+                       for k, vals in s_r.__dict__.items()})
+    report_phase("DD phase M8P walk at its RTK fixes", at_ref, s_b)
+    data = simulate(SimCase("harsh", "", harsh=True, radio_loss=HARSH_RADIO_LOSS, seed=seed, systems="GR"), "m8t")
+    rover = sorted(data.rover, key=lambda e: e.time)
+    store = data.nav.store
+    t1 = rover[0].time
+    sim_r = series_from_epochs(rover, store, lambda k: data.truth(rover[k].time)["antenna_ecef_m"],
+                               data.base_pos_ecef_m)
+    sbase = [e for e in data.base if e.time.diff_s(t1) >= -2.0]
+    sim_b = series_from_epochs(sbase, store, lambda k: data.base_pos_ecef_m, data.base_pos_ecef_m)
+    _shift(sim_b, sbase[0].time.diff_s(t1))
+    tables[f"hil_sim harsh, gr-2012, seed {seed}"] = code_by_arc(sim_r, sim_b)
+    for label, tab in tables.items():
+        print(f"{label}: GPS code rover - base at the reference, RMS m (samples)")
+        print(f"  {'C/N0':8s} " + " ".join(f"{k:>12s}" for k in ("all", "arc < 60 s", "arc >= 60 s", "first 30 s",
+                                                                  "later")))
+        for band, row in tab.items():
+            print(f"  {band:8s} {row['all']:7.2f} ({int(row['n']):4d})" + " ".join(
+                f"{row[k]:12.2f}" for k in ("arc < 60 s", "arc >= 60 s", "first 30 s", "later")))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--no-sim", action="store_true")
     ap.add_argument("--no-real", action="store_true")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--harsh", action="store_true", help="only the walk under trees vs the harsh scenario")
+    ap.add_argument("--code-arcs", action="store_true",
+                    help="only the walk's code at its RTK fixes by arc vs the harsh scenario's at the truth")
     args = ap.parse_args()
+    if args.code_arcs:
+        code_arcs(args.seed if args.seed != 1 else 5)
+        return
     if args.harsh:
         harsh(args.seed)
         return
