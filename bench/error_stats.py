@@ -577,31 +577,21 @@ def code_by_arc(rov: Series, base: Series, pair_tol_s: float = 10.0, gap_s: floa
     return out
 
 
-def _walk_reference() -> Callable[[float], np.ndarray | None]:
-    """The M8P's own RTK fixes of the walk by time of week (within 0.06 s), None elsewhere."""
-    import csv
-
-    with open(M8P / "ref/rover-20181004-1532.m8p_rtk_fixed.csv") as f:
-        ref = {round(float(r["tow"]), 1): np.array([float(r["x"]), float(r["y"]), float(r["z"])])
-               for r in csv.DictReader(f)}
-
-    def at(tow: float) -> np.ndarray | None:
-        return ref.get(round(round(tow / 1.0) * 1.0, 1)) if abs(tow - round(tow)) <= 0.06 else None
-
-    return at
-
-
 def code_arcs(seed: int) -> None:
     """Print code_by_arc of the M8P walk (its own RTK fixes as truth, its RAWX base) beside the harsh flight's."""
+    from bench_rtk import DATASETS  # the walk's reference and base position, as the RTK benchmark reads them
+
     from hil_sim.rtk_scenarios import HARSH_RADIO_LOSS, SimCase, simulate
 
-    walk = read_rinex_obs(M8P / "rinex/rover-20181004-1532.obs.gz").epochs
-    wbase = read_rinex_obs(M8P / "rinex/base-20181004-1452.rawx.obs.gz").epochs
+    ds = next(d for d in DATASETS if "walk" in d.name)
+    assert ds.base_pos is not None
+    walk = read_rinex_obs(ds.rover).epochs
+    wbase = read_rinex_obs(ds.base).epochs
     nav = _nav_store(*(M8P / p for p in WALK_NAV[:2]))
-    ref = _walk_reference()
-    base_pos = np.array([3774085.6456, -601662.5769, 5089316.3970])  # bench_rtk's walk base position
+    base_pos = np.array([float(v) for v in ds.base_pos.split(",")])
+    ref = ds.ref(np.array([e.time.tow_s for e in walk]))  # NaN rows where the M8P did not fix
     t0 = walk[0].time
-    s_r = series_from_epochs(walk, nav, lambda k: ref(walk[k].time.tow_s), base_pos)
+    s_r = series_from_epochs(walk, nav, lambda k: ref[k] if np.isfinite(ref[k]).all() else None, base_pos)
     wbase = [e for e in wbase if e.time.diff_s(t0) >= -2.0]
     s_b = series_from_epochs(wbase, nav, lambda k: base_pos, base_pos)
     _shift(s_b, wbase[0].time.diff_s(t0))

@@ -180,7 +180,7 @@ class RoverEnvironment:
     cannot see (docs/hil-sim-error-model.md). 0: none."""
     acq_code_sigma_ref_m: float = 0.0
     """σ (m, likewise) of a further code error at acquisition that decays over `acq_code_tau_s` (s): the real
-    walk's first 30 s of an arc are 1.4-1.6 times worse than the rest. 0: none."""
+    walk's first 30 s of an arc are 1.2-1.6 times worse than the rest. 0: none."""
     acq_code_tau_s: float = 15.0
 
 

@@ -625,24 +625,20 @@ class World:
                 return False
         return bool(self._slow.interp(el[:, col], t) >= mask)
 
-    def _arc_code_m(self, env: RoverEnvironment, r_idx: int, col: Vec, t: GpsTime, scale: Vec) -> Vec:
+    def _arc_code_m(self, env: RoverEnvironment, r_idx: int, col: Vec, arc: list[int], age_s: Vec, scale: Vec) -> Vec:
         """The rover's code error of each satellite's current arc (m): a constant drawn at its acquisition (or
-        slip) plus a part decaying from it over acq_code_tau_s, both at σ env.*_ref_m × `scale` (the C/N0 law
-        of this epoch, without GLONASS's chip factor). See RoverEnvironment.arc_code_sigma_ref_m."""
+        slip; `arc` its index in the track, `age_s` the time since) plus a part decaying from it over
+        acq_code_tau_s, both at σ env.*_ref_m × `scale` (the C/N0 law of this epoch, without GLONASS's chip
+        factor). See RoverEnvironment.arc_code_sigma_ref_m."""
         out = np.zeros(col.size)
-        tracks = self._tracks[RECEIVERS[r_idx]]
         seed = self.scenario.seed
-        for i, c in enumerate(col.tolist()):
-            tr = tracks[c]
-            assert tr is not None
-            k = max(int(np.searchsorted(tr.resets_ns, t.total_ns, side="right")) - 1, 0)
+        for i, (c, k) in enumerate(zip(col.tolist(), arc, strict=True)):
             draw = self._arc_draws.get((c, k))
             if draw is None:
                 z = _rng(seed, _P_ARC, r_idx, c, k).standard_normal(2)
                 draw = self._arc_draws[(c, k)] = (float(z[0]), float(z[1]))
-            age_s = (t.total_ns - tr.resets_ns[k]) / NS_PER_S
-            out[i] = scale[i] * (env.arc_code_sigma_ref_m * draw[0]
-                                 + env.acq_code_sigma_ref_m * draw[1] * math.exp(-max(age_s, 0.0) / env.acq_code_tau_s))
+            out[i] = scale[i] * (env.arc_code_sigma_ref_m * draw[0] + env.acq_code_sigma_ref_m * draw[1]
+                                 * math.exp(-max(float(age_s[i]), 0.0) / env.acq_code_tau_s))
         return out
 
     def _simulate(self, receiver: str, t_nom: GpsTime, update_state: bool = True) -> tuple[ObsEpoch, dict[str, Any]]:
@@ -747,11 +743,13 @@ class World:
         lli = np.zeros(n, dtype=np.uint8)
         half_sub = np.zeros(n, dtype=np.uint8)
         tracks = self._tracks[receiver]
+        arc_index: list[int] = []
         for i, c in enumerate(col):
             tr = tracks[int(c)]
             assert tr is not None
             k = int(np.searchsorted(tr.resets_ns, t.total_ns, side="right")) - 1
             k = max(k, 0)
+            arc_index.append(k)
             t_reset = tr.resets_ns[k]
             jumps = sum(c for tj, c in zip(tr.jumps_ns, tr.jumps_cyc) if t_reset < tj <= t.total_ns)
             amb[i] = tr.reset_n_cyc[k] + jumps
@@ -769,7 +767,7 @@ class World:
         phase_ifb = self._phase_ifb_m[receiver][col]
         arc_code = np.zeros(n)
         if env is not None and (env.arc_code_sigma_ref_m > 0.0 or env.acq_code_sigma_ref_m > 0.0):
-            arc_code = self._arc_code_m(env, r_idx, col, t, scale)
+            arc_code = self._arc_code_m(env, r_idx, col, arc_index, lock_ms / 1e3, scale)
         pr = rho + clocks_m + tropo + iono + mp_code + eps_code + code_ifb + arc_code
         cp = (rho + clocks_m + tropo - iono + mp_phase + eps_phase + phase_ifb) / lam + amb + half
         dop = -(rho_dot + CLIGHT_M_S * (timing.clock_drift_s_s - dts_dot) + atmo_rate) / lam + eps_dop
