@@ -1160,6 +1160,32 @@ def _dd_ambiguities_multi(x: Arr, p: Arr, others: npt.NDArray[np.int64], refs: n
     return a, qa, qba, qia
 
 
+def _dd_ambiguities_of(st: RtkState, idx: npt.NDArray[np.int64], others: npt.NDArray[np.int64],
+                       refs: npt.NDArray[np.int64]) -> tuple[Arr, Arr, Arr, Arr | None]:
+    """The filter state's DD ambiguities of slots `idx` paired as (`others`, `refs`) (_dd_pairs): _dd_ambiguities
+    with GPS alone (one reference), else _dd_ambiguities_multi."""
+    if st.layout.gps_only:
+        return _dd_ambiguities(st.x, st.p, idx, int(refs[0]))
+    return _dd_ambiguities_multi(st.x, st.p, others, refs, st.ns)
+
+
+def _conditioned_on(st: RtkState, a: Arr, qa: Arr, qba: Arr, qia: Arr | None, ints: Arr
+                    ) -> tuple[Arr, Arr, Arr | None] | None:
+    """The float conditioned on integers `ints` of its DD ambiguities (a, Qa and the cross-covariances Qba, Qia
+    of _dd_ambiguities): position (ECEF m), its covariance (m²) and, while in use, the ionosphere states (m);
+    None when Qa is singular."""
+    try:
+        gain = solve(qa, qba.T).T
+    except LinAlgError:
+        return None
+    pos = st.x[:3] - gain @ (a - ints)
+    cov = st.p[:3, :3] - gain @ qba.T
+    iono = None
+    if st.iono_on and qia is not None:
+        iono = st.x[st.nxi:st.nxi + st.ns] - qia @ solve(qa, a - ints)
+    return pos, cov, iono
+
+
 def _dd_ambiguities_without(dd: tuple[Arr, Arr, Arr, Arr | None], k: int) -> tuple[Arr, Arr, Arr, Arr | None]:
     """_dd_ambiguities' result for the same reference with the `k`-th other slot left out: its entries are
     each one difference of the state's, so a principal subset of the larger set's, to the bit."""
@@ -1537,7 +1563,7 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
     partial fixing: drop the least determined satellite and retry while the ratio test fails; a set needs at
     least min_fix_sats satellites."""
     o = st.options
-    x, p, el, t = st.x, st.p, ctx.el, ctx.time
+    el, t = ctx.el, ctx.time
     idx = cand.nonzero()[0]
     best_ratio = 0.0
     seen_candidate = False
@@ -1558,10 +1584,8 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
         if dropped is not None and dropped[0] == ref_key:
             # a retry keeps the references (the highest satellites, never the one dropped): a subset of the last
             a, qa, qba, qia = _dd_ambiguities_without(dropped[1], dropped[2])
-        elif st.layout.gps_only:
-            a, qa, qba, qia = _dd_ambiguities(x, p, idx, int(ref[0]))
         else:
-            a, qa, qba, qia = _dd_ambiguities_multi(x, p, others, ref, st.ns)
+            a, qa, qba, qia = _dd_ambiguities_of(st, idx, others, ref)
         try:
             res = mlambda(a, qa, ratio_cap=RATIO_CAP)
         except LambdaError:
@@ -1647,16 +1671,11 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
                                                      or _agrees_with_validated(st, ref, others, res.fixed[:, 0], o.min_fix_sats))
         if accept:
             ints = res.fixed[:, 0]
-            try:
-                gain = solve(qa, qba.T).T
-            except LinAlgError:
+            conditioned = _conditioned_on(st, a, qa, qba, qia, ints)
+            if conditioned is None:
                 return None
-            pos = x[:3] - gain @ (a - ints)
-            cov = p[:3, :3] - gain @ qba.T
+            pos, cov, iono = conditioned
             st.last_ratio = ratio
-            iono = None
-            if st.iono_on and qia is not None:
-                iono = x[st.nxi:st.nxi + st.ns] - qia @ solve(qa, a - ints)
             revalidated = not st.held_prns.any() and _agrees_with_validated(st, ref, others, ints, o.min_fix_sats)
             return _Fix(pos, cov, ratio, others, ref, ints, others.size, settled, iono, revalidated)
         # partial: drop the least determined DD ambiguity (largest float variance: a satellite just (re)joined,
@@ -2083,19 +2102,14 @@ def _resume_gap_hold(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_
     others, ref = _dd_pairs(st, idx, ctx.el)
     if others.size + 1 < o.min_fix_sats:
         return None
-    if st.layout.gps_only:
-        a, qa, qba, qia = _dd_ambiguities(st.x, st.p, idx, int(ref[0]))
-    else:
-        a, qa, qba, qia = _dd_ambiguities_multi(st.x, st.p, others, ref, st.ns)
+    a, qa, qba, qia = _dd_ambiguities_of(st, idx, others, ref)
     ints = st.gap_int[others] - st.gap_int[ref]
-    try:
-        gain = solve(qa, qba.T).T
-        iono = st.x[st.nxi:st.nxi + st.ns] - qia @ solve(qa, a - ints) if st.iono_on and qia is not None else None
-    except LinAlgError:
+    conditioned = _conditioned_on(st, a, qa, qba, qia, ints)
+    if conditioned is None:
         return None
+    pos, cov, iono = conditioned
     log.debug("%s: the set held before the radio gap tried again (%d satellites)", ctx.time, idx.size)
-    return _Fix(st.x[:3] - gain @ (a - ints), st.p[:3, :3] - gain @ qba.T, st.last_ratio, others, ref, ints,
-                others.size, iono=iono, revalidated=True, resumed=True)
+    return _Fix(pos, cov, st.last_ratio, others, ref, ints, others.size, iono=iono, revalidated=True, resumed=True)
 
 
 def _float_fix_gate_scale(st: RtkState, fix: _Fix) -> float:
