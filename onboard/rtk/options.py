@@ -89,6 +89,13 @@ class RtkOptions:
     confirming its first fix or re-fixing after slips. Why: under trees each direction loses its hold at the
     slips and needs minutes to confirm a new first fix, minutes the other direction crossed fixed (M8P walk,
     GPS+GLONASS: 53 -> 61 % fixed; docs/rtk-defaults.md)."""
+    combined_contest_distance_m: float = 0.10
+    """Combined post-processing: a run of consecutive fixes of one pass that the other pass's fixes contradict
+    by more than this (m, 3D) at one epoch at least is reported float wherever the other pass has no fix
+    agreeing with it, not only where the two fixes meet (0 disables). Why: a run is one held integer set,
+    refuted as a whole; hil_sim GPS alone under trees (M8T, seed 2) held a wrong cold-start set for 63 s, the
+    backward pass refuted it over the standstill and had no fix of its own over the 18 s of flight after. Not
+    the 5 cm at which two fixes are combined: right fixes under trees part by 5-6 cm (docs/rtk-defaults.md)."""
     handover_sigma_m: float = 0.01
     """σ (m, per ECEF axis) added to the handed-over fix's own covariance when it pins the other pass. Why: a
     fixed position carries centimetre multipath its covariance does not hold; 1 cm keeps the pinned double
@@ -346,6 +353,9 @@ class RtkOptions:
             raise ValueError(f"handover_sigma_m must be a positive number of metres, not {self.handover_sigma_m}")
         if not (math.isfinite(self.handover_min_run_s) and self.handover_min_run_s >= 0.0):
             raise ValueError(f"handover_min_run_s must be ≥ 0 s, not {self.handover_min_run_s}")
+        if not (math.isfinite(self.combined_contest_distance_m) and self.combined_contest_distance_m >= 0.0):
+            raise ValueError("combined_contest_distance_m must be ≥ 0 m (0 disables), not "
+                             f"{self.combined_contest_distance_m}")
         if self.glonass_code_bias_min_epochs < 0 or self.glonass_code_bias_window_epochs < 1:
             raise ValueError("glonass_code_bias_min_epochs must be ≥ 0 (0 disables) and "
                              "glonass_code_bias_window_epochs ≥ 1")
@@ -384,6 +394,7 @@ TOML_KEYS: dict[str, tuple[str, Any]] = {
     "float_fix_gate_scale": ("float_fix_gate_scale", float),
     "float_fix_gate_min_dd": ("float_fix_gate_min_dd", int),
     "combined_handover": ("combined_handover", bool),
+    "combined_contest_distance_m": ("combined_contest_distance_m", float),
     "handover_sigma_m": ("handover_sigma_m", float),
     "handover_min_run_s": ("handover_min_run_s", float),
     "standstill": ("standstill", bool),

@@ -271,6 +271,65 @@ def combine(fwd: Solution, bwd: Solution) -> Solution:
     return fwd if fwd.q < bwd.q else bwd
 
 
+def fix_runs(sols: Sequence[Solution]) -> list[int]:
+    """Per epoch, the index of the run of consecutive fixes it belongs to (-1 where not fixed)."""
+    out = [-1] * len(sols)
+    run = -1
+    for i, sol in enumerate(sols):
+        if sol.q == Q_FIX:
+            if i == 0 or sols[i - 1].q != Q_FIX:
+                run += 1
+            out[i] = run
+    return out
+
+
+def contested_runs(fwd: Sequence[Solution], bwd: Sequence[Solution], distance_m: float
+                   ) -> tuple[set[int], set[int]]:
+    """The runs of consecutive fixes (fix_runs) of each pass that the other pass's fixes contradict at one
+    epoch at least (both fixed, more than `distance_m` apart): (forward runs, backward runs)."""
+    rf, rb = fix_runs(fwd), fix_runs(bwd)
+    bad_f: set[int] = set()
+    bad_b: set[int] = set()
+    for i, (f, b) in enumerate(zip(fwd, bwd, strict=True)):
+        if rf[i] >= 0 and rb[i] >= 0 and float(np.linalg.norm(f.pos_ecef_m - b.pos_ecef_m)) > distance_m:
+            bad_f.add(rf[i])
+            bad_b.add(rb[i])
+    return bad_f, bad_b
+
+
+def combine_passes(fwd: Sequence[Solution], bwd: Sequence[Solution], contest_distance_m: float = 0.10
+                   ) -> list[Solution]:
+    """Combine two passes epoch by epoch (combine); with `contest_distance_m` > 0, a fix of a run that the
+    other pass's fixes contradict by more than that somewhere (contested_runs) is not taken where the other
+    pass has no fix to agree with it.
+
+    A run of consecutive fixes is one held integer set: the other pass's fix refuting it at one epoch refutes it
+    at all of them, also where that pass had no fix of its own to object with
+    (RtkOptions.combined_contest_distance_m)."""
+    if contest_distance_m <= 0.0:
+        return [combine(f, b) for f, b in zip(fwd, bwd, strict=True)]
+    bad_f, bad_b = contested_runs(fwd, bwd, contest_distance_m)
+    rf, rb = fix_runs(fwd), fix_runs(bwd)
+    out = []
+    for i, (f, b) in enumerate(zip(fwd, bwd, strict=True)):
+        f_bad, b_bad = rf[i] in bad_f, rb[i] in bad_b
+        if (f_bad or b_bad) and (f.q == Q_FIX) != (b.q == Q_FIX):
+            out.append(_unvouched(f, b))
+        else:
+            out.append(combine(f, b))
+    return out
+
+
+def _unvouched(fwd: Solution, bwd: Solution) -> Solution:
+    """One pass fixed on a contested run, the other not fixed: a float at the fix's position, its covariance
+    widened to the distance from the other pass (at least COMBINE_FIX_AGREEMENT_M, whatever that pass is)."""
+    fixed, other = (fwd, bwd) if fwd.q == Q_FIX else (bwd, fwd)
+    dist = COMBINE_FIX_AGREEMENT_M
+    if other.q != Q_NONE:
+        dist = max(dist, float(np.linalg.norm(fixed.pos_ecef_m - other.pos_ecef_m)))
+    return _combined(fwd, bwd, Q_FLOAT, fixed.pos_ecef_m, fixed.cov_pos_m2 + np.eye(3) * dist**2 / 4.0, fixed.ratio)
+
+
 def postprocess(rover: Sequence[ObsEpoch], base: Sequence[ObsEpoch], nav: NavData, base_pos_ecef_m: Arr | None,
                 options: RtkOptions, direction: str = "forward", init_pos_ecef_m: Arr | None = None,
                 progress: Callable[[int], None] | None = None) -> tuple[list[Solution], list[RunStats]]:
@@ -300,7 +359,7 @@ def postprocess(rover: Sequence[ObsEpoch], base: Sequence[ObsEpoch], nav: NavDat
     f, sf = run_filter(rov, paired, nav, base_pos_ecef_m, options, False, init_pos_ecef_m, progress)
     b, sb = run_filter(rov, paired, nav, base_pos_ecef_m, options, True, init_pos_ecef_m, progress,
                        handover_anchors(f, options.handover_min_run_s) if options.combined_handover else None)
-    return [combine(x, y) for x, y in zip(f, b, strict=True)], [sf, sb]
+    return combine_passes(f, b, options.combined_contest_distance_m), [sf, sb]
 
 
 def first_time(epochs: Sequence[ObsEpoch]) -> GpsTime | None:

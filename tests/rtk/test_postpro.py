@@ -12,7 +12,15 @@ from onboard.formats.rinex_obs import read_rinex_obs
 from onboard.gnsstime import GpsTime
 from onboard.rtk.ephemeris import EphemerisStore
 from onboard.rtk.options import RtkOptions
-from onboard.rtk.postpro import combine, handover_anchors, pair_epochs, postprocess
+from onboard.rtk.postpro import (
+    combine,
+    combine_passes,
+    contested_runs,
+    fix_runs,
+    handover_anchors,
+    pair_epochs,
+    postprocess,
+)
 from onboard.rtk.rtkpos import NX0, Nav, _apply_anchor, rtk_init
 from onboard.rtk.types import GNSS_GLONASS, GNSS_GPS, Q_FIX, Q_FLOAT, Q_NONE, Q_SINGLE, ObsEpoch, Solution
 from tests.conftest import shared_file
@@ -68,6 +76,26 @@ def test_combine_rules():
     assert floats.q == Q_FLOAT and np.allclose(floats.pos_ecef_m, a + [0.15, 0, 0])
     assert combine(_sol(Q_SINGLE, a + 3.0, 2.0), _sol(Q_FLOAT, a, 0.1)).q == Q_FLOAT
     assert combine(_sol(Q_NONE, a, 1.0), _sol(Q_SINGLE, a, 2.0)).q == Q_SINGLE
+
+
+def test_a_run_refuted_at_one_epoch_is_not_taken_where_the_other_pass_has_no_fix():
+    a = np.array([1.0, 2.0, 3.0])
+    fwd = [_sol(Q_FIX, a, 0.003)] * 4 + [_sol(Q_FLOAT, a, 0.3)] + [_sol(Q_FIX, a, 0.003)] * 2
+    bwd = [_sol(Q_FIX, a + [0.3, 0, 0], 0.003)] + [_sol(Q_FLOAT, a, 0.3)] * 3 + [_sol(Q_NONE, a, 1.0)] + \
+        [_sol(Q_FIX, a + [0.01, 0, 0], 0.003)] + [_sol(Q_NONE, a, 1.0)]
+    assert fix_runs(fwd) == [0, 0, 0, 0, -1, 1, 1] and fix_runs(bwd) == [0, -1, -1, -1, -1, 1, -1]
+    assert contested_runs(fwd, bwd, 0.10) == ({0}, {0})
+    out = combine_passes(fwd, bwd, 0.10)
+    # the forward's first run, refuted at epoch 0 by 30 cm, is float at all its epochs; its second run is not
+    assert [s.q for s in out] == [Q_FLOAT] * 5 + [Q_FIX, Q_FIX]
+    assert np.allclose(out[2].pos_ecef_m, a) and out[2].cov_pos_m2[0, 0] >= 0.05**2 / 4
+    # epoch by epoch (0 disables) the refuted run's other epochs stay fixed
+    assert [s.q for s in combine_passes(fwd, bwd, 0.0)] == [Q_FLOAT] + [Q_FIX] * 3 + [Q_FLOAT, Q_FIX, Q_FIX]
+    # two fixes 6 cm apart (multipath under trees) are not two integer sets: nothing contested
+    near = [_sol(Q_FIX, a + [0.06, 0, 0], 0.003)] + bwd[1:]
+    assert contested_runs(fwd, near, 0.10) == (set(), set())
+    with pytest.raises(ValueError, match="combined_contest_distance_m"):
+        RtkOptions(combined_contest_distance_m=float("nan"))
 
 
 def _geonet_run(direction: str) -> tuple[np.ndarray, np.ndarray]:
