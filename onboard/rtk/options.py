@@ -90,12 +90,14 @@ class RtkOptions:
     slips and needs minutes to confirm a new first fix, minutes the other direction crossed fixed (M8P walk,
     GPS+GLONASS: 53 -> 61 % fixed; docs/rtk-defaults.md)."""
     combined_contest_distance_m: float = 0.10
-    """Combined post-processing: a run of consecutive fixes of one pass that the other pass's fixes contradict
-    by more than this (m, 3D) at one epoch at least is reported float wherever the other pass has no fix
-    agreeing with it, not only where the two fixes meet (0 disables). Why: a run is one held integer set,
-    refuted as a whole; hil_sim GPS alone under trees (M8T, seed 2) held a wrong cold-start set for 63 s, the
-    backward pass refuted it over the standstill and had no fix of its own over the 18 s of flight after. Not
-    the 5 cm at which two fixes are combined: right fixes under trees part by 5-6 cm (docs/rtk-defaults.md)."""
+    """Combined post-processing: two integer hypotheses (one pass's lineage of a held set, Solution.fix_id)
+    whose fixes lie more than this (m, 3D) apart at most of the epochs both passes are fixed refute each other,
+    and each is reported float at all its epochs where the other pass has no fix agreeing with it, not only
+    where the two meet; so is a hypothesis held over less than handover_min_run_s, which also refutes nothing
+    (0 disables all three). Why: one held set is right or wrong as a whole; hil_sim GPS alone under trees held
+    wrong sets for 63-327 s in one pass while the other, right there, had no fix over part of them (M8T seeds
+    1-24: 119 wrong combined epochs). Not the 5 cm at which two fixes are combined, and not at a single epoch:
+    right fixes under trees stray by 5-15 cm at a few epochs (docs/rtk-defaults.md)."""
     handover_sigma_m: float = 0.01
     """σ (m, per ECEF axis) added to the handed-over fix's own covariance when it pins the other pass. Why: a
     fixed position carries centimetre multipath its covariance does not hold; 1 cm keeps the pinned double

@@ -283,37 +283,71 @@ def fix_runs(sols: Sequence[Solution]) -> list[int]:
     return out
 
 
-def contested_runs(fwd: Sequence[Solution], bwd: Sequence[Solution], distance_m: float
-                   ) -> tuple[set[int], set[int]]:
-    """The runs of consecutive fixes (fix_runs) of each pass that the other pass's fixes contradict at one
-    epoch at least (both fixed, more than `distance_m` apart): (forward runs, backward runs)."""
-    rf, rb = fix_runs(fwd), fix_runs(bwd)
-    bad_f: set[int] = set()
-    bad_b: set[int] = set()
-    for i, (f, b) in enumerate(zip(fwd, bwd, strict=True)):
-        if rf[i] >= 0 and rb[i] >= 0 and float(np.linalg.norm(f.pos_ecef_m - b.pos_ecef_m)) > distance_m:
-            bad_f.add(rf[i])
-            bad_b.add(rb[i])
+def fix_hypotheses(sols: Sequence[Solution]) -> list[tuple[str, int] | None]:
+    """Per epoch, which integer hypothesis of its pass a fix rests on (None where not fixed): the engine's
+    lineage (Solution.fix_id: one set of integers across the pass's breaks), else its run of consecutive fixes."""
+    runs = fix_runs(sols)
+    return [None if r < 0 else ("lineage", s.fix_id) if s.fix_id >= 0 else ("run", r) for s, r in zip(sols, runs)]
+
+
+def _hypothesis_spans_s(sols: Sequence[Solution], keys: Sequence[tuple[str, int] | None]
+                        ) -> dict[tuple[str, int], float]:
+    """Each hypothesis's span (s): from its first to its last fixed epoch in the pass."""
+    first: dict[tuple[str, int], GpsTime] = {}
+    last: dict[tuple[str, int], GpsTime] = {}
+    for sol, k in zip(sols, keys):
+        if k is not None:
+            first.setdefault(k, sol.time)
+            last[k] = sol.time
+    return {k: abs(last[k].diff_s(first[k])) for k in first}
+
+
+def contested_hypotheses(fwd: Sequence[Solution], bwd: Sequence[Solution], distance_m: float, min_span_s: float
+                         ) -> tuple[set[tuple[str, int]], set[tuple[str, int]]]:
+    """The integer hypotheses (fix_hypotheses) of each pass that a hypothesis of the other pass contradicts:
+    (forward's, backward's). Two hypotheses contradict each other when their fixes lie more than `distance_m`
+    apart at most of the epochs both are fixed (two integer sets: a constant offset through a slowly changing
+    geometry; one set's fixes straying at a few epochs is those epochs' matter, which combine() settles). A
+    hypothesis held over less than `min_span_s` (s), not borne out by the epochs after it, refutes nothing."""
+    hf, hb = fix_hypotheses(fwd), fix_hypotheses(bwd)
+    span_f, span_b = _hypothesis_spans_s(fwd, hf), _hypothesis_spans_s(bwd, hb)
+    meets: dict[tuple[tuple[str, int], tuple[str, int]], list[int]] = {}
+    for f, b, kf, kb in zip(fwd, bwd, hf, hb, strict=True):
+        if kf is not None and kb is not None:
+            count = meets.setdefault((kf, kb), [0, 0])
+            count[0] += 1
+            count[1] += float(np.linalg.norm(f.pos_ecef_m - b.pos_ecef_m)) > distance_m
+    bad_f: set[tuple[str, int]] = set()
+    bad_b: set[tuple[str, int]] = set()
+    for (kf, kb), (n_both, n_apart) in meets.items():
+        if 2 * n_apart > n_both:
+            if span_b[kb] >= min_span_s:
+                bad_f.add(kf)
+            if span_f[kf] >= min_span_s:
+                bad_b.add(kb)
     return bad_f, bad_b
 
 
-def combine_passes(fwd: Sequence[Solution], bwd: Sequence[Solution], contest_distance_m: float = 0.10
-                   ) -> list[Solution]:
-    """Combine two passes epoch by epoch (combine); with `contest_distance_m` > 0, a fix of a run that the
-    other pass's fixes contradict by more than that somewhere (contested_runs) is not taken where the other
-    pass has no fix to agree with it.
+def combine_passes(fwd: Sequence[Solution], bwd: Sequence[Solution], contest_distance_m: float = 0.10,
+                   contest_min_span_s: float = 5.0) -> list[Solution]:
+    """Combine two passes epoch by epoch (combine); with `contest_distance_m` > 0, a fix resting on an integer
+    hypothesis that the other pass contradicts (contested_hypotheses), or held over less than
+    `contest_min_span_s` (s), is reported float where the other pass has no fix to agree with it.
 
-    A run of consecutive fixes is one held integer set: the other pass's fix refuting it at one epoch refutes it
-    at all of them, also where that pass had no fix of its own to object with
-    (RtkOptions.combined_contest_distance_m)."""
-    if contest_distance_m <= 0.0:
+    One held set of integers (a lineage of the engine, else a run of consecutive fixes) is one hypothesis: the
+    other pass's fixes refuting it where both are fixed refute it at all its epochs, also where that pass had no
+    fix of its own to object with (RtkOptions.combined_contest_distance_m)."""
+    if contest_distance_m <= 0.0:  # every epoch on its own (RTKLIB's combination)
         return [combine(f, b) for f, b in zip(fwd, bwd, strict=True)]
-    bad_f, bad_b = contested_runs(fwd, bwd, contest_distance_m)
-    rf, rb = fix_runs(fwd), fix_runs(bwd)
+    bad_f, bad_b = contested_hypotheses(fwd, bwd, contest_distance_m, contest_min_span_s)
+    hf, hb = fix_hypotheses(fwd), fix_hypotheses(bwd)
+    # nor is a hypothesis held over less than contest_min_span_s: fixed, then lost within seconds (a hold's
+    # misfit, slips), it was not borne out by the epochs after it
+    bad_f |= {k for k, v in _hypothesis_spans_s(fwd, hf).items() if v < contest_min_span_s}
+    bad_b |= {k for k, v in _hypothesis_spans_s(bwd, hb).items() if v < contest_min_span_s}
     out = []
-    for i, (f, b) in enumerate(zip(fwd, bwd, strict=True)):
-        f_bad, b_bad = rf[i] in bad_f, rb[i] in bad_b
-        if (f_bad or b_bad) and (f.q == Q_FIX) != (b.q == Q_FIX):
+    for f, b, kf, kb in zip(fwd, bwd, hf, hb, strict=True):
+        if (kf in bad_f or kb in bad_b) and (kf is None) != (kb is None):
             out.append(_unvouched(f, b))
         else:
             out.append(combine(f, b))
@@ -321,8 +355,9 @@ def combine_passes(fwd: Sequence[Solution], bwd: Sequence[Solution], contest_dis
 
 
 def _unvouched(fwd: Solution, bwd: Solution) -> Solution:
-    """One pass fixed on a contested run, the other not fixed: a float at the fix's position, its covariance
-    widened to the distance from the other pass (at least COMBINE_FIX_AGREEMENT_M, whatever that pass is)."""
+    """One pass fixed on a hypothesis not taken alone, the other not fixed: a float at the fix's position, its
+    covariance widened to the distance from the other pass (at least COMBINE_FIX_AGREEMENT_M, whatever that pass
+    is)."""
     fixed, other = (fwd, bwd) if fwd.q == Q_FIX else (bwd, fwd)
     dist = COMBINE_FIX_AGREEMENT_M
     if other.q != Q_NONE:
@@ -359,7 +394,7 @@ def postprocess(rover: Sequence[ObsEpoch], base: Sequence[ObsEpoch], nav: NavDat
     f, sf = run_filter(rov, paired, nav, base_pos_ecef_m, options, False, init_pos_ecef_m, progress)
     b, sb = run_filter(rov, paired, nav, base_pos_ecef_m, options, True, init_pos_ecef_m, progress,
                        handover_anchors(f, options.handover_min_run_s) if options.combined_handover else None)
-    return combine_passes(f, b, options.combined_contest_distance_m), [sf, sb]
+    return combine_passes(f, b, options.combined_contest_distance_m, options.handover_min_run_s), [sf, sb]
 
 
 def first_time(epochs: Sequence[ObsEpoch]) -> GpsTime | None:

@@ -341,6 +341,11 @@ class RtkState:
     """validated_int as it was when a hold was released on a base carried forward (a radio gap), NaN elsewhere;
     slots leave it on a reset as they leave validated_int (see RtkOptions.resume_hold_after_gap)."""
     gap_base_time: GpsTime | None = None
+    lineage_int: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
+    """The last fix's integers (as validated_int, NaN off it and on any reset since): a fix equal to them on the
+    satellites both hold continues their lineage (Solution.fix_id)."""
+    lineage_id: int = -1
+    """Solution.fix_id of that lineage (-1 before the first fix); ids count from 0 in each run of the filter."""
     """The base epoch of that release: the set is tried again at the first epoch paired with a newer one. None
     when no such try is due."""
     static: bool = False
@@ -395,8 +400,8 @@ def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkStat
         st.layout, st.ns, st.nxi = layout, n, NX0 + n
         st.x, st.p = np.zeros(NX0 + n), np.zeros((NX0 + n, NX0 + n))
         for name in ("lock", "outage", "half_cycle", "prev_cp_r", "prev_dop_r", "prev_phase_r", "last_t_r_ns",
-                     "prev_zb", "held_prns", "known_amb", "validated_int", "gap_int", "pending_slip", "prev_sat_clk_r",
-                     "prev_sat_ok_r"):
+                     "prev_zb", "held_prns", "known_amb", "validated_int", "gap_int", "lineage_int", "pending_slip",
+                     "prev_sat_clk_r", "prev_sat_ok_r"):
             old = getattr(st, name)
             setattr(st, name, np.full(n, old[0], old.dtype))
         st.prev_sat_pos_r = np.zeros((n, 3))
@@ -593,10 +598,10 @@ def _range_with_trop_m(rcv: _Receiver, pos_ecef_m: Arr, trop_m: Arr) -> tuple[Ar
 
 
 def _solution(t: GpsTime, pos: Arr, vel: Arr, q: int, ns: int, cov: Arr, covv: Arr, age: float,
-              ratio: float) -> Solution:
+              ratio: float, fix_id: int = -1) -> Solution:
     return Solution(time=t, pos_ecef_m=np.array(pos, float), vel_ecef_m_s=np.array(vel, float), q=q, ns=ns,
                     cov_pos_m2=np.array(cov, float), cov_vel_m2_s2=np.array(covv, float), age_s=age,
-                    ratio=min(ratio, RATIO_CAP))
+                    ratio=min(ratio, RATIO_CAP), fix_id=fix_id)
 
 
 def _in_use(st: RtkState, first: int = NX0) -> npt.NDArray[np.bool_]:
@@ -616,6 +621,7 @@ def _reset_amb(st: RtkState, k: npt.NDArray[np.int64]) -> None:
     st.known_amb[k] = False
     st.validated_int[k] = np.nan
     st.gap_int[k] = np.nan
+    st.lineage_int[k] = np.nan
 
 
 def _process_noise(st: RtkState, dt: float, pos: Arr) -> Arr:
@@ -2163,8 +2169,12 @@ def _epoch_solution(st: RtkState, ctx: EpochContext, fix: _Fix | None) -> Soluti
     if st.init_pos_ecef_m is not None:
         st.init_pos_ecef_m = None  # the known point only seeds the first fix
     weak = math.sqrt(max(float(fix.cov.trace()), 0.0)) > o.max_fix_sigma_m
+    ints = _slot_integers(fix.ref, fix.slots, fix.ints, st.ns)
+    if st.lineage_id < 0 or not _same_integers(ints, st.lineage_int, 2, _groups(st)):
+        st.lineage_id += 1  # another integer hypothesis than the last fix's
+    st.lineage_int = ints
     sol = _solution(ctx.t_sol, fix.pos, st.x[3:6], Q_FLOAT if weak else Q_FIX, ctx.ns, fix.cov, st.p[3:6, 3:6],
-                    ctx.age_s, fix.ratio)
+                    ctx.age_s, fix.ratio, -1 if weak else st.lineage_id)
     if st.channel_code_bias is not None and not weak and st.fix_count >= o.min_hold_epochs:
         _learn_channel_code_bias(st, ctx, fix.pos)
     if o.ar_mode == "fix-and-hold" and (st.fix_count >= o.min_hold_epochs or fix.resumed):

@@ -257,7 +257,9 @@ class Solution:
     `q` Q_FIX/Q_FLOAT/Q_SINGLE/Q_NONE, `ns` satellites used (a Q_NONE solution has no position: NaN position,
     velocity and covariances, ns 0; never read it as a position), `cov_pos_m2` (3,3) ECEF position covariance,
     `cov_vel_m2_s2` (3,3) velocity covariance, `age_s` age of the base data (rover − base time, s),
-    `ratio` the ambiguity ratio-test value (0 when no search ran).
+    `ratio` the ambiguity ratio-test value (0 when no search ran), `fix_id` the pass's integer-set lineage of a
+    fix (fixes with one id rest on one set of integers, held or re-fixed, satellites joining and leaving; -1 when
+    not fixed or not known).
     """
 
     time: GpsTime
@@ -269,3 +271,4 @@ class Solution:
     cov_vel_m2_s2: npt.NDArray[np.float64]
     age_s: float = 0.0
     ratio: float = 0.0
+    fix_id: int = -1

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -15,7 +16,8 @@ from onboard.rtk.options import RtkOptions
 from onboard.rtk.postpro import (
     combine,
     combine_passes,
-    contested_runs,
+    contested_hypotheses,
+    fix_hypotheses,
     fix_runs,
     handover_anchors,
     pair_epochs,
@@ -78,22 +80,49 @@ def test_combine_rules():
     assert combine(_sol(Q_NONE, a, 1.0), _sol(Q_SINGLE, a, 2.0)).q == Q_SINGLE
 
 
-def test_a_run_refuted_at_one_epoch_is_not_taken_where_the_other_pass_has_no_fix():
+def _timed(sols: list[Solution]) -> list[Solution]:
+    """The solutions one second apart."""
+    return [replace(s, time=GpsTime.from_week_tow_s(2021, 100.0 + i)) for i, s in enumerate(sols)]
+
+
+def test_a_hypothesis_the_other_pass_refutes_is_float_where_that_pass_has_no_fix():
     a = np.array([1.0, 2.0, 3.0])
-    fwd = [_sol(Q_FIX, a, 0.003)] * 4 + [_sol(Q_FLOAT, a, 0.3)] + [_sol(Q_FIX, a, 0.003)] * 2
-    bwd = [_sol(Q_FIX, a + [0.3, 0, 0], 0.003)] + [_sol(Q_FLOAT, a, 0.3)] * 3 + [_sol(Q_NONE, a, 1.0)] + \
-        [_sol(Q_FIX, a + [0.01, 0, 0], 0.003)] + [_sol(Q_NONE, a, 1.0)]
-    assert fix_runs(fwd) == [0, 0, 0, 0, -1, 1, 1] and fix_runs(bwd) == [0, -1, -1, -1, -1, 1, -1]
-    assert contested_runs(fwd, bwd, 0.10) == ({0}, {0})
-    out = combine_passes(fwd, bwd, 0.10)
-    # the forward's first run, refuted at epoch 0 by 30 cm, is float at all its epochs; its second run is not
-    assert [s.q for s in out] == [Q_FLOAT] * 5 + [Q_FIX, Q_FIX]
-    assert np.allclose(out[2].pos_ecef_m, a) and out[2].cov_pos_m2[0, 0] >= 0.05**2 / 4
-    # epoch by epoch (0 disables) the refuted run's other epochs stay fixed
-    assert [s.q for s in combine_passes(fwd, bwd, 0.0)] == [Q_FLOAT] + [Q_FIX] * 3 + [Q_FLOAT, Q_FIX, Q_FIX]
-    # two fixes 6 cm apart (multipath under trees) are not two integer sets: nothing contested
-    near = [_sol(Q_FIX, a + [0.06, 0, 0], 0.003)] + bwd[1:]
-    assert contested_runs(fwd, near, 0.10) == (set(), set())
+    fix, far, near = _sol(Q_FIX, a, 0.003), _sol(Q_FIX, a + [0.3, 0, 0], 0.003), _sol(Q_FIX, a + [0.01, 0, 0], 0.003)
+    flt, none = _sol(Q_FLOAT, a, 0.3), _sol(Q_NONE, a, 1.0)
+    # forward: one run 0-9 s, float, a run 11-17 s; backward: fixed 30 cm away at 0-5 s, then float
+    fwd = _timed([fix] * 10 + [flt] + [fix] * 7)
+    bwd = _timed([far] * 6 + [flt] * 4 + [none] + [near] + [none] * 6)
+    assert fix_runs(fwd) == [0] * 10 + [-1] + [1] * 7
+    assert fix_hypotheses(bwd)[:7] == [("run", 0)] * 6 + [None]
+    assert contested_hypotheses(fwd, bwd, 0.10, 5.0) == ({("run", 0)}, {("run", 0)})
+    out = combine_passes(fwd, bwd, 0.10, 5.0)
+    # the refuted run is float at every epoch, also 6-9 s where the backward pass has no fix; the other run is not
+    assert [s.q for s in out] == [Q_FLOAT] * 11 + [Q_FIX] * 7
+    assert np.allclose(out[8].pos_ecef_m, a) and out[8].cov_pos_m2[0, 0] >= 0.05**2 / 4
+    # epoch by epoch (0 disables), the run's fix is taken where the backward pass has none
+    assert [s.q for s in combine_passes(fwd, bwd, 0.0)][:10] == [Q_FLOAT] * 6 + [Q_FIX] * 4
+    # a hypothesis held less than 5 s refutes nothing, and is itself not taken where the other pass is float
+    short = _timed([far] * 3 + [flt] * 15)
+    assert contested_hypotheses(fwd, short, 0.10, 5.0) == (set(), {("run", 0)})
+    assert [s.q for s in combine_passes(fwd, short, 0.10, 5.0)][:10] == [Q_FLOAT] * 3 + [Q_FIX] * 7
+    alone = _timed([flt] * 18)
+    assert [s.q for s in combine_passes(_timed([fix] * 3 + [flt] * 15), alone, 0.10, 5.0)][:4] == [Q_FLOAT] * 4
+    # one set straying at a minority of the common epochs is not another set: those epochs alone are float
+    stray = _timed([far] * 2 + [near] * 8 + [flt] * 8)
+    assert contested_hypotheses(fwd, stray, 0.10, 5.0) == (set(), set())
+    assert [s.q for s in combine_passes(fwd, stray, 0.10, 5.0)][:10] == [Q_FLOAT] * 2 + [Q_FIX] * 8
+
+
+def test_the_engines_lineage_joins_runs_into_one_hypothesis():
+    a = np.array([1.0, 2.0, 3.0])
+    fix = _sol(Q_FIX, a, 0.003)
+    lineage = replace(fix, pos_ecef_m=a + [0.3, 0, 0], fix_id=4)
+    # backward: fixed 30 cm away at 0-5 s and again at 8-9 s, one lineage across the break
+    bwd = _timed([lineage] * 6 + [_sol(Q_FLOAT, a, 0.3)] * 2 + [lineage] * 2)
+    fwd = _timed([fix] * 6 + [_sol(Q_FLOAT, a, 0.3)] * 4)
+    assert fix_hypotheses(bwd)[7:] == [None, ("lineage", 4), ("lineage", 4)]
+    out = combine_passes(fwd, bwd, 0.10, 5.0)
+    assert [s.q for s in out][8:] == [Q_FLOAT, Q_FLOAT]  # the second run rests on the refuted integers too
     with pytest.raises(ValueError, match="combined_contest_distance_m"):
         RtkOptions(combined_contest_distance_m=float("nan"))
 
