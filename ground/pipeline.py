@@ -342,13 +342,18 @@ class RtkOutcome:
     header: tuple[str, ...] = field(default=())
     systems: str = "G"
     """The constellations the engine used (RINEX letters)."""
+    n_disputed: int = 0
+    """Combined runs: epochs one pass fixed that the combination reports float, the two passes disagreeing on the
+    integers there (RunStats.disputed, summed over the passes)."""
 
     def summary(self) -> str:
         """One line for a job's message."""
         n = max(self.n_epochs, 1)
+        disputed = (f"; {self.n_disputed} fixes written as float: the forward and backward passes disagree there"
+                    if self.n_disputed else "")
         return (f"{self.n_epochs} epochs: fix {self.n_fix} ({100 * self.n_fix / n:.1f} %), float {self.n_float}, "
-                f"single {self.n_single}, no solution {self.n_none} (not written); systems {self.systems}; "
-                f"written {self.output.name}")
+                f"single {self.n_single}, no solution {self.n_none} (not written); systems {self.systems}"
+                f"{disputed}; written {self.output.name}")
 
 
 def run_rtk(inputs: RtkInputs, options: RtkJobOptions, output: Path) -> RtkOutcome:
@@ -378,7 +383,7 @@ def run_rtk(inputs: RtkInputs, options: RtkJobOptions, output: Path) -> RtkOutco
     systems = observed_systems(run) if options.systems == RTK_SYSTEMS_AUTO else options.systems
     rtk_options = replace(RtkOptions(), systems=systems, elmask_deg=options.elmask_deg,
                           ar_elmask_deg=max(options.elmask_deg, 15.0), static_start=options.static_start)
-    sols, _ = postprocess(rov_gps, bas_gps, nav, base_pos_arr, rtk_options, options.direction)
+    sols, stats = postprocess(rov_gps, bas_gps, nav, base_pos_arr, rtk_options, options.direction)
     good = [s for s in sols if is_position(s)]
     q = np.array([s.q for s in sols], dtype=int)
     if not good:
@@ -395,4 +400,5 @@ def run_rtk(inputs: RtkInputs, options: RtkJobOptions, output: Path) -> RtkOutco
     with atomic_output(output, "w") as fh:
         write_pos(fh, good, header, velocity=options.velocity)
     return RtkOutcome(output, len(sols), int(np.sum(q == Q_FIX)), int(np.sum(q == Q_FLOAT)),
-                      int(np.sum(q == Q_SINGLE)), len(sols) - len(good), header, systems)
+                      int(np.sum(q == Q_SINGLE)), len(sols) - len(good), header, systems,
+                      sum(s.disputed for s in stats))

@@ -178,6 +178,10 @@ def _run(args: argparse.Namespace) -> int:
     print(f"{len(sols)} epochs: fix {np.sum(q == Q_FIX)} ({100 * np.sum(q == Q_FIX) / n:.1f} %), "
           f"float {np.sum(q == Q_FLOAT)}, single {np.sum(q == Q_SINGLE)}; slips {sum(s.slips for s in stats)}; "
           f"written {args.output}")
+    if args.direction == "combined" and any(s.disputed for s in stats):
+        print(f"fixes the two passes dispute, written as float: {stats[0].disputed} forward, {stats[1].disputed} "
+              "backward (one pass's integers contradicted by the other's fixes, or held under "
+              f"{options.handover_min_run_s:g} s)", file=sys.stderr)
     return EXIT_OK
 
 

@@ -121,6 +121,9 @@ class RunStats:
     """Float ambiguities restarted for fitting no integer set while determined (RtkOptions.stuck_float_s)."""
     rejected_updates: int = 0
     """Epochs without a measurement update because every outlier pass found an outlier (RtkState.rejected_updates)."""
+    disputed: int = 0
+    """Combined runs: this pass's fixed epochs that the combination reports float, the other pass disagreeing
+    with the fix or refuting the integers it rests on, or the fix not borne out (combine_passes)."""
 
 
 def reverse_slip_flags(epochs: Sequence[ObsEpoch]) -> list[ObsEpoch]:
@@ -394,7 +397,10 @@ def postprocess(rover: Sequence[ObsEpoch], base: Sequence[ObsEpoch], nav: NavDat
     f, sf = run_filter(rov, paired, nav, base_pos_ecef_m, options, False, init_pos_ecef_m, progress)
     b, sb = run_filter(rov, paired, nav, base_pos_ecef_m, options, True, init_pos_ecef_m, progress,
                        handover_anchors(f, options.handover_min_run_s) if options.combined_handover else None)
-    return combine_passes(f, b, options.combined_contest_distance_m, options.handover_min_run_s), [sf, sb]
+    sols = combine_passes(f, b, options.combined_contest_distance_m, options.handover_min_run_s)
+    for stats, pass_sols in ((sf, f), (sb, b)):
+        stats.disputed = sum(p.q == Q_FIX and c.q != Q_FIX for p, c in zip(pass_sols, sols, strict=True))
+    return sols, [sf, sb]
 
 
 def first_time(epochs: Sequence[ObsEpoch]) -> GpsTime | None:

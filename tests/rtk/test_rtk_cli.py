@@ -81,6 +81,24 @@ def test_m8p_slice_with_header_base_position_llh_and_velocity(tmp_path):
     assert all(abs(t.tow_s - round(t.tow_s)) < 1e-3 for t in track.time)
 
 
+@pytest.mark.slow
+def test_combined_says_how_many_fixes_the_two_passes_dispute(tmp_path, capsys):
+    """The M8P walk under trees, GPS+GLONASS, combined: the fixes written as float because the forward and
+    backward passes disagree are counted on stderr (3 + 3 when measured), and the .pos has them as float."""
+    d = "gnss/ublox-m8p-galway-2018/rinex/"
+    rc = main(["rtk", "--rover", str(shared_file(d + "rover-20181004-1532.obs.gz")),
+               "--base", str(shared_file(d + "base-20181004-1452.rawx.obs.gz")),
+               "--nav", str(shared_file(d + "rover-20181004-1532.nav.gz")),
+               "--base-pos", "3774085.6456,-601662.5769,5089316.3970", "--systems", "GR", "--direction", "combined",
+               "--no-progress", "-o", str(tmp_path / "walk.pos")])
+    assert rc == 0
+    err = capsys.readouterr().err
+    line = [x for x in err.splitlines() if x.startswith("fixes the two passes dispute, written as float: ")]
+    assert len(line) == 1
+    forward, backward = (int(w) for w in line[0].split(": ")[1].replace(",", "").split()[0:3:2])
+    assert forward > 0 and backward > 0
+
+
 def _run_err(capsys, argv) -> str:
     assert main(argv) == 2
     return capsys.readouterr().err

@@ -38,13 +38,19 @@ def test_a_set_the_other_pass_refutes_is_not_taken_where_that_pass_has_no_fix(se
     truth = np.array([data.truth(s.time)["antenna_ecef_m"] for s in fwd])
     # one pass's wrong set (63 and 327 epochs when measured)
     assert max(_wrong_and_fixed(fwd, truth)[0], _wrong_and_fixed(bwd, truth)[0]) > 30
-    wrong, fixed = _wrong_and_fixed(
-        postpro.combine_passes(fwd, bwd, opts.combined_contest_distance_m, opts.handover_min_run_s), truth)
+    combined = postpro.combine_passes(fwd, bwd, opts.combined_contest_distance_m, opts.handover_min_run_s)
+    wrong, fixed = _wrong_and_fixed(combined, truth)
     assert wrong == 0
     # epoch by epoch, the wrong set survives where the other pass has no fix
     assert _wrong_and_fixed(postpro.combine_passes(fwd, bwd, 0.0), truth)[0] > 10
     if seed == 2:
         assert fixed > 200  # the backward pass's right fixes stay
+        # postprocess's combined run: the same solutions, and each pass's disputed fixes counted
+        sols, stats = postpro.postprocess(data.rover, data.base, data.nav, data.base_pos_ecef_m, opts, "combined")
+        assert [s.q for s in sols] == [s.q for s in combined]
+        for st, one_pass in zip(stats, (fwd, bwd), strict=True):
+            assert st.disputed == sum(p.q == Q_FIX and c.q != Q_FIX for p, c in zip(one_pass, sols, strict=True))
+        assert stats[0].disputed >= _wrong_and_fixed(fwd, truth)[0]  # every wrong forward fix among them
     else:
         # the backward pass's two wrong runs are one lineage: the refutation of one reaches the other
         ids = {s.fix_id for s, e in zip(bwd, truth) if s.q == Q_FIX and np.linalg.norm(s.pos_ecef_m - e) > 0.10}
