@@ -152,7 +152,7 @@ def reverse_slip_flags(epochs: Sequence[ObsEpoch]) -> list[ObsEpoch]:
 def run_filter(rover: Sequence[ObsEpoch], paired_base: Sequence[ObsEpoch | None], nav: NavData,
                base_pos_ecef_m: Arr | None, options: RtkOptions, backward: bool = False,
                init_pos_ecef_m: Arr | None = None, progress: Callable[[int], None] | None = None,
-               anchors: Sequence[Solution] | None = None) -> tuple[list[Solution], RunStats]:
+               anchors: Sequence[Solution | None] | None = None) -> tuple[list[Solution], RunStats]:
     """One filter pass over all rover epochs (in time order, or reversed when `backward`).
 
     Returns the solutions in time order (index-aligned with `rover`) and run statistics. The known take-off
@@ -332,18 +332,31 @@ def contested_hypotheses(fwd: Sequence[Solution], bwd: Sequence[Solution], dista
 
 
 def combine_passes(fwd: Sequence[Solution], bwd: Sequence[Solution], contest_distance_m: float = 0.10,
-                   contest_min_span_s: float = 5.0) -> list[Solution]:
+                   contest_min_span_s: float = 5.0, anchors: Sequence[Solution | None] | None = None
+                   ) -> list[Solution]:
     """Combine two passes epoch by epoch (combine); with `contest_distance_m` > 0, a fix resting on an integer
     hypothesis that the other pass contradicts (contested_hypotheses), or held over less than
     `contest_min_span_s` (s), is reported float where the other pass has no fix to agree with it.
 
     One held set of integers (a lineage of the engine, else a run of consecutive fixes) is one hypothesis: the
     other pass's fixes refuting it where both are fixed refute it at all its epochs, also where that pass had no
-    fix of its own to object with (RtkOptions.combined_contest_distance_m)."""
+    fix of its own to object with (RtkOptions.combined_contest_distance_m). `anchors` (handover_anchors, index
+    aligned): where the backward pass was pinned to the forward's fix and agrees with it, its hypothesis carries
+    the forward's integers on, and the two are refuted together."""
     if contest_distance_m <= 0.0:  # every epoch on its own (RTKLIB's combination)
         return [combine(f, b) for f, b in zip(fwd, bwd, strict=True)]
     bad_f, bad_b = contested_hypotheses(fwd, bwd, contest_distance_m, contest_min_span_s)
     hf, hb = fix_hypotheses(fwd), fix_hypotheses(bwd)
+    links = [(lf, lb) for i, (lf, lb) in enumerate(zip(hf, hb, strict=True))
+             if anchors is not None and anchors[i] is not None and lf is not None and lb is not None
+             and float(np.linalg.norm(fwd[i].pos_ecef_m - bwd[i].pos_ecef_m)) <= COMBINE_FIX_AGREEMENT_M]
+    while True:  # until no link carries a refutation further (each pass adds to the sets or stops)
+        grown = [(lf, lb) for lf, lb in links if (lf in bad_f) != (lb in bad_b)]
+        if not grown:
+            break
+        for lf, lb in grown:
+            bad_f.add(lf)
+            bad_b.add(lb)
     # nor is a hypothesis held over less than contest_min_span_s: fixed, then lost within seconds (a hold's
     # misfit, slips), it was not borne out by the epochs after it
     bad_f |= {k for k, v in _hypothesis_spans_s(fwd, hf).items() if v < contest_min_span_s}
@@ -352,6 +365,9 @@ def combine_passes(fwd: Sequence[Solution], bwd: Sequence[Solution], contest_dis
     for f, b, kf, kb in zip(fwd, bwd, hf, hb, strict=True):
         if (kf in bad_f or kb in bad_b) and (kf is None) != (kb is None):
             out.append(_unvouched(f, b))
+        elif kf in bad_f and kb in bad_b:  # two refuted sets agreeing (one pinned to the other) vouch for nothing
+            both = combine(f, b)
+            out.append(replace(both, q=Q_FLOAT) if both.q == Q_FIX else both)
         else:
             out.append(combine(f, b))
     return out
@@ -395,9 +411,9 @@ def postprocess(rover: Sequence[ObsEpoch], base: Sequence[ObsEpoch], nav: NavDat
         sols, st = run_filter(rov, paired, nav, base_pos_ecef_m, options, True, init_pos_ecef_m, progress)
         return sols, [st]
     f, sf = run_filter(rov, paired, nav, base_pos_ecef_m, options, False, init_pos_ecef_m, progress)
-    b, sb = run_filter(rov, paired, nav, base_pos_ecef_m, options, True, init_pos_ecef_m, progress,
-                       handover_anchors(f, options.handover_min_run_s) if options.combined_handover else None)
-    sols = combine_passes(f, b, options.combined_contest_distance_m, options.handover_min_run_s)
+    anchors = handover_anchors(f, options.handover_min_run_s) if options.combined_handover else None
+    b, sb = run_filter(rov, paired, nav, base_pos_ecef_m, options, True, init_pos_ecef_m, progress, anchors)
+    sols = combine_passes(f, b, options.combined_contest_distance_m, options.handover_min_run_s, anchors)
     for stats, pass_sols in ((sf, f), (sb, b)):
         stats.disputed = sum(p.q == Q_FIX and c.q != Q_FIX for p, c in zip(pass_sols, sols, strict=True))
     return sols, [sf, sb]

@@ -113,6 +113,17 @@ def test_a_hypothesis_the_other_pass_refutes_is_float_where_that_pass_has_no_fix
     assert [s.q for s in combine_passes(fwd, stray, 0.10, 5.0)][:10] == [Q_FLOAT] * 2 + [Q_FIX] * 8
 
 
+def test_a_backward_pass_pinned_to_a_refuted_forward_set_is_refuted_with_it():
+    a = np.array([1.0, 2.0, 3.0])
+    fix, other, flt = _sol(Q_FIX, a, 0.003), _sol(Q_FIX, a + [0.3, 0, 0], 0.003), _sol(Q_FLOAT, a, 0.3)
+    fwd = _timed([flt] * 5 + [fix] * 11 + [flt] * 4)  # one set at 5-15 s
+    # backward: refutes it at 10-15 s, loses its hold, is pinned to it at 5 s and carries it back to 0 s
+    bwd = _timed([fix] * 6 + [flt] * 4 + [other] * 6 + [flt] * 4)
+    anchors = [None] * 5 + [fwd[5]] + [None] * 14
+    assert [s.q for s in combine_passes(fwd, bwd, 0.10, 5.0)][:5] == [Q_FIX] * 5
+    assert [s.q for s in combine_passes(fwd, bwd, 0.10, 5.0, anchors)] == [Q_FLOAT] * 20
+
+
 def test_the_engines_lineage_joins_runs_into_one_hypothesis():
     a = np.array([1.0, 2.0, 3.0])
     fix = _sol(Q_FIX, a, 0.003)
