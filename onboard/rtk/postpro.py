@@ -274,6 +274,10 @@ def combine(fwd: Solution, bwd: Solution) -> Solution:
     return fwd if fwd.q < bwd.q else bwd
 
 
+_Key = tuple[str, int]
+"""An integer hypothesis of one pass (fix_hypotheses): ("lineage", Solution.fix_id) or ("run", its index)."""
+
+
 def fix_runs(sols: Sequence[Solution]) -> list[int]:
     """Per epoch, the index of the run of consecutive fixes it belongs to (-1 where not fixed)."""
     out = [-1] * len(sols)
@@ -286,18 +290,17 @@ def fix_runs(sols: Sequence[Solution]) -> list[int]:
     return out
 
 
-def fix_hypotheses(sols: Sequence[Solution]) -> list[tuple[str, int] | None]:
+def fix_hypotheses(sols: Sequence[Solution]) -> list[_Key | None]:
     """Per epoch, which integer hypothesis of its pass a fix rests on (None where not fixed): the engine's
     lineage (Solution.fix_id: one set of integers across the pass's breaks), else its run of consecutive fixes."""
     runs = fix_runs(sols)
     return [None if r < 0 else ("lineage", s.fix_id) if s.fix_id >= 0 else ("run", r) for s, r in zip(sols, runs)]
 
 
-def _hypothesis_spans_s(sols: Sequence[Solution], keys: Sequence[tuple[str, int] | None]
-                        ) -> dict[tuple[str, int], float]:
+def _hypothesis_spans_s(sols: Sequence[Solution], keys: Sequence[_Key | None]) -> dict[_Key, float]:
     """Each hypothesis's span (s): from its first to its last fixed epoch in the pass."""
-    first: dict[tuple[str, int], GpsTime] = {}
-    last: dict[tuple[str, int], GpsTime] = {}
+    first: dict[_Key, GpsTime] = {}
+    last: dict[_Key, GpsTime] = {}
     for sol, k in zip(sols, keys):
         if k is not None:
             first.setdefault(k, sol.time)
@@ -306,22 +309,29 @@ def _hypothesis_spans_s(sols: Sequence[Solution], keys: Sequence[tuple[str, int]
 
 
 def contested_hypotheses(fwd: Sequence[Solution], bwd: Sequence[Solution], distance_m: float, min_span_s: float
-                         ) -> tuple[set[tuple[str, int]], set[tuple[str, int]]]:
+                         ) -> tuple[set[_Key], set[_Key]]:
     """The integer hypotheses (fix_hypotheses) of each pass that a hypothesis of the other pass contradicts:
     (forward's, backward's). Two hypotheses contradict each other when their fixes lie more than `distance_m`
     apart at most of the epochs both are fixed (two integer sets: a constant offset through a slowly changing
     geometry; one set's fixes straying at a few epochs is those epochs' matter, which combine() settles). A
     hypothesis held over less than `min_span_s` (s), not borne out by the epochs after it, refutes nothing."""
     hf, hb = fix_hypotheses(fwd), fix_hypotheses(bwd)
-    span_f, span_b = _hypothesis_spans_s(fwd, hf), _hypothesis_spans_s(bwd, hb)
-    meets: dict[tuple[tuple[str, int], tuple[str, int]], list[int]] = {}
+    return _contested(fwd, bwd, hf, hb, _hypothesis_spans_s(fwd, hf), _hypothesis_spans_s(bwd, hb), distance_m,
+                      min_span_s)
+
+
+def _contested(fwd: Sequence[Solution], bwd: Sequence[Solution], hf: Sequence[_Key | None],
+               hb: Sequence[_Key | None], span_f: dict[_Key, float], span_b: dict[_Key, float], distance_m: float,
+               min_span_s: float) -> tuple[set[_Key], set[_Key]]:
+    """contested_hypotheses on the passes' hypotheses and spans already found."""
+    meets: dict[tuple[_Key, _Key], list[int]] = {}
     for f, b, kf, kb in zip(fwd, bwd, hf, hb, strict=True):
         if kf is not None and kb is not None:
             count = meets.setdefault((kf, kb), [0, 0])
             count[0] += 1
             count[1] += float(np.linalg.norm(f.pos_ecef_m - b.pos_ecef_m)) > distance_m
-    bad_f: set[tuple[str, int]] = set()
-    bad_b: set[tuple[str, int]] = set()
+    bad_f: set[_Key] = set()
+    bad_b: set[_Key] = set()
     for (kf, kb), (n_both, n_apart) in meets.items():
         if 2 * n_apart > n_both:
             if span_b[kb] >= min_span_s:
@@ -345,8 +355,9 @@ def combine_passes(fwd: Sequence[Solution], bwd: Sequence[Solution], contest_dis
     the forward's integers on, and the two are refuted together."""
     if contest_distance_m <= 0.0:  # every epoch on its own (RTKLIB's combination)
         return [combine(f, b) for f, b in zip(fwd, bwd, strict=True)]
-    bad_f, bad_b = contested_hypotheses(fwd, bwd, contest_distance_m, contest_min_span_s)
     hf, hb = fix_hypotheses(fwd), fix_hypotheses(bwd)
+    span_f, span_b = _hypothesis_spans_s(fwd, hf), _hypothesis_spans_s(bwd, hb)
+    bad_f, bad_b = _contested(fwd, bwd, hf, hb, span_f, span_b, contest_distance_m, contest_min_span_s)
     links = [(lf, lb) for i, (lf, lb) in enumerate(zip(hf, hb, strict=True))
              if anchors is not None and anchors[i] is not None and lf is not None and lb is not None
              and float(np.linalg.norm(fwd[i].pos_ecef_m - bwd[i].pos_ecef_m)) <= COMBINE_FIX_AGREEMENT_M]
@@ -359,8 +370,8 @@ def combine_passes(fwd: Sequence[Solution], bwd: Sequence[Solution], contest_dis
             bad_b.add(lb)
     # nor is a hypothesis held over less than contest_min_span_s: fixed, then lost within seconds (a hold's
     # misfit, slips), it was not borne out by the epochs after it
-    bad_f |= {k for k, v in _hypothesis_spans_s(fwd, hf).items() if v < contest_min_span_s}
-    bad_b |= {k for k, v in _hypothesis_spans_s(bwd, hb).items() if v < contest_min_span_s}
+    bad_f |= {k for k, v in span_f.items() if v < contest_min_span_s}
+    bad_b |= {k for k, v in span_b.items() if v < contest_min_span_s}
     out = []
     for f, b, kf, kb in zip(fwd, bwd, hf, hb, strict=True):
         if (kf in bad_f or kb in bad_b) and (kf is None) != (kb is None):

@@ -341,13 +341,13 @@ class RtkState:
     """validated_int as it was when a hold was released on a base carried forward (a radio gap), NaN elsewhere;
     slots leave it on a reset as they leave validated_int (see RtkOptions.resume_hold_after_gap)."""
     gap_base_time: GpsTime | None = None
+    """The base epoch of that release: the set is tried again at the first epoch paired with a newer one. None
+    when no such try is due."""
     lineage_int: Arr = field(default_factory=lambda: np.full(NSAT, np.nan))
     """The last fix's integers (as validated_int, NaN off it and on any reset since): a fix equal to them on the
     satellites both hold continues their lineage (Solution.fix_id)."""
     lineage_id: int = -1
     """Solution.fix_id of that lineage (-1 before the first fix); ids count from 0 in each run of the filter."""
-    """The base epoch of that release: the set is tried again at the first epoch paired with a newer one. None
-    when no such try is due."""
     static: bool = False
     init_pos_ecef_m: Arr | None = None
     fail_count: int = 0
