@@ -65,34 +65,36 @@ def _sky(hour: float | None) -> str:
 
 
 def run_matrix(only: list[str] | None = None, models: tuple[str, ...] = ("lea6t", "m8t"), seed: int = 1,
-               start_hour: float | None = None, systems: str = "G", world: str = "gr-2012") -> None:
+               start_hour: float | None = None, systems: str = "G", world: str = "gr-2012",
+               direction: str = "forward") -> None:
     """Print the matrix (scenarios whose name contains one of `only`, or all); `systems` other than "G" runs
     it in the multi-constellation `world` with the engine's RtkOptions(systems=...)."""
     sky = "GPS L1" if systems == "G" else f"systems {systems}, world {world}"
-    print(f"hil_sim flights (seed {seed}{_sky(start_hour)}), directgeo onboard.rtk forward, {sky}, 15 deg mask, "
+    print(f"hil_sim flights (seed {seed}{_sky(start_hour)}), directgeo onboard.rtk {direction}, {sky}, 15 deg mask, "
           "fix-and-hold, max age 30 s")
     print(HEADER)
     print("-" * len(HEADER))
     for case, model in _runs(only, models):
         c = replace(case, seed=seed, start_hour=start_hour, systems=systems, world=world)
-        print(row(c, model, evaluate(c, model)), flush=True)
+        print(row(c, model, evaluate(c, model, direction=direction)), flush=True)
 
 
 def run_seeds(seeds: list[int], only: list[str] | None = None, models: tuple[str, ...] = ("lea6t", "m8t"),
-              start_hour: float | None = None, systems: str = "G", world: str = "gr-2012") -> None:
+              start_hour: float | None = None, systems: str = "G", world: str = "gr-2012",
+              direction: str = "forward") -> None:
     """Print, per scenario and model, the airborne fix % over several World seeds (min, median, mean), the
     wrong fixes summed over the seeds (naming the seeds that had any) and the median first fix: one line each,
     so that a change is judged on more than one draw of the errors."""
     sky = "GPS L1" if systems == "G" else f"systems {systems}, world {world}"
     print(f"hil_sim flights, seeds {seeds[0]}-{seeds[-1]} ({len(seeds)}){_sky(start_hour)}, directgeo onboard.rtk "
-          f"forward, {sky}, 15 deg mask, fix-and-hold, max age 30 s")
+          f"{direction}, {sky}, 15 deg mask, fix-and-hold, max age 30 s")
     head = (f"{'scenario':30s} {'model':6s} {'air % min':>9s} {'median':>7s} {'mean':>6s} {'wrong':>6s}  "
             "seeds with wrong fixes / first fix s (median) (the seed of the min)")
     print(head)
     print("-" * len(head))
     for case, model in _runs(only, models):
-        runs = {seed: evaluate(replace(case, seed=seed, start_hour=start_hour, systems=systems, world=world), model)
-                for seed in seeds}
+        runs = {seed: evaluate(replace(case, seed=seed, start_hour=start_hour, systems=systems, world=world), model,
+                               direction=direction) for seed in seeds}
         air = np.array([r["air fix %"] for r in runs.values()], float)
         wrong = {seed: r["wrong"] for seed, r in runs.items() if r["wrong"]}
         firsts = np.array([r["first fix s"] for r in runs.values()], float)
@@ -123,12 +125,15 @@ def main() -> None:
     ap.add_argument("--systems", default="G", help="constellations, e.g. GREJ (default G: the GPS world)")
     ap.add_argument("--world", default="gr-2012", help="multi-constellation world (hil_sim.scenario.MULTI_WORLDS): "
                     "gr-2012 (GPS+GLONASS) or gej-2021 (GPS+Galileo+QZSS)")
+    ap.add_argument("--direction", choices=("forward", "combined"), default="forward",
+                    help="forward (default): the drone's real-time solution, the matrix's targets; combined: the "
+                    "forward and backward passes combined, the ground's RTK job's default deliverable")
     args = ap.parse_args()
     models = tuple(args.model or ("lea6t", "m8t"))
     if args.seeds:
-        run_seeds(args.seeds, args.only, models, args.start_hour, args.systems, args.world)
+        run_seeds(args.seeds, args.only, models, args.start_hour, args.systems, args.world, args.direction)
     else:
-        run_matrix(args.only, models, args.seed, args.start_hour, args.systems, args.world)
+        run_matrix(args.only, models, args.seed, args.start_hour, args.systems, args.world, args.direction)
 
 
 if __name__ == "__main__":

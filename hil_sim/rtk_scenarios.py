@@ -247,15 +247,16 @@ def score_epochs(q: np.ndarray, err_m: np.ndarray, armed: np.ndarray, age_s: np.
 
 
 def evaluate(case: SimCase, model: str, options: RtkOptions | None = None,
-             data: SimData | None = None) -> dict[str, Any]:
-    """Simulate (unless `data`, the simulation of `case`, is given) and solve `case`: the figures
-    `bench/rtk_sim.py` prints (and per-epoch q, err_m, armed, age_s)."""
+             data: SimData | None = None, direction: str = "forward") -> dict[str, Any]:
+    """Simulate (unless `data`, the simulation of `case`, is given) and solve `case` in `direction` (forward: the
+    drone's real-time solution; combined: the ground's deliverable): the figures `bench/rtk_sim.py` prints (and
+    per-epoch q, err_m, armed, age_s)."""
     data = data or simulate(case, model)
     opts = options or (RtkOptions(systems=case.systems.upper()) if case.multi else RtkOptions())
     if data.init_pos_ecef_m is not None:
         opts = replace(opts, static_start=True)
     t_run = time.process_time()
-    sols, stats = postprocess(data.rover, data.base, data.nav, data.base_pos_ecef_m, opts, "forward",
+    sols, stats = postprocess(data.rover, data.base, data.nav, data.base_pos_ecef_m, opts, direction,
                               data.init_pos_ecef_m)
     cpu = time.process_time() - t_run
     q = np.array([s.q for s in sols])

@@ -278,3 +278,17 @@ def test_a_base_half_cycle_arc_does_not_reach_the_rover_unflagged() -> None:
     # now withholds such phase and restarts the lock time when the half cycle resolves
     r = _run("m8t", duration_s=600.0, undetected_slips_per_h=2.0, seed=10)
     assert r["wrong"] == 0 and r["air fix %"] >= 99.0
+
+
+@pytest.mark.slow
+def test_evaluate_scores_the_combined_solution_when_asked() -> None:
+    """bench/rtk_sim.py --direction combined: the ground's deliverable on the same flight. The backward pass
+    carries the fix back over the seconds the forward pass spent confirming its first one (9 s when measured)."""
+    from hil_sim.rtk_scenarios import SimCase, evaluate, simulate
+
+    case = SimCase("test", "", duration_s=200.0)
+    data = simulate(case, "m8t")
+    forward = evaluate(case, "m8t", data=data)
+    combined = evaluate(case, "m8t", data=data, direction="combined")
+    assert forward["first fix s"] > 3.0 and combined["first fix s"] == 0.0
+    assert combined["wrong"] == 0 and combined["air fix %"] >= forward["air fix %"]
