@@ -97,7 +97,8 @@ class RtkOptions:
     (0 disables all three). Why: one held set is right or wrong as a whole; hil_sim GPS alone under trees held
     wrong sets for 63-327 s in one pass while the other, right there, had no fix over part of them (M8T seeds
     1-24: 119 wrong combined epochs). Not the 5 cm at which two fixes are combined, and not at a single epoch:
-    right fixes under trees stray by 5-15 cm at a few epochs (docs/rtk-defaults.md)."""
+    right sets under trees stray beyond 5 cm at a few epochs (M8P walk: 5.0-6.0 cm; hil_sim: up to 21 cm;
+    docs/rtk-defaults.md)."""
     handover_sigma_m: float = 0.01
     """σ (m, per ECEF axis) added to the handed-over fix's own covariance when it pins the other pass. Why: a
     fixed position carries centimetre multipath its covariance does not hold; 1 cm keeps the pinned double
