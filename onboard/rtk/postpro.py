@@ -204,19 +204,10 @@ def handover_anchors(sols: Sequence[Solution], min_run_s: float) -> list[Solutio
     after crossing the run on its own, so where it fixes the run by itself the two passes stay independent
     checks of each other (combine); pinned there, it carries the fix on into the epochs before, where the
     forward pass had none (RtkOptions.combined_handover)."""
-    out: list[Solution | None] = [None] * len(sols)
-    i = 0
-    while i < len(sols):
-        if sols[i].q != Q_FIX:
-            i += 1
-            continue
-        j = i
-        while j + 1 < len(sols) and sols[j + 1].q == Q_FIX:
-            j += 1
-        if abs(sols[j].time.diff_s(sols[i].time)) >= min_run_s:
-            out[i] = sols[i]
-        i = j + 1
-    return out
+    runs = fix_runs(sols)
+    spans = _hypothesis_spans_s(sols, [None if r < 0 else ("run", r) for r in runs])
+    return [sol if r >= 0 and (i == 0 or runs[i - 1] != r) and spans[("run", r)] >= min_run_s else None
+            for i, (sol, r) in enumerate(zip(sols, runs, strict=True))]
 
 
 def _smooth(a: Solution, b: Solution) -> tuple[Arr, Arr]:
