@@ -180,8 +180,8 @@ def _run(args: argparse.Namespace) -> int:
           f"written {args.output}")
     if args.direction == "combined" and any(s.disputed for s in stats):
         print(f"fixes the two passes dispute, written as float: {stats[0].disputed} forward, {stats[1].disputed} "
-              "backward (one pass's integers contradicted by the other's fixes, or held under "
-              f"{options.handover_min_run_s:g} s)", file=sys.stderr)
+              "backward (one pass's integers contradicted by the other's fixes, held under "
+              f"{options.handover_min_run_s:g} s, or next to an epoch where the passes disagree)", file=sys.stderr)
     return EXIT_OK
 
 

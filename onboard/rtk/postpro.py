@@ -337,7 +337,8 @@ def combine_passes(fwd: Sequence[Solution], bwd: Sequence[Solution], contest_dis
                    ) -> list[Solution]:
     """Combine two passes epoch by epoch (combine); with `contest_distance_m` > 0, a fix resting on an integer
     hypothesis that the other pass contradicts (contested_hypotheses), or held over less than
-    `contest_min_span_s` (s), is reported float where the other pass has no fix to agree with it.
+    `contest_min_span_s` (s), or next to an epoch where the passes dispute it (beside_disputes), is reported
+    float where the other pass has no fix to agree with it.
 
     One held set of integers (a lineage of the engine, else a run of consecutive fixes) is one hypothesis: the
     other pass's fixes refuting it where both are fixed refute it at all its epochs, also where that pass had no
@@ -363,15 +364,37 @@ def combine_passes(fwd: Sequence[Solution], bwd: Sequence[Solution], contest_dis
     # misfit, slips), it was not borne out by the epochs after it
     bad_f |= {k for k, v in span_f.items() if v < contest_min_span_s}
     bad_b |= {k for k, v in span_b.items() if v < contest_min_span_s}
+    beside = beside_disputes(fwd, bwd, hf, hb)
     out = []
-    for f, b, kf, kb in zip(fwd, bwd, hf, hb, strict=True):
-        if (kf in bad_f or kb in bad_b) and (kf is None) != (kb is None):
+    for i, (f, b, kf, kb) in enumerate(zip(fwd, bwd, hf, hb, strict=True)):
+        if (kf in bad_f or kb in bad_b or i in beside) and (kf is None) != (kb is None):
             out.append(_unvouched(f, b))
         elif kf in bad_f and kb in bad_b:  # two refuted sets agreeing (one pinned to the other) vouch for nothing
             both = combine(f, b)
             out.append(replace(both, q=Q_FLOAT) if both.q == Q_FIX else both)
         else:
             out.append(combine(f, b))
+    return out
+
+
+def beside_disputes(fwd: Sequence[Solution], bwd: Sequence[Solution], hf: Sequence[_Key | None],
+                    hb: Sequence[_Key | None]) -> set[int]:
+    """Epochs whose fix (of either pass) rests on the hypothesis that the next or the previous epoch has in
+    dispute: there both passes are fixed and further apart than COMBINE_FIX_AGREEMENT_M, so neither is taken.
+
+    A right set held through an undetected slip strays from the other pass's for a few epochs until the slip is
+    caught, and its first and last stray epochs may be where the other pass has no fix to object: hil_sim
+    harsh, LEA-6T, seed 10 (21 cm off on the epoch before two disputed ones) and seed 14 (12 cm)."""
+    out: set[int] = set()
+    n = len(fwd)
+    for i in range(n):
+        if fwd[i].q != Q_FIX or bwd[i].q != Q_FIX:
+            continue
+        if float(np.linalg.norm(fwd[i].pos_ecef_m - bwd[i].pos_ecef_m)) <= COMBINE_FIX_AGREEMENT_M:
+            continue
+        for j in (i - 1, i + 1):
+            if 0 <= j < n and ((hf[j] is not None and hf[j] == hf[i]) or (hb[j] is not None and hb[j] == hb[i])):
+                out.add(j)
     return out
 
 

@@ -40,7 +40,7 @@ def test_the_walk_fixes_with_glonass_where_gps_alone_cannot(tmp_path: Path) -> N
     assert "ground rtk job (L1, systems GR)" in text and "systems G)" in (tmp_path / "g.pos").read_text()
     assert int((read_pos(tmp_path / "gr.pos").q == 1).sum()) == both.n_fix
     assert "; systems GR; " in both.summary() and "; systems G; " in gps.summary()
-    # the message says where the two passes' fixes disagreed and were written as float (6 epochs when measured)
+    # the message says where the two passes' fixes disagreed and were written as float (8 epochs when measured)
     assert both.n_disputed > 0 and f"; {both.n_disputed} fixes written as float: the forward and backward passes " \
         "disagree there;" in both.summary()
     auto = run_rtk(inputs, RtkJobOptions(base_pos_ecef_m=BASE_ECEF_M), tmp_path / "auto.pos")

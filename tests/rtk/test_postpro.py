@@ -14,6 +14,7 @@ from onboard.gnsstime import GpsTime
 from onboard.rtk.ephemeris import EphemerisStore
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.postpro import (
+    beside_disputes,
     combine,
     combine_passes,
     contested_hypotheses,
@@ -104,13 +105,34 @@ def test_a_hypothesis_the_other_pass_refutes_is_float_where_that_pass_has_no_fix
     # a hypothesis held less than 5 s refutes nothing, and is itself not taken where the other pass is float
     short = _timed([far] * 3 + [flt] * 15)
     assert contested_hypotheses(fwd, short, 0.10, 5.0) == (set(), {("run", 0)})
-    assert [s.q for s in combine_passes(fwd, short, 0.10, 5.0)][:10] == [Q_FLOAT] * 3 + [Q_FIX] * 7
+    # (and the forward fix at 3 s, beside the dispute at 2 s, is not taken alone either: beside_disputes)
+    assert [s.q for s in combine_passes(fwd, short, 0.10, 5.0)][:10] == [Q_FLOAT] * 4 + [Q_FIX] * 6
     alone = _timed([flt] * 18)
     assert [s.q for s in combine_passes(_timed([fix] * 3 + [flt] * 15), alone, 0.10, 5.0)][:4] == [Q_FLOAT] * 4
     # one set straying at a minority of the common epochs is not another set: those epochs alone are float
     stray = _timed([far] * 2 + [near] * 8 + [flt] * 8)
     assert contested_hypotheses(fwd, stray, 0.10, 5.0) == (set(), set())
     assert [s.q for s in combine_passes(fwd, stray, 0.10, 5.0)][:10] == [Q_FLOAT] * 2 + [Q_FIX] * 8
+
+
+def test_a_fix_beside_a_dispute_of_its_own_set_is_float_where_the_other_pass_has_no_fix():
+    a = np.array([1.0, 2.0, 3.0])
+    fix = replace(_sol(Q_FIX, a, 0.003), fix_id=1)
+    near, far = _sol(Q_FIX, a + [0.01, 0, 0], 0.003), _sol(Q_FIX, a + [0.2, 0, 0], 0.003)
+    flt = _sol(Q_FLOAT, a, 0.07)
+    # the backward pass holds one set throughout and strays 20 cm at 3-6 s (a slip not yet caught), where the
+    # forward pass, one lineage, is float at 3 and 6 s and fixed, disputing it, at 4 and 5 s (hil_sim LEA-6T
+    # harsh, seed 10)
+    fwd = _timed([fix] * 3 + [flt] + [fix] * 2 + [flt] + [fix] * 5)
+    bwd = _timed([near] * 3 + [far] * 4 + [near] * 5)
+    assert contested_hypotheses(fwd, bwd, 0.10, 5.0) == (set(), set())  # disputed at 2 of 10 common epochs
+    assert beside_disputes(fwd, bwd, fix_hypotheses(fwd), fix_hypotheses(bwd)) == {3, 4, 5, 6}
+    assert [s.q for s in combine_passes(fwd, bwd, 0.10, 5.0)] == [Q_FIX] * 3 + [Q_FLOAT] * 4 + [Q_FIX] * 5
+    # epoch by epoch (RTKLIB), the stray fixes at 3 and 6 s are taken
+    assert [s.q for s in combine_passes(fwd, bwd, 0.0)] == [Q_FIX] * 4 + [Q_FLOAT] * 2 + [Q_FIX] * 6
+    # another hypothesis of the backward pass after a break is not the disputed one
+    broken = _timed([near] * 3 + [far] * 3 + [_sol(Q_FLOAT, a, 0.3)] + [far] + [near] * 4)
+    assert 6 not in beside_disputes(fwd, broken, fix_hypotheses(fwd), fix_hypotheses(broken))
 
 
 def test_a_backward_pass_pinned_to_a_refuted_forward_set_is_refuted_with_it():

@@ -84,7 +84,7 @@ def test_m8p_slice_with_header_base_position_llh_and_velocity(tmp_path):
 @pytest.mark.slow
 def test_combined_says_how_many_fixes_the_two_passes_dispute(tmp_path, capsys):
     """The M8P walk under trees, GPS+GLONASS, combined: the fixes written as float because the forward and
-    backward passes disagree are counted on stderr (3 + 3 when measured), and the .pos has them as float."""
+    backward passes disagree are counted on stderr (4 + 4 when measured), and the .pos has them as float."""
     d = "gnss/ublox-m8p-galway-2018/rinex/"
     rc = main(["rtk", "--rover", str(shared_file(d + "rover-20181004-1532.obs.gz")),
                "--base", str(shared_file(d + "base-20181004-1452.rawx.obs.gz")),
