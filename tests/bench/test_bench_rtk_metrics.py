@@ -3,6 +3,7 @@ RTKLIB's navsys mask (the benchmark itself needs RTKLIB's bindings and the real 
 
 from __future__ import annotations
 
+import sys
 from types import SimpleNamespace
 
 import numpy as np
@@ -97,3 +98,33 @@ def test_combined_runs_write_their_own_files_in_their_own_direction(tmp_path):
     assert "--direction=combined" in ours and ours[-2:] == ["-o", str(tmp_path / "ours-combined.pos")]
     assert "--direction=combined" not in cmds["ours"] and "--combined" not in cmds["demo5"]
     assert len({bench_rtk._out_file(c) for c in cmds.values()}) == 4
+
+
+
+def _fake_engine(tmp_path, script: str) -> list[str]:
+    """A command `run_set` runs as an engine: `script` writes its .pos (one week/tow/ECEF/Q line) to the path
+    after -o (sys.argv[-1])."""
+    return [sys.executable, "-c", script, "-o", str(tmp_path / "fake.pos")]
+
+
+LINE = "2021 100.0 -3976219.1873 3382371.6051 3652511.1423 "
+
+
+def test_repeat_keeps_the_least_cpu_and_refuses_an_engine_that_changes_its_answer(tmp_path, monkeypatch):
+    ds = bench_rtk.DATASETS[0]
+    steady = _fake_engine(tmp_path, f"import sys; open(sys.argv[-1], 'w').write('{LINE}1\\n')")
+    real_child = bench_rtk.run_child
+    cpu = iter([0.5, 0.2, 0.4])
+    monkeypatch.setattr(bench_rtk, "run_child", lambda cmd: (next(cpu), 0.0, real_child(cmd)[2]))
+    monkeypatch.setattr(bench_rtk, "engine_commands", lambda *a, **k: {"ours": steady})
+    rows, us = bench_rtk.run_set(ds, "G", ("ours",), None, repeat=3)
+    assert len(rows) == 1 and us == {"ours": pytest.approx(0.2e6)}  # one epoch: the least of 0.5, 0.2, 0.4 s
+    # an engine whose solution changes from one run to the next is not timed as if it were one job
+    counter = tmp_path / "runs"
+    flaky = _fake_engine(tmp_path, f"import sys, pathlib; c = pathlib.Path({str(counter)!r}); "
+                                   "n = int(c.read_text()) if c.exists() else 0; c.write_text(str(n + 1)); "
+                                   f"open(sys.argv[-1], 'w').write('{LINE}' + str(1 + n) + chr(10))")
+    cpu = iter([0.5, 0.2])
+    monkeypatch.setattr(bench_rtk, "engine_commands", lambda *a, **k: {"ours": flaky})
+    with pytest.raises(RuntimeError, match="gave another solution"):
+        bench_rtk.run_set(ds, "G", ("ours",), None, repeat=2)
