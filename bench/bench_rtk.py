@@ -23,8 +23,8 @@ independent). Then whole-process CPU (resource RUSAGE_CHILDREN), µs per output 
 table (and the notes) as markdown, atomically.
 
 Run: `.venv/bin/python bench/bench_rtk.py [--quick] [--only SUBSTRING ...] [--systems G GR ...] [--engines
-demo5 ours ...] [--repeat N] [--markdown PATH]` (about 2 min, N times that with --repeat; `--quick`: GEONET 0759/3040 and the M8P static README pairing,
-GPS only). The bindings are the `bench` extra (pyrtklib 0.2.7, pyrtklib5 0.2.8); an inherited PYTHONPATH is
+demo5 ours ...] [--repeat N] [--markdown PATH]` (about 2 min, N times that with --repeat; `--quick`: GEONET
+0759/3040 and the M8P static README pairing, GPS only). The bindings are the `bench` extra (pyrtklib 0.2.7, pyrtklib5 0.2.8); an inherited PYTHONPATH is
 passed to the child processes after this checkout (e.g. `pip install --target DIR pyrtklib5==0.2.8`).
 
 Inputs: the M8P RINEX files (convbin -r ubx) hold GPS, GLONASS (and QZSS on the walk) observations, and their

@@ -94,11 +94,11 @@ class RtkOptions:
     whose fixes lie more than this (m, 3D) apart at most of the epochs both passes are fixed refute each other,
     and each is reported float at all its epochs where the other pass has no fix agreeing with it, not only
     where the two meet; so is a hypothesis held over less than handover_min_run_s, which also refutes nothing,
-    and a fix next to an epoch where the two passes dispute its hypothesis (0 disables all four). Why: one held set is right or wrong as a whole; hil_sim GPS alone under trees held
-    wrong sets for 63-327 s in one pass while the other, right there, had no fix over part of them (M8T seeds
-    1-24: 119 wrong combined epochs). Not the 5 cm at which two fixes are combined, and not at a single epoch:
-    right sets under trees stray beyond 5 cm at a few epochs (M8P walk: 5.0-6.0 cm; hil_sim: up to 21 cm;
-    docs/rtk-defaults.md)."""
+    and a fix next to an epoch where the two passes dispute its hypothesis (0 disables all four). Why: one held
+    set is right or wrong as a whole; hil_sim GPS alone under trees held wrong sets for 63-327 s in one pass
+    while the other, right there, had no fix over part of them (M8T seeds 1-24: 119 wrong combined epochs). Not
+    the 5 cm at which two fixes are combined, and not at a single epoch: right sets under trees stray beyond
+    5 cm at a few epochs (M8P walk: 5.0-6.0 cm; hil_sim: up to 21 cm; docs/rtk-defaults.md)."""
     handover_sigma_m: float = 0.01
     """σ (m, per ECEF axis) added to the handed-over fix's own covariance when it pins the other pass. Why: a
     fixed position carries centimetre multipath its covariance does not hold; 1 cm keeps the pinned double
