@@ -388,13 +388,11 @@ def beside_disputes(fwd: Sequence[Solution], bwd: Sequence[Solution], hf: Sequen
     out: set[int] = set()
     n = len(fwd)
     for i in range(n):
-        if fwd[i].q != Q_FIX or bwd[i].q != Q_FIX:
+        # a hypothesis key marks a fix: both fixed and apart, the epoch combine() writes as float
+        if hf[i] is None or hb[i] is None or \
+                float(np.linalg.norm(fwd[i].pos_ecef_m - bwd[i].pos_ecef_m)) <= COMBINE_FIX_AGREEMENT_M:
             continue
-        if float(np.linalg.norm(fwd[i].pos_ecef_m - bwd[i].pos_ecef_m)) <= COMBINE_FIX_AGREEMENT_M:
-            continue
-        for j in (i - 1, i + 1):
-            if 0 <= j < n and ((hf[j] is not None and hf[j] == hf[i]) or (hb[j] is not None and hb[j] == hb[i])):
-                out.add(j)
+        out.update(j for j in (i - 1, i + 1) if 0 <= j < n and (hf[j] == hf[i] or hb[j] == hb[i]))
     return out
 
 

@@ -100,7 +100,6 @@ def test_combined_runs_write_their_own_files_in_their_own_direction(tmp_path):
     assert len({bench_rtk._out_file(c) for c in cmds.values()}) == 4
 
 
-
 def _fake_engine(tmp_path, script: str) -> list[str]:
     """A command `run_set` runs as an engine: `script` writes its .pos (one week/tow/ECEF/Q line) to the path
     after -o (sys.argv[-1])."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hil_sim.rtk_scenarios import HARSH_RADIO_LOSS, SimCase, simulate
+from hil_sim.rtk_scenarios import HARSH_RADIO_LOSS, SimCase, SimData, simulate
 from onboard.rtk import postpro
 from onboard.rtk.options import RtkOptions
 from onboard.rtk.types import Q_FIX, Solution
@@ -25,17 +25,25 @@ def _wrong_and_fixed(sols: list[Solution], truth: np.ndarray) -> tuple[int, int]
     return int(np.count_nonzero(fixed & (err > 0.10))), int(np.count_nonzero(fixed))
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("seed", [2, 9])
-def test_a_set_the_other_pass_refutes_is_not_taken_where_that_pass_has_no_fix(seed: int) -> None:
-    data = simulate(SimCase("harsh", "", harsh=True, radio_loss=HARSH_RADIO_LOSS, seed=seed), "m8t")
+def _harsh_passes(seed: int, model: str) -> tuple[SimData, list[Solution], list[Solution],
+                                                  list[Solution | None], np.ndarray]:
+    """hil_sim's harsh GPS flight of `seed` on receiver `model`: the data, the forward pass, the backward pass
+    pinned to it (handover_anchors), the anchors and the true antenna positions (ECEF, m) per epoch."""
+    data = simulate(SimCase("harsh", "", harsh=True, radio_loss=HARSH_RADIO_LOSS, seed=seed), model)
     opts = RtkOptions()
     rover = sorted(data.rover, key=lambda e: e.time)
     paired = postpro.pair_epochs(rover, data.base, opts.pair_tolerance_s, opts.max_age_s)
     fwd, _ = postpro.run_filter(rover, paired, data.nav, data.base_pos_ecef_m, opts, False)
-    bwd, _ = postpro.run_filter(rover, paired, data.nav, data.base_pos_ecef_m, opts, True, None, None,
-                                postpro.handover_anchors(fwd, opts.handover_min_run_s))
-    truth = np.array([data.truth(s.time)["antenna_ecef_m"] for s in fwd])
+    anchors = postpro.handover_anchors(fwd, opts.handover_min_run_s)
+    bwd, _ = postpro.run_filter(rover, paired, data.nav, data.base_pos_ecef_m, opts, True, None, None, anchors)
+    return data, fwd, bwd, anchors, np.array([data.truth(s.time)["antenna_ecef_m"] for s in fwd])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [2, 9])
+def test_a_set_the_other_pass_refutes_is_not_taken_where_that_pass_has_no_fix(seed: int) -> None:
+    data, fwd, bwd, _, truth = _harsh_passes(seed, "m8t")
+    opts = RtkOptions()
     # one pass's wrong set (63 and 327 epochs when measured)
     assert max(_wrong_and_fixed(fwd, truth)[0], _wrong_and_fixed(bwd, truth)[0]) > 30
     combined = postpro.combine_passes(fwd, bwd, opts.combined_contest_distance_m, opts.handover_min_run_s)
@@ -63,14 +71,8 @@ def test_a_held_set_straying_beside_a_dispute_is_not_taken_where_the_other_pass_
     (a slip not caught yet). The forward pass disputes it at 508-509 s but is float at 507 s, where epoch by
     epoch, and with the refutation of whole sets alone (a minority of their common epochs), the stray fix was
     taken (postpro.beside_disputes)."""
-    data = simulate(SimCase("harsh", "", harsh=True, radio_loss=HARSH_RADIO_LOSS, seed=10), "lea6t")
+    _, fwd, bwd, anchors, truth = _harsh_passes(10, "lea6t")
     opts = RtkOptions()
-    rover = sorted(data.rover, key=lambda e: e.time)
-    paired = postpro.pair_epochs(rover, data.base, opts.pair_tolerance_s, opts.max_age_s)
-    fwd, _ = postpro.run_filter(rover, paired, data.nav, data.base_pos_ecef_m, opts, False)
-    anchors = postpro.handover_anchors(fwd, opts.handover_min_run_s)
-    bwd, _ = postpro.run_filter(rover, paired, data.nav, data.base_pos_ecef_m, opts, True, None, None, anchors)
-    truth = np.array([data.truth(s.time)["antenna_ecef_m"] for s in fwd])
     combined = postpro.combine_passes(fwd, bwd, opts.combined_contest_distance_m, opts.handover_min_run_s, anchors)
     wrong, fixed = _wrong_and_fixed(combined, truth)
     assert wrong == 0 and fixed > 300
