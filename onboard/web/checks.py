@@ -16,6 +16,8 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from onboard.recorder.status import STALE_AFTER_S
+from onboard.rtk.gnss import SYSTEMS, SYSTEMS_BY_LETTER
+from onboard.rtk.types import GNSS_SBAS
 
 OK, WARN, FAIL = "ok", "warn", "fail"
 
@@ -138,10 +140,7 @@ def preflight_checks(
     else:
         checks.append(Check("configuration", WARN, f"configuration {cfg}"))
 
-    sats = status.get("satellites") or []
-    strong = [s for s in sats if s.get("gnss_id") == 0 and float(s.get("cn0_dbhz", 0)) >= options.min_cn0_dbhz]
-    level = OK if len(strong) >= options.min_satellites else (WARN if len(strong) >= 5 else FAIL)
-    checks.append(Check("satellites", level, f"{len(strong)} GPS satellites ≥ {options.min_cn0_dbhz:.0f} dB-Hz (need {options.min_satellites})"))
+    checks.append(satellites_check(status.get("satellites") or [], rtk, options))
 
     epochs = int(status.get("epochs") or 0)
     checks.append(Check("raw observations", OK if epochs > 0 else FAIL, f"{epochs} epochs recorded, last {status.get('last_epoch_gpst') or 'never'}"))
@@ -163,6 +162,42 @@ def preflight_checks(
     checks += autopilot_state_checks(autopilot, options)
     checks.append(upload_check(upload))
     return checks
+
+
+def _engine_gnss_ids(sats: list[dict[str, Any]], rtk: dict[str, Any] | None) -> list[int]:
+    """u-blox gnssIds of the constellations the RTK engine differences, in the receiver's order: those of
+    rtk.json's `systems` (RINEX letters) once the engine has decided them, else every constellation tracked in
+    `sats` that the engine can use (not SBAS)."""
+    letters = rtk.get("systems") if isinstance(rtk, dict) else None
+    if isinstance(letters, str) and letters and all(c in SYSTEMS_BY_LETTER for c in letters.upper()):
+        return [SYSTEMS_BY_LETTER[c].gnss_id for c in dict.fromkeys(letters.upper())]
+    tracked = dict.fromkeys(int(s.get("gnss_id", -1)) for s in sats)
+    return [g for g in tracked if g in SYSTEMS and g != GNSS_SBAS]
+
+
+def satellites_check(sats: list[dict[str, Any]], rtk: dict[str, Any] | None, options: PreflightOptions) -> Check:
+    """The "satellites" line: satellites at C/N0 ≥ min_cn0_dbhz of the constellations the engine uses, per
+    constellation. The engine double-differences within each constellation (one reference satellite each), so a
+    constellation adds its satellites less one: min_satellites of one constellation are as good as
+    min_satellites + 1 split over two (a warning one double difference short, a no-go below)."""
+    ids = _engine_gnss_ids(sats, rtk)
+    counts = {g: 0 for g in ids}
+    for s in sats:
+        g = int(s.get("gnss_id", -1))
+        if g in counts and float(s.get("cn0_dbhz", 0)) >= options.min_cn0_dbhz:
+            counts[g] += 1
+    double_differences = sum(max(n - 1, 0) for n in counts.values())
+    need = options.min_satellites - 1
+    level = OK if double_differences >= need else (WARN if double_differences >= need - 1 else FAIL)
+    cn0 = f"≥ {options.min_cn0_dbhz:.0f} dB-Hz"
+    if len(counts) <= 1:
+        name = SYSTEMS[ids[0]].name if ids else "GPS"
+        return Check("satellites", level,
+                     f"{sum(counts.values())} {name} satellites {cn0} (need {options.min_satellites})")
+    per = ", ".join(f"{SYSTEMS[g].name} {n}" for g, n in counts.items())
+    return Check("satellites", level,
+                 f"{sum(counts.values())} satellites {cn0}: {per} (need {options.min_satellites} of one "
+                 "constellation, one more for each further one)")
 
 
 def _guarded(name: str, build: Any) -> list[Check]:

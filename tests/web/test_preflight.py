@@ -66,6 +66,46 @@ def test_each_problem_is_named() -> None:
     assert lv["receiver link"] == FAIL and lv["recorder"] == FAIL
 
 
+def _satellites(now_ns: int, sats: list[SatelliteStatus], rtk: dict | None = None) -> tuple[str, str]:
+    snap = _healthy(now_ns)
+    snap.satellites = sats
+    (check,) = [c for c in preflight_checks(snap.to_json(), now_ns, rtk=rtk) if c.name == "satellites"]
+    return check.level, check.detail
+
+
+def test_satellites_of_every_constellation_the_engine_uses_count() -> None:
+    """An M8T on GPS + GLONASS + Galileo: 5 + 4 + 3 strong satellites are 9 double differences (one reference per
+    constellation), more than the 5 of 6 GPS satellites; counting GPS alone, the page said 5 of 6."""
+    now = time.time_ns()
+    sats = ([SatelliteStatus(0, prn, 44.0) for prn in (2, 5, 10, 12, 25)]
+            + [SatelliteStatus(6, sv, 40.0) for sv in (1, 2, 8, 17)]
+            + [SatelliteStatus(2, sv, 42.0) for sv in (3, 11, 24)]
+            + [SatelliteStatus(0, 31, 30.0), SatelliteStatus(1, 123, 45.0)])  # weak GPS, SBAS: not counted
+    rtk = {**_rtk_fixed().to_json(), "systems": "GRE"}
+    assert _satellites(now, sats, rtk) == (
+        OK, ("12 satellites ≥ 35 dB-Hz: GPS 5, GLONASS 4, Galileo 3 (need 6 of one constellation, one more for "
+             "each further one)"))
+    # the engine set to GPS alone counts GPS alone: one double difference short
+    assert _satellites(now, sats, {**rtk, "systems": "G"}) == (WARN, "5 GPS satellites ≥ 35 dB-Hz (need 6)")
+    # no real-time RTK (or its constellations not decided yet): what the receiver tracks, SBAS aside
+    assert _satellites(now, sats, None)[0] == OK
+    assert _satellites(now, sats, {**rtk, "systems": None})[1].startswith("12 satellites")
+    assert _satellites(now, sats, {**rtk, "systems": 7})[1].startswith("12 satellites")  # a damaged rtk.json
+
+
+def test_a_constellation_adds_its_satellites_less_its_reference() -> None:
+    now = time.time_ns()
+
+    def split(n_gps: int, n_glo: int) -> str:
+        sats = [SatelliteStatus(0, prn, 44.0) for prn in range(1, n_gps + 1)]
+        sats += [SatelliteStatus(6, sv, 44.0) for sv in range(1, n_glo + 1)]
+        return _satellites(now, sats, {**_rtk_fixed().to_json(), "systems": "GR"})[0]
+
+    assert [split(4, 3), split(3, 3), split(3, 2), split(6, 0), split(6, 1)] == [OK, WARN, FAIL, OK, OK]
+    assert [split(5, 1), split(4, 1), split(1, 1)] == [WARN, FAIL, FAIL]
+    assert _satellites(now, [], None) == (FAIL, "0 GPS satellites ≥ 35 dB-Hz (need 6)")
+
+
 def _rtk_fixed() -> RtkStatus:
     """The real-time RTK snapshot of a rover fixed on the epoch the recorder saw last (`_healthy`)."""
     return RtkStatus(running=True, radio_open=True, radio_bytes=52000, base_frames=400, base_epochs=120,
