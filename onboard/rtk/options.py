@@ -308,6 +308,14 @@ class RtkOptions:
     correction grows from zero, it does not jump by rate × age when carrying starts). Younger ones (1 Hz base,
     a few lost epochs) are used raw. Why: the atmosphere moves about a centimetre in 5 s, less than the rate's
     own noise adds on a multipath-laden u-blox base, while longer gaps need the rate."""
+    base_rate_skill_min: float = 0.5
+    """While a set is held, a satellite whose correction rate (base_rate_window_s) predicted the base's own last
+    base_extrapolate_min_age_s seconds this well (skill 1 − SSE(rate)/SSE(hold): the straight line fitted to the
+    epochs before them against holding the last of those; 1 a perfect prediction, 0 no better than holding) is
+    carried forward from the first second of a gap instead of from base_extrapolate_min_age_s. ≥ 1: never. Why:
+    under a fast ionosphere (solar maximum) a satellite's base correction can drift 6 mm/s, 3 cm before carrying
+    starts, enough to release a held set (hil_sim gr-2012, 20-s gap); the multipath of a u-blox base does not
+    continue its trend, and is carried as before."""
     pair_tolerance_s: float = 0.025
     max_base_spp_offset_m: float = 30.0
     """Post-processing refuses a base position farther than this (m, 3D) from the median of the base's own
@@ -362,6 +370,8 @@ class RtkOptions:
         if self.glonass_code_bias_min_epochs < 0 or self.glonass_code_bias_window_epochs < 1:
             raise ValueError("glonass_code_bias_min_epochs must be ≥ 0 (0 disables) and "
                              "glonass_code_bias_window_epochs ≥ 1")
+        if math.isnan(self.base_rate_skill_min):
+            raise ValueError("base_rate_skill_min must be a number (≥ 1 never carries early)")
         if not 0.0 <= self.code_cn0_ref_dbhz <= 70.0:  # also refuses NaN
             raise ValueError(f"code_cn0_ref_dbhz must be 0 (off) to 70 dB-Hz, not {self.code_cn0_ref_dbhz}")
 
@@ -404,6 +414,7 @@ TOML_KEYS: dict[str, tuple[str, Any]] = {
     "standstill_window_s": ("standstill_window_s", float),
     "standstill_min_s": ("standstill_min_s", float),
     "static_code_correlation_s": ("static_code_correlation_s", float),
+    "base_rate_skill_min": ("base_rate_skill_min", float),
     "use_doppler": ("use_doppler", bool),
     "max_first_fix_baseline_km": ("max_first_fix_baseline_km", float),
 }

@@ -866,7 +866,8 @@ def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver
     """
     o = st.options
     hist = st.base_hist
-    if age_s < o.base_extrapolate_min_age_s or len(hist) < 3:
+    held = o.base_rate_skill_min < 1.0 and bool(st.held_prns.any())
+    if age_s <= 0.0 or (age_s < o.base_extrapolate_min_age_s and not held) or len(hist) < 3:
         return base
     # the rate depends on the history alone, which changes only with a new base epoch: the rover epochs of one
     # base epoch (a radio gap) share it, memoised on that base epoch's receiver
@@ -876,20 +877,27 @@ def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver
         rate = base.memo[key] = _correction_rate(o, hist, base.cp_cyc)
     if not rate:
         return base
-    ok, slope = rate
+    ok, slope, skill = rate
+    early = held & (skill >= o.base_rate_skill_min)
+    if age_s < o.base_extrapolate_min_age_s and not early.any():
+        return base
     cp = base.cp_cyc.copy()
     # from the age where carrying starts, so the correction does not jump when it starts (a jump of rate ×
-    # min age released a good hold on the M8P RAWX base); the drift before that stays, as for raw data
-    step = slope * (age_s - o.base_extrapolate_min_age_s)
+    # min age released a good hold on the M8P RAWX base); the drift before that stays, as for raw data. Under a
+    # hold, a rate that predicted the base's own last seconds is carried from the gap's start (base_rate_skill_min)
+    step = np.where(early, slope * age_s, slope * max(age_s - o.base_extrapolate_min_age_s, 0.0))
     # the history is in GPS L1 cycles (see _udbias_epoch): each slot's own
     cp[ok] += step if st.layout.gps_only else step / lambda_ratio_to_gps(base.lam)[ok]
     return _Receiver(base.pr_m, cp, base.dop_hz, base.lli, base.sats, base.has, base.lam, base.cn0_dbhz)
 
 
 def _correction_rate(o: RtkOptions, hist: list[tuple[GpsTime, Arr]], base_cp_cyc: Arr) -> tuple[Arr, ...]:
-    """(slots, their rate in cycles/s) of the base's phase − modelled range over the history `hist` (see
-    _extrapolated_base), the common base-clock drift removed; () when the history cannot tell (too short, too
-    few clean slots)."""
+    """(slots, their rate in cycles/s, its skill) of the base's phase − modelled range over the history `hist`
+    (see _extrapolated_base), the common base-clock drift removed; () when the history cannot tell (too short,
+    too few clean slots). The skill (per slot, ≤ 1; −inf where the history is too short to tell) is
+    1 − SSE(line)/SSE(hold) of the base's last base_extrapolate_min_age_s seconds against the straight line
+    fitted to the epochs before them, and against holding the last of those: near 1 for an atmosphere drifting
+    steadily, 0 or less for multipath that does not continue its trend."""
     t_n = hist[-1][0]
     tk = np.array([t.diff_s(t_n) for t, _ in hist])  # ≤ 0, newest last
     if -tk[0] < 0.5 * o.base_rate_window_s:
@@ -909,9 +917,28 @@ def _correction_rate(o: RtkOptions, hist: list[tuple[GpsTime, Arr]], base_cp_cyc
     # least-squares slope over the window (a quadratic amplifies a u-blox base's noise: docs/rtk-defaults.md)
     tc = tk - tk.mean()
     slope = tc @ (z[:, ok] - z[:, ok].mean(axis=0)) / (tc @ tc)
-    ok.flags.writeable = False
-    slope.flags.writeable = False
-    return ok, slope
+    skill = _rate_skill(z[:, ok], tk, o.base_extrapolate_min_age_s)
+    for a in (ok, slope, skill):
+        a.flags.writeable = False
+    return ok, slope, skill
+
+
+def _rate_skill(z: Arr, tk: Arr, recent_s: float) -> Arr:
+    """Per column of `z` (epochs × slots, at times `tk` s, newest last): 1 − SSE(line)/SSE(hold) over the epochs
+    of the last `recent_s` seconds, the line fitted to the epochs before them and the hold their last value;
+    −inf per column when fewer than 3 epochs precede or fewer than 2 follow."""
+    older = tk <= tk[-1] - recent_s
+    if np.count_nonzero(older) < 3 or np.count_nonzero(~older) < 2:
+        return np.full(z.shape[1], -np.inf)
+    zo, to = z[older], tk[older]
+    tco = to - to.mean()
+    zo_mean = zo.mean(axis=0)
+    slope = tco @ (zo - zo_mean) / (tco @ tco)
+    zn = z[~older]
+    sse_line = ((zn - zo_mean - np.outer(tk[~older] - to.mean(), slope)) ** 2).sum(axis=0)
+    sse_hold = ((zn - zo[-1]) ** 2).sum(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(sse_hold > 0.0, 1.0 - sse_line / sse_hold, -np.inf)
 
 
 def _tdcp_slips(st: RtkState, rov: _Receiver, t_r: GpsTime, usable: npt.NDArray[np.bool_],
