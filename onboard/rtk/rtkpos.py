@@ -866,8 +866,10 @@ def _extrapolated_base(st: RtkState, base: _Receiver, age_s: float) -> _Receiver
     """
     o = st.options
     hist = st.base_hist
+    if age_s <= 0.0 or len(hist) < 3:
+        return base
     held = o.base_rate_skill_min < 1.0 and bool(st.held_prns.any())
-    if age_s <= 0.0 or (age_s < o.base_extrapolate_min_age_s and not held) or len(hist) < 3:
+    if age_s < o.base_extrapolate_min_age_s and not held:
         return base
     # the rate depends on the history alone, which changes only with a new base epoch: the rover epochs of one
     # base epoch (a radio gap) share it, memoised on that base epoch's receiver
@@ -915,12 +917,19 @@ def _correction_rate(o: RtkOptions, hist: list[tuple[GpsTime, Arr]], base_cp_cyc
     if np.count_nonzero(ok) < 2:
         return ()
     # least-squares slope over the window (a quadratic amplifies a u-blox base's noise: docs/rtk-defaults.md)
-    tc = tk - tk.mean()
-    slope = tc @ (z[:, ok] - z[:, ok].mean(axis=0)) / (tc @ tc)
+    slope, _ = _line_fit(z[:, ok], tk)
     skill = _rate_skill(z[:, ok], tk, o.base_extrapolate_min_age_s)
     for a in (ok, slope, skill):
         a.flags.writeable = False
     return ok, slope, skill
+
+
+def _line_fit(z: Arr, tk: Arr) -> tuple[Arr, Arr]:
+    """Least-squares straight line through each column of `z` (epochs × slots) over the times `tk` (s): its
+    slope (per s) and its value at the mean time."""
+    tc = tk - tk.mean()
+    z_mean = z.mean(axis=0)
+    return tc @ (z - z_mean) / (tc @ tc), z_mean
 
 
 def _rate_skill(z: Arr, tk: Arr, recent_s: float) -> Arr:
@@ -931,9 +940,7 @@ def _rate_skill(z: Arr, tk: Arr, recent_s: float) -> Arr:
     if np.count_nonzero(older) < 3 or np.count_nonzero(~older) < 2:
         return np.full(z.shape[1], -np.inf)
     zo, to = z[older], tk[older]
-    tco = to - to.mean()
-    zo_mean = zo.mean(axis=0)
-    slope = tco @ (zo - zo_mean) / (tco @ tco)
+    slope, zo_mean = _line_fit(zo, to)
     zn = z[~older]
     sse_line = ((zn - zo_mean - np.outer(tk[~older] - to.mean(), slope)) ** 2).sum(axis=0)
     sse_hold = ((zn - zo[-1]) ** 2).sum(axis=0)
