@@ -30,34 +30,27 @@ def ld_factor(q: Arr) -> tuple[Arr, Arr]:
     return np.array(lmat).reshape(q.shape), np.array(d)
 
 
-# The factorisation, decorrelation and search below work on nested Python lists: for the n ≤ ~15 ambiguities
-# of single-frequency GPS, element-wise numpy indexing costs more than the arithmetic.
+# The decorrelation and search below work on nested Python lists: for the n ≤ ~20 ambiguities of single-frequency
+# RTK, element-wise numpy indexing costs more than the arithmetic.
 
 
 def _ld_lists(q: Arr) -> tuple[list[list[float]], list[float]]:
-    """ld_factor() on lists: the same operations element by element (same results to the bit)."""
-    n = q.shape[0]
-    a = q.tolist()
-    lmat = [[0.0] * n for _ in range(n)]
-    d = [0.0] * n
-    for i in range(n - 1, -1, -1):
-        di = a[i][i]
-        d[i] = di
-        if di <= 0.0:
-            raise LambdaError("ambiguity covariance not positive definite")
-        s = math.sqrt(di)
-        ai, li = a[i], lmat[i]
-        for k in range(i + 1):
-            li[k] = ai[k] / s
-        # rank-one downdate of the leading block; its lower triangle is all that is read later
-        for j in range(i):
-            lj, aj = li[j], a[j]
-            for k in range(j + 1):
-                aj[k] -= lj * li[k]
-        lii = li[i]
-        for k in range(i + 1):
-            li[k] /= lii
-    return lmat, d
+    """ld_factor() as lists, from LAPACK's Cholesky factor of Q with its order reversed.
+
+    RTKLIB's LD() eliminates from the last ambiguity up; with J the order reversal, JQJ = CCᵀ (C lower), so
+    Q = UUᵀ with U = JCJ upper triangular, and Lᵀ = U·diag(U)⁻¹, D = diag(U)²: the same factors as the
+    element-by-element elimination, to rounding (1e-15 relative), in one call instead of n³/6 interpreted
+    operations (n = 20: 0.2 ms)."""
+    try:
+        c = np.linalg.cholesky(q[::-1, ::-1])
+    except np.linalg.LinAlgError:
+        raise LambdaError("ambiguity covariance not positive definite") from None
+    u = c[::-1, ::-1]
+    du = u.diagonal()
+    if not np.isfinite(du).all():
+        raise LambdaError("ambiguity covariance not finite")
+    # L = (U·diag(U)⁻¹)ᵀ: row i of L is column i of U over U[i, i]; its upper part is LAPACK's zeros
+    return (u / du).T.tolist(), (du * du).tolist()
 
 
 def reduction(lmat_in: Arr, d_in: Arr) -> tuple[Arr, Arr, Arr]:

@@ -67,6 +67,14 @@ def test_not_positive_definite_is_refused():
         mlambda(np.array([1.0, 2.0]), np.array([[1.0, 2.0], [2.0, 1.0]]))
 
 
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -1.0, 0.0])
+def test_non_finite_or_singular_covariance_is_refused(bad: float) -> None:
+    q = np.eye(3) * 0.01
+    q[1, 1] = bad
+    with pytest.raises(LambdaError):
+        mlambda(np.array([1.1, 2.0, -0.9]), q)
+
+
 def _reduction_reference(lmat: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """RTKLIB reduction() as written there (gauss() and perm() on dense arrays, restart at n − 2, Z as floats)."""
     lmat, d = lmat.copy(), d.copy()
