@@ -17,7 +17,8 @@ horizontal/vertical RMS against the reference, fixed epochs checked against it a
 (3D, and horizontally) and > 5 cm (3D); on the walk, whose reference (the M8P's own RTK fixes) covers few
 epochs, also the fixed epochs > 10 cm (3D) from a pseudo-reference: demo5's combined forward/backward fixed
 solution with the widest set (GPS+GLONASS; demo5's own forward run is part of it, so its count there is not
-independent). Then whole-process CPU (resource RUSAGE_CHILDREN), µs per output epoch, and ours/demo5 CPU
+independent), and how many of the fixed epochs > 5 cm from the reference lie within 5 cm of that pseudo-reference
+(where two engines' fixes agree and the reference departs from both). Then whole-process CPU (resource RUSAGE_CHILDREN), µs per output epoch, and ours/demo5 CPU
 (total CPU of the same job on the same files), the raw-RTCM3 run of ours and our filter alone in ms per epoch
 (this process, reading excluded) against the Pi budget of 200 ms/epoch at 5 Hz. `--markdown PATH` writes the
 table (and the notes) as markdown, atomically.
@@ -308,16 +309,18 @@ def score(sol: np.ndarray, ref: Callable[[np.ndarray], np.ndarray],
     has none): epochs, fixed, fix %, first fix (s after the first epoch), fixed-epoch horizontal/vertical RMS
     (cm), fixed epochs checked against the reference and how many are > 10 cm off in 3D (wrong), > 10 cm
     horizontally (wrong_h), > 5 cm in 3D (off5); with `pseudo`, fixed epochs checked against it and > 10 cm
-    3D off (pseudo_checked, pseudo_wrong)."""
+    3D off (pseudo_checked, pseudo_wrong), and of the off5 epochs those within 5 cm of the pseudo-reference
+    (off5_pseudo_near: an independent engine's fix agrees with ours where the reference departs from both)."""
     nan = float("nan")
     n = len(sol)
     out: dict[str, float] = {"epochs": n, "fixed": 0, "fix": nan, "ttff": nan, "h": nan, "v": nan, "checked": 0,
-                             "wrong": 0, "wrong_h": 0, "off5": 0, "pseudo_checked": 0, "pseudo_wrong": 0}
+                             "wrong": 0, "wrong_h": 0, "off5": 0, "pseudo_checked": 0, "pseudo_wrong": 0,
+                             "off5_pseudo_near": 0}
     if n == 0:
         return out
     fixed = sol[:, 5] == 1
     tow = sol[:, 1] + (sol[:, 0] - sol[0, 0]) * 604800.0
-    enu, _ = _enu(sol, ref, fixed)
+    enu, has = _enu(sol, ref, fixed)
     d3 = np.linalg.norm(enu, axis=1)
     dh = np.hypot(enu[:, 0], enu[:, 1])
     out.update({
@@ -332,9 +335,15 @@ def score(sol: np.ndarray, ref: Callable[[np.ndarray], np.ndarray],
         "off5": int(np.sum(d3 > NEAR_M)),
     })
     if pseudo is not None:
-        penu, _ = _enu(sol, pseudo, fixed)
+        penu, phas = _enu(sol, pseudo, fixed)
+        p3 = np.linalg.norm(penu, axis=1)
         out["pseudo_checked"] = len(penu)
-        out["pseudo_wrong"] = int(np.sum(np.linalg.norm(penu, axis=1) > WRONG_M))
+        out["pseudo_wrong"] = int(np.sum(p3 > WRONG_M))
+        off5 = np.zeros(n, bool)
+        off5[has] = d3 > NEAR_M
+        near = np.zeros(n, bool)
+        near[phas] = p3 <= NEAR_M
+        out["off5_pseudo_near"] = int(np.count_nonzero(off5 & near))
     return out
 
 
@@ -344,7 +353,8 @@ COLUMNS = [  # (header, width, format of a row's value)
     ("set", 36, "{}"), ("systems", 12, "{}"), ("engine", 12, "{}"), ("epochs", 6, "{:d}"), ("fixed", 6, "{:d}"),
     ("fix %", 6, "{:.1f}"), ("/rover %", 8, "{:.1f}"), ("1st fix s", 9, "{:.0f}"), ("h RMS cm", 8, "{:.1f}"),
     ("v RMS cm", 8, "{:.1f}"), ("checked", 7, "{:d}"), (">10cm 3D", 8, "{:d}"), (">10cm h", 7, "{:d}"),
-    (">5cm 3D", 7, "{:d}"), ("pseudo chk", 10, "{}"), ("pseudo >10cm", 12, "{}"), ("CPU s", 6, "{:.2f}"),
+    (">5cm 3D", 7, "{:d}"), ("pseudo chk", 10, "{}"), ("pseudo >10cm", 12, "{}"),
+    ("of >5cm: pseudo <=5cm", 21, "{}"), ("CPU s", 6, "{:.2f}"),
     ("us/epoch", 8, "{:.0f}"), ("CPU ours/demo5", 14, "{}"),
 ]
 
@@ -452,7 +462,8 @@ def run_set(ds: Dataset, systems: str, engines: tuple[str, ...],
     for name, (r, cpu) in results.items():
         peer_cpu = results[PEER[name]][1] if PEER.get(name) in results else 0.0
         ratio = f"x{cpu / peer_cpu:.2f}" if peer_cpu > 0 else ""
-        pc = (str(r["pseudo_checked"]), str(r["pseudo_wrong"])) if pseudo is not None else ("", "")
+        pc = ((str(r["pseudo_checked"]), str(r["pseudo_wrong"]), str(r["off5_pseudo_near"])) if pseudo is not None
+              else ("", "", ""))
         rows.append(table_row([ds.name, systems_label(systems), name, r["epochs"], r["fixed"], r["fix"],
                                100 * r["fixed"] / max(n_rover, 1), r["ttff"], r["h"], r["v"], r["checked"],
                                r["wrong"], r["wrong_h"], r["off5"], *pc, cpu, 1e6 * cpu / max(r["epochs"], 1),

@@ -51,6 +51,20 @@ def test_score_against_a_reference_of_few_epochs_and_a_pseudo_reference():
     assert r["pseudo_checked"] == 1 and r["pseudo_wrong"] == 1  # epoch 1001: 0.2 vs 0.5 m east; 1002 float there
 
 
+def test_score_counts_the_epochs_beyond_5_cm_where_the_pseudo_reference_agrees_with_the_solution():
+    # reference: REF at every epoch; the solution's fixes 0, 8, 8, 12 cm east and a float at 8 cm; the
+    # pseudo-reference fixed 1, 7, 30 cm east at the first three epochs and float at the fourth
+    sol = _rows([(0, 0, 0), (0.08, 0, 0), (0.08, 0, 0), (0.12, 0, 0), (0.08, 0, 0)], [1, 1, 1, 1, 2])
+    ref = bench_rtk._static(tuple(REF))
+    pseudo_rows = _rows([(0.01, 0, 0), (0.07, 0, 0), (0.30, 0, 0), (0.12, 0, 0), (0.08, 0, 0)], [1, 1, 1, 2, 1])
+    r = bench_rtk.score(sol, ref, bench_rtk.solution_ref(pseudo_rows))
+    assert r["off5"] == 3  # 8, 8 and 12 cm
+    # 1001: 8 vs 7 cm (1 cm apart) agrees; 1002: 8 vs 30 cm does not; 1003: no fixed pseudo-reference there; the
+    # float at 1004 is not counted; 1000 is within 5 cm of the reference
+    assert r["off5_pseudo_near"] == 1
+    assert bench_rtk.score(sol, ref)["off5_pseudo_near"] == 0  # without a pseudo-reference
+
+
 def test_score_of_an_empty_solution():
     r = bench_rtk.score(np.zeros((0, 6)), bench_rtk._static(tuple(REF)))
     assert r["epochs"] == 0 and r["fixed"] == 0 and np.isnan(r["fix"])
@@ -68,7 +82,8 @@ def test_markdown_and_text_tables():
     md = bench_rtk.markdown_table(["a", "b|c"], [["1", "x|y"]]).splitlines()
     assert md == ["| a | b\\|c |", "|---|---|", "| 1 | x\\|y |"]
     cells = bench_rtk.table_row(["set", "GPS", "demo5", 10, 9, 90.0, 90.0, float("nan"), 1.25, 2.0, 9, 0, 0, 1, "",
-                                 "", 0.5, 50000.0, ""])
+                                 "", "", 0.5, 50000.0, ""])
+    assert len(cells) == len(bench_rtk.COLUMNS)
     assert cells[3:8] == ["10", "9", "90.0", "90.0", "-"] and cells[8] == "1.2"
     assert len(bench_rtk.text_table([cells]).splitlines()) == 2
 
