@@ -324,7 +324,13 @@ def _certain_nearest(a: Arr, q: Arr, lmat: list[list[float]], d: list[float], ra
     return res
 
 
-def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None) -> LambdaResult:
+_WARM_MAX_Z = 1 << 20
+"""Largest |entry| of a warm start's Z kept: the products Zᵀ·Q·Z and Z·Z' stay exact in integers and well within
+double precision's 53 bits; beyond it the decorrelation starts from the identity again."""
+
+
+def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None, z_start: Arr | None = None
+            ) -> LambdaResult:
     """Integer least-squares estimates of float ambiguities `a_float` (n,) with covariance `q` (n,n).
 
     Follows RTKLIB lambda(): z = Zᵀa is searched in the decorrelated space, F = Z⁻ᵀE mapped back.
@@ -334,6 +340,11 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None) ->
     alone (n, 1) and `sq_dist[1]` is the lower bound of the second-best distance, so `ratio` ≥ `ratio_cap`
     instead of the exact value. For callers that report the ratio capped there (a .pos file's 999.9). A float
     provably next to its rounding skips the decorrelation too (see _certain_nearest: Z = I, D of Q itself).
+
+    `z_start`: an integer unimodular (n, n) transform to decorrelate from, e.g. the previous epoch's Z of the
+    same ambiguities (LambdaResult.z_mat): the reduction then starts from ZₛᵀQZₛ, which a slowly changing
+    covariance leaves nearly reduced, and Z = Zₛ·Z'. The best and second-best integer vectors (the ratio) do
+    not depend on the start; the conditional variances D (the success rate) are those of another reduced basis.
     """
     a = np.asarray(a_float, float)
     n = a.shape[0]
@@ -345,7 +356,14 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None) ->
         certain = _certain_nearest(a, q, lmat0, d0, ratio_cap)
         if certain is not None:
             return certain
-    lmat, d, z = _reduction_lists(lmat0, d0)  # Z row-major as RTKLIB's: the products below the same
+    if z_start is not None and z_start.shape == (n, n) and float(np.abs(z_start).max()) <= _WARM_MAX_Z:
+        qw = z_start.T @ q @ z_start
+        lmat, d, zw = _reduction_lists(*_ld_lists(qw))
+        z = z_start @ zw
+        if float(np.abs(z).max()) > _WARM_MAX_Z:
+            lmat, d, z = _reduction_lists(lmat0, d0)
+    else:
+        lmat, d, z = _reduction_lists(lmat0, d0)  # Z row-major as RTKLIB's: the products below the same
     zs = z.T @ a
     zs_list = zs.tolist()
     e, s = _search_lists(lmat, d, zs_list, m, ratio_cap)

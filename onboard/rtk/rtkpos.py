@@ -383,6 +383,9 @@ class RtkState:
     pairs_memo: dict[tuple[bytes, bytes], tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]] = field(
         default_factory=dict, repr=False, compare=False)
     """_dd_pairs' results by (slots, elevations) bytes: a cache, no state of the filter."""
+    lambda_z: dict[tuple[bytes, bytes], Arr] = field(default_factory=dict, repr=False, compare=False)
+    """The last decorrelating Z of each DD ambiguity set (others, references as bytes), where the next reduction
+    of that set starts (mlambda's z_start): same integers and ratio, the success rate of that reduced basis."""
 
 
 def rtk_init(options: RtkOptions, init_pos_ecef_m: Arr | None = None) -> RtkState:
@@ -1314,6 +1317,8 @@ def _dd_pairs(st: RtkState, idx: npt.NDArray[np.int64], el: Arr) -> tuple[npt.ND
 
 _PAIRS_MEMO_SIZE = 64
 """Entries RtkState.pairs_memo holds at most (an epoch uses a handful)."""
+_LAMBDA_Z_MEMO_SIZE = 32
+"""Ambiguity sets RtkState.lambda_z holds at most (an epoch tries up to max_partial_drop + 1)."""
 
 
 def _dd_pairs_of(layout: SlotLayout, idx: npt.NDArray[np.int64], el: Arr
@@ -1579,9 +1584,10 @@ def _same_integers(a: Arr, b: Arr, min_common: int, group: npt.NDArray[np.int8] 
     d = a[common] - b[common]
     if group is None:
         return bool(np.all(d == d[0]))
-    # up to one constant per constellation (each has its own reference)
-    _, first, inverse = np.unique(group[common], return_index=True, return_inverse=True)
-    return bool(np.all(d == d[first][inverse]))
+    # up to one constant per constellation (each has its own reference): each equal to its group's first (a
+    # pass over the few satellites: np.unique's sort and index arrays cost more)
+    first: dict[int, float] = {}
+    return all(first.setdefault(gv, dv) == dv for gv, dv in zip(group[common].tolist(), d.tolist(), strict=True))
 
 
 def _agrees_with_validated(st: RtkState, ref: int | npt.NDArray[np.int64], others: npt.NDArray[np.int64], ints: Arr,
@@ -1620,16 +1626,20 @@ def _resamb_lambda(st: RtkState, ctx: EpochContext, cand: npt.NDArray[np.bool_])
         others, ref = _dd_pairs(st, idx, el)
         if others.size + 1 < o.min_fix_sats:
             break
-        ref_key = tuple(np.unique(ref).tolist())
+        ref_key = tuple(sorted(set(ref.tolist())))  # np.unique's result, without its sort of arrays
         if dropped is not None and dropped[0] == ref_key:
             # a retry keeps the references (the highest satellites, never the one dropped): a subset of the last
             a, qa, qba, qia = _dd_ambiguities_without(dropped[1], dropped[2])
         else:
             a, qa, qba, qia = _dd_ambiguities_of(st, idx, others, ref)
+        z_key = (others.tobytes(), ref.tobytes())
         try:
-            res = mlambda(a, qa, ratio_cap=RATIO_CAP)
+            res = mlambda(a, qa, ratio_cap=RATIO_CAP, z_start=st.lambda_z.get(z_key))
         except LambdaError:
             return None
+        if len(st.lambda_z) >= _LAMBDA_Z_MEMO_SIZE and z_key not in st.lambda_z:
+            st.lambda_z.clear()  # sets of past epochs' satellites: most are not asked for again
+        st.lambda_z[z_key] = res.z_mat
         ratio = res.ratio
         best_ratio = max(best_ratio, ratio)
         if _drop == 0:

@@ -142,3 +142,36 @@ def test_certificate_replaces_the_search_only_next_to_an_integer_vector_with_cer
     assert np.array_equal(res.cond_var, mlambda(ints + 0.01, loose).cond_var) and res.success_rate < 1.0
     halfway = mlambda(ints + np.array([0.5, 0.0, 0.0]), held, ratio_cap=999.9)
     assert not np.array_equal(halfway.z_mat, np.eye(3)) or halfway.ratio < 999.9
+
+
+def test_warm_start_keeps_the_integers_and_ratio_and_gives_a_reduced_basis():
+    """Decorrelating from the previous epoch's Z (z_start) of a slowly changing, strongly correlated
+    covariance: the same best and second-best integer vectors and distances as from the identity, and a Z that
+    is an integer transform of determinant ±1 whose ZᵀQZ has the returned D and an L below ½ off the diagonal."""
+    rng = np.random.default_rng(17)
+    for _ in range(30):
+        n = int(rng.integers(4, 16))
+        g = rng.normal(size=(n, n)) + rng.normal(size=n) * 30.0  # nearly collinear: a float of code and geometry
+        q = g @ g.T * 0.002 + np.eye(n) * 1e-4
+        a = rng.normal(size=n) * 20.0
+        first = mlambda(a, q)
+        drift = rng.normal(size=(n, n)) * 1e-3
+        q2 = q + (drift @ drift.T) * 0.002  # the next epoch's covariance
+        a2 = a + rng.normal(size=n) * 0.01
+        cold, warm = mlambda(a2, q2), mlambda(a2, q2, z_start=first.z_mat)
+        assert np.array_equal(warm.fixed, cold.fixed)
+        np.testing.assert_allclose(warm.sq_dist, cold.sq_dist, rtol=1e-8)
+        z = warm.z_mat
+        assert np.array_equal(z, np.round(z)) and abs(round(float(np.linalg.det(z)))) == 1
+        lmat, d = ld_factor(z.T @ q2 @ z)
+        assert np.all(np.abs(np.tril(lmat, -1)) <= 0.5 + 1e-9)
+        np.testing.assert_allclose(d, warm.cond_var, rtol=1e-6)
+
+
+def test_warm_start_of_the_wrong_shape_or_too_large_is_ignored():
+    q = np.array([[6.290, 5.978, 0.544], [5.978, 6.292, 2.340], [0.544, 2.340, 6.288]])
+    a = np.array([5.450, 3.100, 2.970])
+    cold = mlambda(a, q)
+    for z0 in (np.eye(2), np.eye(3) * float(1 << 21)):
+        res = mlambda(a, q, z_start=z0)
+        assert np.array_equal(res.fixed, cold.fixed) and np.array_equal(res.z_mat, cold.z_mat)
