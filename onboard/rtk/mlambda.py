@@ -351,19 +351,25 @@ def mlambda(a_float: Arr, q: Arr, m: int = 2, ratio_cap: float | None = None, z_
     if n == 0 or q.shape != (n, n):
         raise LambdaError(f"bad shapes: a {a.shape}, Q {q.shape}")
     q = np.asarray(q, dtype=float)
-    lmat0, d0 = _ld_lists(q)  # also the positive-definiteness check, whatever follows
-    if ratio_cap is not None:
-        certain = _certain_nearest(a, q, lmat0, d0, ratio_cap)
-        if certain is not None:
-            return certain
-    if z_start is not None and z_start.shape == (n, n) and float(np.abs(z_start).max()) <= _WARM_MAX_Z:
-        qw = z_start.T @ q @ z_start
-        lmat, d, zw = _reduction_lists(*_ld_lists(qw))
+    warm = z_start is not None and z_start.shape == (n, n) and float(np.abs(z_start).max()) <= _WARM_MAX_Z
+    factors = None
+    # the certificate needs every D ≤ _CERTAIN_MAX_VAR, and the last D is Q's own last variance: a warm start
+    # skips the factors of Q when that one is already larger (its own factors check positive definiteness)
+    if not warm or (ratio_cap is not None and q[n - 1, n - 1] <= _CERTAIN_MAX_VAR * (1.0 + 1e-9)):
+        factors = _ld_lists(q)  # also the positive-definiteness check, whatever follows
+        if ratio_cap is not None:
+            certain = _certain_nearest(a, q, *factors, ratio_cap)
+            if certain is not None:
+                return certain
+    if warm:
+        assert z_start is not None
+        lmat, d, zw = _reduction_lists(*_ld_lists(z_start.T @ q @ z_start))
         z = z_start @ zw
         if float(np.abs(z).max()) > _WARM_MAX_Z:
-            lmat, d, z = _reduction_lists(lmat0, d0)
+            lmat, d, z = _reduction_lists(*(factors or _ld_lists(q)))
     else:
-        lmat, d, z = _reduction_lists(lmat0, d0)  # Z row-major as RTKLIB's: the products below the same
+        assert factors is not None
+        lmat, d, z = _reduction_lists(*factors)  # Z row-major as RTKLIB's: the products below the same
     zs = z.T @ a
     zs_list = zs.tolist()
     e, s = _search_lists(lmat, d, zs_list, m, ratio_cap)
