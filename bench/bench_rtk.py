@@ -405,26 +405,38 @@ def rtcm_stream_run(ds: Dataset) -> dict[str, float]:
     return score(rows, ds.ref)
 
 
-def engine_alone_ms(ds: Dataset, systems: str, repeat: int = 1) -> tuple[float, int]:
+BARE_OPTIONS: dict[str, object] = {
+    "standstill": False, "tdcp_slip_test": False, "tdcp_float_slip_threshold_cyc": 0.0, "use_doppler": False,
+    "partial_ar": False, "slip_outlier_factor": 0.0, "code_scatter_reference": 0.0, "code_cn0_ref_dbhz": 0.0,
+    "base_rate_skill_min": 1.0, "base_extrapolate_min_age_s": 1e9, "max_outlier_passes": 1,
+}
+"""`--bare`: every test our filter has beyond RTKLIB's relpos() turned off (standstill, time-differenced phase,
+Doppler rows, partial fixing, the robust slip threshold, measured code scatter and C/N0 weights, the base's
+carry-forward, outlier passes): what the filter's core costs without what its fix rates rest on."""
+
+
+def engine_alone_ms(ds: Dataset, systems: str, repeat: int = 1, bare: bool = False) -> tuple[float, int, int]:
     """Our filter's CPU ms per epoch in this process (inputs read as `onboard rtk` reads them, first, not timed):
-    the least of `repeat` runs."""
+    the least of `repeat` runs; also its epochs and fixed epochs. `bare`: with BARE_OPTIONS."""
     from dataclasses import replace
 
     from onboard.postpro.inputs import load_rtk_inputs
     from onboard.rtk.options import RtkOptions
     from onboard.rtk.postpro import postprocess
+    from onboard.rtk.types import Q_FIX
 
     bp = [float(v) for v in ds.base_pos.split(",")] if ds.base_pos else None
     run = load_rtk_inputs(ds.rover, ds.base, ds.navs, bp, systems=systems)
+    options = replace(RtkOptions(), systems=systems, elmask_deg=15.0, **(BARE_OPTIONS if bare else {}))
     best = math.inf
-    n = 0
+    n = fixed = 0
     for _ in range(max(repeat, 1)):
         t = time.process_time()
-        sols, _ = postprocess(run.rover, run.base, run.nav, run.base_pos_ecef_m,
-                              replace(RtkOptions(), systems=systems, elmask_deg=15.0), "forward")
+        sols, _ = postprocess(run.rover, run.base, run.nav, run.base_pos_ecef_m, options, "forward")
         best = min(best, time.process_time() - t)
         n = len(sols)
-    return 1e3 * best / max(n, 1), n
+        fixed = sum(1 for sol in sols if sol.q == Q_FIX)
+    return 1e3 * best / max(n, 1), n, fixed
 
 
 def compile_project() -> None:
@@ -490,6 +502,9 @@ def main() -> int:
     ap.add_argument("--systems", nargs="*", help="only these system sets (e.g. G GR)")
     ap.add_argument("--engines", nargs="*", choices=ENGINES, help=f"only these engines (default all: {ENGINES})")
     ap.add_argument("--no-engine-alone", action="store_true", help="skip the in-process timing of our filter")
+    ap.add_argument("--bare", action="store_true",
+                    help="also time our filter alone with every test beyond RTKLIB's relpos() off (BARE_OPTIONS), "
+                         "with its fixed epochs: what the core costs without what the fix rates rest on")
     ap.add_argument("--repeat", type=int, default=1, metavar="N",
                     help="run every engine (and our filter alone) N times and keep the least CPU, for figures less "
                          "at the mercy of a shared machine (default 1)")
@@ -516,7 +531,7 @@ def main() -> int:
           "3D; pseudo: against demo5's combined forward/backward fixed solution, widest system set")
     rows: list[list[str]] = []
     notes: list[str] = []
-    engine_ms: list[tuple[str, str, float, int, float]] = []
+    engine_ms: list[tuple[str, str, float, int, int, float]] = []
     for ds in chosen:
         sets = [s for s in ds.systems if (not args.quick or s == "G") and (not args.systems or s in args.systems)]
         pseudo = None
@@ -536,8 +551,10 @@ def main() -> int:
                              f"cm, v {r['v']:.1f} cm, >10 cm {r['wrong']}")
                 print("   " + notes[-1])
             if "ours" in engines and not args.no_engine_alone:
-                ms, n = engine_alone_ms(ds, systems, args.repeat)
-                engine_ms.append((ds.name, systems, ms, n, us_per_epoch.get("demo5", 0.0) / 1e3))
+                for bare in (False, True) if args.bare else (False,):
+                    ms, n, fixed = engine_alone_ms(ds, systems, args.repeat, bare)
+                    engine_ms.append((ds.name + (" [bare]" if bare else ""), systems, ms, n, fixed,
+                                      us_per_epoch.get("demo5", 0.0) / 1e3))
     print("\nall sets:\n" + text_table(rows))
     for note in notes:
         print("  " + note)
@@ -545,9 +562,9 @@ def main() -> int:
         print("\nengine alone (onboard.rtk forward filter, this process, reading excluded"
               + (f"; least of {args.repeat} runs" if args.repeat > 1 else "") + "), against demo5's whole-run CPU "
               "per epoch (issue 16's speed measure):")
-    for name, systems, ms, n, demo5_ms in engine_ms:
+    for name, systems, ms, n, fixed, demo5_ms in engine_ms:
         peer = f"demo5 {demo5_ms:5.2f} ms/epoch, ours/demo5 x{ms / demo5_ms:.2f}" if demo5_ms > 0 else "demo5 not run"
-        print(f"  {name:40s} {systems:4s} {ms:7.2f} ms/epoch over {n} epochs; {peer}  (Pi budget "
+        print(f"  {name:47s} {systems:4s} {ms:7.2f} ms/epoch over {n} epochs ({fixed} fixed); {peer}  (Pi budget "
               f"{PI_BUDGET_MS:.0f} ms at 5 Hz; x86 figure, a Pi 4 is roughly 3-5x slower)")
     if args.markdown:
         from onboard.formats.atomic import write_atomic
