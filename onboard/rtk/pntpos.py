@@ -13,13 +13,19 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S
+from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S, PR_MAX_M, PR_MIN_M
 from onboard.rtk.ephemeris import SatState
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
 from onboard.rtk.models import klobuchar_m, saastamoinen_m
 
 Arr = npt.NDArray[np.float64]
 
+DOPPLER_OUTLIER_M_S = 10.0
+"""A Doppler whose range rate misses the velocity solution of the others by more than this (m/s; 53 Hz at L1)
+is left out of it. Why: a u-blox's Doppler fits to 0.1-1 m/s even under trees; a corrupt value or a wrong
+ephemeris misses by far more and would move the velocity, hence the motion and slip tests that read it."""
+DOPPLER_MAX_EXCLUSIONS = 2
+"""Dopplers left out of one epoch's velocity at most (one at a time, the worst first, while 5 or more remain)."""
 ERR_CODE_BASE_M = 0.3
 """Pseudorange σ at zenith for SPP weighting (m; RTKLIB err[1..2] × eratio order of magnitude)."""
 
@@ -172,8 +178,11 @@ def _pntpos_batch(pr: Arr, sats: list[SatState], tow_s: Arr, elmask_rad: float, 
     iono_scale = None if lam_m is None else (lam_m / LAMBDA_L1_M) ** 2
     spos = np.stack([s.pos_m for s in sats]).reshape(n_ep, n, 3)
     sclk = CLIGHT_M_S * np.stack([s.clock_s for s in sats]).reshape(n_ep, n)
-    valid = np.stack([s.ok for s in sats]).reshape(n_ep, n) & np.isfinite(pr)
+    # a pseudorange outside what any GNSS satellite's range and both clocks can make is corrupt, not an outlier
+    # for the exclusion below: one at 0 m pulls the solution thousands of km away, where no exclusion recovers
+    valid = np.stack([s.ok for s in sats]).reshape(n_ep, n) & (pr >= PR_MIN_M) & (pr <= PR_MAX_M)
     x = np.zeros((n_ep, 3 + nc)) if x0 is None else np.array(x0, float).reshape(n_ep, 3 + nc)
+    x_start = x.copy()
     excluded = np.zeros((n_ep, n), bool)
     az = np.zeros((n_ep, n))
     el = np.full((n_ep, n), np.pi / 2)
@@ -275,6 +284,8 @@ def _pntpos_batch(pr: Arr, sats: list[SatState], tow_s: Arr, elmask_rad: float, 
             cand = np.flatnonzero(mask[j])
             excluded[todo[j], cand[np.argmax(np.abs(res[j, cand]) * np.sin(el[todo[j], cand]))]] = True
         todo = todo[again]
+        # from the start again: a gross outlier may have pulled the position where the iteration cannot return
+        x[todo] = x_start[todo]
     for k in todo.tolist():
         fail(k, np.zeros(n, bool), "no consistent solution")
     return [s for s in out if s is not None] if all(s is not None for s in out) else _missing(out)
@@ -336,7 +347,21 @@ def _doppler_batch(dop_hz: Arr | None, sats: list[SatState], e: Arr, pos: Arr,
     sag = OMEGA_E_RAD_S / CLIGHT_M_S * (vs[:, :, 1] * pos[:, 0:1] - vs[:, :, 0] * pos[:, 1:2])
     y = rate_obs - (np.add.reduce(e * vs, axis=2) + sag - CLIGHT_M_S * sdrift)
     sel = np.flatnonzero(enough)
-    sol = _least_squares(np.where(m[sel][:, :, None], _design(e[sel]), 0.0), np.where(m[sel], y[sel], 0.0))
+    h = _design(e[sel])
+    ms, ys = m[sel], y[sel]
+    for attempt in range(DOPPLER_MAX_EXCLUSIONS + 1):
+        sol = _least_squares(np.where(ms[:, :, None], h, 0.0), np.where(ms, ys, 0.0))
+        if attempt == DOPPLER_MAX_EXCLUSIONS:
+            break
+        # one Doppler far off every other's fit (a corrupt value, a wrong ephemeris) moves the whole solution:
+        # the worst is left out while at least 5 remain, as the code's RAIM-like exclusion
+        res = np.where(ms, np.abs(ys - np.einsum("kni,ki->kn", h, sol)), 0.0)
+        worst = res.argmax(axis=1)
+        bad = (res[np.arange(sel.size), worst] > DOPPLER_OUTLIER_M_S) & (ms.sum(axis=1) >= 5)
+        if not bad.any():
+            break
+        ms = ms.copy()
+        ms[np.flatnonzero(bad), worst[bad]] = False
     vel[sel] = sol[:, :3]
     drift[sel] = sol[:, 3]
     return vel, drift

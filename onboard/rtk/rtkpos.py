@@ -49,6 +49,7 @@ from onboard.rtk.slots import (
     SlotLayout,
     lambda_ratio_to_gps,
     satellite_states_layout,
+    screen_observations,
     slot_arrays,
     slot_layout,
     wavelengths,
@@ -436,6 +437,7 @@ def _slot_arrays(epochs: list[ObsEpoch]) -> tuple[Arr, Arr, Arr, npt.NDArray[np.
         dop[at] = np.concatenate([g.dop_hz for g in gps])
         lli[at] = np.concatenate([g.lli for g in gps])
         cn0[at] = np.concatenate([g.cn0_dbhz for g in gps])
+    screen_observations(pr, cp, dop, cn0)
     return pr, cp, dop, lli, cn0
 
 

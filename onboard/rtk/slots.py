@@ -17,7 +17,15 @@ import numpy as np
 import numpy.typing as npt
 
 from onboard.gnsstime import NS_PER_S
-from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, l1_wavelength_m
+from onboard.rtk.consts import (
+    CLIGHT_M_S,
+    CN0_MAX_DBHZ,
+    DOPPLER_MAX_HZ,
+    LAMBDA_L1_M,
+    PR_MAX_M,
+    PR_MIN_M,
+    l1_wavelength_m,
+)
 from onboard.rtk.ephemeris import EphemerisStore, SatState, satellite_states_batch, table_states
 from onboard.rtk.gnss import SYSTEMS_BY_LETTER, sat_id, system
 from onboard.rtk.navstore import BroadcastNavigation
@@ -130,7 +138,20 @@ def slot_arrays(layout: SlotLayout, epochs: list[ObsEpoch]) -> tuple[Arr, Arr, A
     dop[at] = np.concatenate([e.dop_hz for e in epochs])[m]
     lli[at] = np.concatenate([e.lli for e in epochs])[m]
     cn0[at] = np.concatenate([e.cn0_dbhz for e in epochs])[m]
+    screen_observations(pr, cp, dop, cn0)
     return pr, cp, dop, lli, cn0
+
+
+def screen_observations(pr_m: Arr, cp_cyc: Arr, dop_hz: Arr, cn0_dbhz: Arr) -> None:
+    """Blank (NaN, in place) the values no receiver can measure: a pseudorange outside [PR_MIN_M, PR_MAX_M],
+    a non-finite phase, a Doppler beyond ±DOPPLER_MAX_HZ, a C/N0 outside [0, CN0_MAX_DBHZ]. Why: such a value
+    in a RINEX file or a damaged message is not an outlier of the models but no measurement at all, and one
+    pseudorange of 0 m puts its satellite's transmission time (and position) a tenth of a second off."""
+    with np.errstate(invalid="ignore"):  # NaN compares False: left as it is
+        pr_m[(pr_m < PR_MIN_M) | (pr_m > PR_MAX_M)] = np.nan
+        cp_cyc[np.isinf(cp_cyc)] = np.nan
+        dop_hz[~(np.abs(dop_hz) <= DOPPLER_MAX_HZ)] = np.nan
+        cn0_dbhz[(cn0_dbhz < 0.0) | (cn0_dbhz > CN0_MAX_DBHZ)] = np.nan
 
 
 def satellite_states_layout(layout: SlotLayout, store: EphemerisStore, nav: BroadcastNavigation | None,

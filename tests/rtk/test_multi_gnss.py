@@ -214,3 +214,35 @@ def test_septentrio_gps_galileo_qzss_moving_5km(fault, expect_fix):
     assert ok.sum() > 100 and err.max() < 0.10, (err.max(), int((err > 0.10).sum()))
     enu = np.array([ecef_to_enu(p, r) for p, r in zip(pos[ok], ref[ok], strict=True)])
     assert np.hypot(enu[:, 0], enu[:, 1]).max() < 0.05
+
+
+def _corrupted(epochs: list[ObsEpoch], rng: np.random.Generator, rate: float) -> list[ObsEpoch]:
+    """The epochs with `rate` of their pseudorange, phase, Doppler and C/N0 values replaced by what a damaged
+    file or message carries: NaN, ±inf, 10¹², −10⁶, 0 or a plausible-looking 3·10⁷."""
+    bad = np.array([np.nan, np.inf, -np.inf, 1e12, -1e6, 0.0, 3e7])
+    out = []
+    for e in epochs:
+        values = {}
+        for name in ("pr_m", "cp_cyc", "dop_hz", "cn0_dbhz"):
+            a = getattr(e, name).copy()
+            hit = rng.random(a.size) < rate
+            a[hit] = rng.choice(bad, int(hit.sum()))
+            values[name] = a
+        out.append(replace(e, **values))
+    return out
+
+
+@pytest.mark.slow
+def test_m8p_static_with_corrupt_values_in_both_receivers_keeps_fixing_and_never_wrong():
+    """1 % of every value of both receivers corrupt (about one per epoch and receiver), M8P static, lossy base,
+    GPS + GLONASS: no exception, ≥ 90 % of the epochs fixed (clean: 99.5 %), none more than 10 cm from the
+    surveyed antenna. Before corrupt pseudoranges and Dopplers were screened and left out of the single-point
+    solution, one 0-m pseudorange lost its whole epoch and one corrupt Doppler threw the velocity: 53.5 % fixed."""
+    rover, base, nav, base_pos = _m8p_static("GR")
+    rng = np.random.default_rng(1)
+    q, pos, _tow = _run(_corrupted(rover, rng, 0.01), _corrupted(base, rng, 0.01), nav, base_pos, "GR")
+    fixed = q == Q_FIX
+    assert fixed.mean() >= 0.90, fixed.mean()
+    err = np.linalg.norm(pos[fixed] - M8P_ROVER_ECEF_M, axis=1)
+    assert err.max() < 0.10, err.max()
+    assert np.isfinite(pos[q != 0]).all()

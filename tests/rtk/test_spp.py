@@ -94,3 +94,52 @@ def test_atmosphere_models_have_textbook_magnitudes():
 def test_ecef_llh_sanity():
     lat, lon, h = ecef_to_llh(ROVER_0759)
     assert 35 < np.degrees(lat) < 36.5 and 139 < np.degrees(lon) < 141 and -50 < h < 500
+
+
+@pytest.fixture(scope="module")
+def shipped_store():
+    """Broadcast orbits shipped with the simulator (2010-07-01): no ../shared needed."""
+    from hil_sim.scenario import DEFAULT_NAV_PATH
+    from tests.rtk._sim import T0
+
+    return EphemerisStore(read_rinex_nav(DEFAULT_NAV_PATH).ephemerides), T0
+
+
+@pytest.mark.parametrize("corrupt", [0.0, -1.0e6, np.inf, -np.inf, 1.0e12])
+def test_spp_refuses_a_pseudorange_no_satellite_can_give_and_keeps_the_epoch(shipped_store, corrupt: float) -> None:
+    """One impossible pseudorange (0 m, negative, infinite, 10⁹ km) is not a measurement: the epoch is still
+    solved on the others, to the millimetre the solution without that satellite. (A 0-m pseudorange used to
+    pull the iteration thousands of km away and the exclusion then lost the whole epoch.)"""
+    from tests.rtk._sim import BASE_ECEF_M, SimReceiver, observe
+
+    store, t0 = shipped_store
+    e = observe(store, SimReceiver(clock_s=2e-4), BASE_ECEF_M, np.zeros(3), t0)
+    assert len(e) >= 6
+    pr = e.pr_m.copy()
+    pr[1] = corrupt
+    sats = satellite_states(store, e.sv_id, e.time, pr)
+    sol = pntpos(pr, sats, e.time.tow_s, np.radians(10), e.dop_hz)
+    assert sol.ok, sol.message
+    assert not sol.used[1] and sol.used[0] and sol.used[2:].all()
+    without = pr.copy()
+    without[1] = np.nan
+    alone = pntpos(without, sats, e.time.tow_s, np.radians(10), e.dop_hz)
+    assert np.linalg.norm(sol.pos_ecef_m - alone.pos_ecef_m) < 0.001
+    assert np.linalg.norm(sol.pos_ecef_m - BASE_ECEF_M) < 15.0  # the broadcast models' single-point metres
+
+
+@pytest.mark.parametrize("corrupt_hz", [1.0e6, -3000.0, 200.0])
+def test_doppler_velocity_leaves_out_a_doppler_far_off_the_others(shipped_store, corrupt_hz: float) -> None:
+    """A static receiver with one corrupt Doppler (added: 1 MHz, −3 kHz, 200 Hz ≈ 38 m/s): the velocity is the
+    others' (noise-free: zero), not moved by tens or thousands of m/s."""
+    from tests.rtk._sim import BASE_ECEF_M, SimReceiver, observe
+
+    store, t0 = shipped_store
+    e = observe(store, SimReceiver(clock_s=2e-4, drift_s_s=1e-7), BASE_ECEF_M, np.zeros(3), t0)
+    dop = e.dop_hz.copy()
+    dop[2] += corrupt_hz
+    sats = satellite_states(store, e.sv_id, e.time, e.pr_m)
+    sol = pntpos(e.pr_m, sats, e.time.tow_s, np.radians(10), dop)
+    assert sol.ok
+    assert np.linalg.norm(sol.vel_ecef_m_s) < 0.01
+    assert sol.clock_drift_m_s == pytest.approx(1e-7 * 299792458.0, abs=0.01)
