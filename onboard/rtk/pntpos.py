@@ -20,6 +20,9 @@ from onboard.rtk.models import klobuchar_m, saastamoinen_m
 
 Arr = npt.NDArray[np.float64]
 
+PREFIT_GROSS_M = 1.0e6
+"""A pseudorange whose residual at the start position misses its constellation's median by more than this (m)
+is a gross error, left out before the least squares (see _gross_errors)."""
 DOPPLER_OUTLIER_M_S = 10.0
 """A Doppler whose range rate misses the velocity solution of the others by more than this (m/s; 53 Hz at L1)
 is left out of it. Why: a u-blox's Doppler fits to 0.1-1 m/s even under trees; a corrupt value or a wrong
@@ -183,6 +186,8 @@ def _pntpos_batch(pr: Arr, sats: list[SatState], tow_s: Arr, elmask_rad: float, 
     valid = np.stack([s.ok for s in sats]).reshape(n_ep, n) & (pr >= PR_MIN_M) & (pr <= PR_MAX_M)
     x = np.zeros((n_ep, 3 + nc)) if x0 is None else np.array(x0, float).reshape(n_ep, 3 + nc)
     x_start = x.copy()
+    if x0 is not None:
+        valid &= ~_gross_errors(pr, spos, sclk, x[:, :3], valid, clock_group)
     excluded = np.zeros((n_ep, n), bool)
     az = np.zeros((n_ep, n))
     el = np.full((n_ep, n), np.pi / 2)
@@ -289,6 +294,28 @@ def _pntpos_batch(pr: Arr, sats: list[SatState], tow_s: Arr, elmask_rad: float, 
     for k in todo.tolist():
         fail(k, np.zeros(n, bool), "no consistent solution")
     return [s for s in out if s is not None] if all(s is not None for s in out) else _missing(out)
+
+
+def _gross_errors(pr: Arr, spos: Arr, sclk_m: Arr, pos0: Arr, valid: npt.NDArray[np.bool_],
+                  clock_group: npt.NDArray[np.int8] | None) -> npt.NDArray[np.bool_]:
+    """Pseudoranges (E, n) more than PREFIT_GROSS_M from the others of their clock group at the start positions
+    `pos0` (E, 3; ECEF m): the median of range residuals stands in for the unknown clock. Why: a value
+    thousands of km off pulls the least squares so far that the exclusion by largest residual then takes good
+    satellites; at a start within tens of km of the receiver (the filter's position, the batch's first
+    solution) no measurement misses its group by a thousand."""
+    d = spos - pos0[:, None, :]
+    res = np.where(valid, pr - np.sqrt(np.add.reduce(d * d, axis=2)) + sclk_m, np.nan)
+    gross = np.zeros(pr.shape, bool)
+    groups = [np.ones(pr.shape[1], bool)] if clock_group is None else [clock_group == g for g in np.unique(clock_group)]
+    for in_group in groups:
+        r = res[:, in_group]
+        enough = np.count_nonzero(np.isfinite(r), axis=1) >= 3  # a median of two cannot tell which is off
+        if not enough.any():
+            continue
+        with np.errstate(invalid="ignore"):
+            med = np.nanmedian(np.where(enough[:, None], r, 0.0), axis=1)
+            gross[:, in_group] = enough[:, None] & (np.abs(r - med[:, None]) > PREFIT_GROSS_M)
+    return gross
 
 
 def _missing(out: list[SppSolution | None]) -> list[SppSolution]:

@@ -143,3 +143,34 @@ def test_doppler_velocity_leaves_out_a_doppler_far_off_the_others(shipped_store,
     assert sol.ok
     assert np.linalg.norm(sol.vel_ecef_m_s) < 0.01
     assert sol.clock_drift_m_s == pytest.approx(1e-7 * 299792458.0, abs=0.01)
+
+
+def test_spp_of_a_real_gps_glonass_epoch_leaves_out_a_pseudorange_8000_km_off():
+    """M8P static rover, GPS + GLONASS, epoch 30 with G03's pseudorange replaced by 3·10⁷ m (inside the physical
+    bounds, 8 000 km off): from the batch's start position that residual misses the other GPS satellites' by
+    thousands of km and is left out before the least squares. The exclusion by largest residual alone, at the
+    position the bad value had pulled the solution to, left out good satellites until 4 remained: no solution."""
+    from dataclasses import replace
+
+    from onboard.postpro.inputs import load_rtk_inputs
+    from onboard.rtk.options import RtkOptions
+    from onboard.rtk.rtkpos import epoch_receivers, epoch_spp
+    from onboard.rtk.slots import slot_layout
+
+    m8p = "gnss/ublox-m8p-galway-2018/rinex/"
+    inp = load_rtk_inputs(shared_file(m8p + "rover-20181004-1237.obs.gz"),
+                          shared_file(m8p + "base-20181004-1236.rtcm.obs.gz"),
+                          [shared_file(m8p + "rover-20181004-1237.nav.gz")], systems="GR")
+    epochs = list(inp.rover[:40])
+    e = epochs[30]
+    g03 = (e.gnss_id == 0) & (e.sv_id == 3)
+    assert g03.any()
+    epochs[30] = replace(e, pr_m=np.where(g03, 3.0e7, e.pr_m))
+    options = RtkOptions(systems="GR")
+    layout = slot_layout("GR")
+    rcvs = epoch_receivers(epochs, inp.nav.store, layout=layout, broadcast=inp.nav.broadcast)
+    sols = epoch_spp(epochs, rcvs, inp.nav, options)
+    assert sols[30].ok, sols[30].message
+    assert not sols[30].used[layout.slots_of(np.array([0]), np.array([3]))[0]]
+    assert np.count_nonzero(sols[30].used) >= np.count_nonzero(sols[29].used) - 1  # G03 alone left out
+    assert np.linalg.norm(sols[30].pos_ecef_m - sols[29].pos_ecef_m) < 10.0
