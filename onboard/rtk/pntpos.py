@@ -2,7 +2,8 @@
 
 Iterative weighted least squares for position and receiver clock with Saastamoinen + Klobuchar corrections,
 elevation mask and a RAIM-like exclusion of the worst satellite while residuals stay too large; then the
-receiver velocity and clock drift from Doppler.
+receiver velocity and clock drift from Doppler, without a Doppler far off the others' fit. Pseudoranges outside
+physical bounds, or (from a start position) thousands of km off the others, are left out first.
 """
 
 from __future__ import annotations
@@ -141,7 +142,9 @@ def pntpos(pr_m: Arr, sats: SatState, tow_s: float, elmask_rad: float, dop_hz: A
 
     `tow_s` receiver time (s of week) for the ionosphere model, `iono` (alpha, beta) Klobuchar coefficients.
     Follows RTKLIB pntpos() estpos()/raim_fde(): drops the satellite with the largest normalised residual
-    while the residual RMS exceeds `outlier_m`/… and at least 5 remain. pntpos_batch with one epoch.
+    while the residual RMS exceeds `outlier_m`/… and at least 5 remain, each retry from the start point. A
+    pseudorange outside [PR_MIN_M, PR_MAX_M], or with `x0_ecef_m` more than PREFIT_GROSS_M off its clock
+    group's others, is not used. pntpos_batch with one epoch.
     Several constellations: `clock_group` (n,) the constellation of each satellite (0, 1, …: one receiver
     clock each, as RTKLIB's inter-system biases; clock_bias_m is then the first one's with satellites), `lam_m`
     (n,) their carrier wavelengths (m; Doppler, ionosphere scaling).
