@@ -11,11 +11,11 @@ OMEGA_E_RAD_S = 7.2921151467e-5
 PR_MIN_M = 1.0e6
 PR_MAX_M = 1.0e8
 """Pseudoranges (m) outside [PR_MIN_M, PR_MAX_M] are corrupt values, not measurements: a satellite's range from
-the ground is 19 100-42 000 km (GPS to BeiDou GEO) and the receivers' clock offsets, a few ms at most (the M8P's
-RAWX: −6.8 ms, 2 000 km), leave a pseudorange far inside these bounds."""
+the ground is 19 100-42 000 km (GPS to BeiDou GEO), and a receiver clock milliseconds off moves it by thousands of
+km (the M8P logs of ../shared: 15 500-23 100 km, clocks up to about 12 ms off)."""
 DOPPLER_MAX_HZ = 50_000.0
 """|Doppler| (Hz) beyond which a value is corrupt: a satellite's range rate gives ±5 kHz at L1 and a receiver
-oscillator's offset a few kHz (±2.5 ppm: ±4 kHz)."""
+oscillator's offset a few kHz (±2.5 ppm: ±4 kHz); the M8P logs stay within ±5.4 kHz."""
 CN0_MAX_DBHZ = 100.0
 """C/N0 (dB-Hz) beyond which, or below 0, a value is corrupt (receivers report 0-63)."""
 FREQ_L1_HZ = 1_575_420_000.0
