@@ -17,7 +17,7 @@ import numpy.typing as npt
 from onboard.rtk.consts import CLIGHT_M_S, LAMBDA_L1_M, OMEGA_E_RAD_S, PR_MAX_M, PR_MIN_M
 from onboard.rtk.ephemeris import SatState
 from onboard.rtk.geodesy import ecef_to_llh, enu_rotation
-from onboard.rtk.models import klobuchar_m, saastamoinen_m
+from onboard.rtk.models import klobuchar_m, median_of_few, saastamoinen_m
 
 Arr = npt.NDArray[np.float64]
 
@@ -308,6 +308,16 @@ def _gross_errors(pr: Arr, spos: Arr, sclk_m: Arr, pos0: Arr, valid: npt.NDArray
     solution) no measurement misses its group by a thousand."""
     d = spos - pos0[:, None, :]
     res = np.where(valid, pr - np.sqrt(np.add.reduce(d * d, axis=2)) + sclk_m, np.nan)
+    if res.shape[0] == 1:  # the real-time epoch: a pass over a few dozen values costs less than nanmedian's
+        row = res[0].tolist()
+        groups_of = [0] * len(row) if clock_group is None else clock_group.tolist()
+        members: dict[int, list[float]] = {}
+        for v, g in zip(row, groups_of, strict=True):
+            if not math.isnan(v):
+                members.setdefault(g, []).append(v)
+        center = {g: median_of_few(np.array(v)) for g, v in members.items() if len(v) >= 3}
+        return np.array([[g in center and abs(v - center[g]) > PREFIT_GROSS_M
+                          for v, g in zip(row, groups_of, strict=True)]])
     gross = np.zeros(pr.shape, bool)
     groups = [np.ones(pr.shape[1], bool)] if clock_group is None else [clock_group == g for g in np.unique(clock_group)]
     for in_group in groups:

@@ -174,3 +174,33 @@ def test_spp_of_a_real_gps_glonass_epoch_leaves_out_a_pseudorange_8000_km_off():
     assert not sols[30].used[layout.slots_of(np.array([0]), np.array([3]))[0]]
     assert np.count_nonzero(sols[30].used) >= np.count_nonzero(sols[29].used) - 1  # G03 alone left out
     assert np.linalg.norm(sols[30].pos_ecef_m - sols[29].pos_ecef_m) < 10.0
+    # the real-time path: that epoch alone, from the previous epoch's solution
+    r = rcvs[30]
+    live = pntpos(np.where(r.has, r.pr_m, np.nan), r.sats, epochs[30].time.tow_s, options.elmask_rad, r.dop_hz,
+                  inp.nav.iono, x0_ecef_m=sols[29].pos_ecef_m, clock0_m=sols[29].clock_bias_m,
+                  clock_group=layout.group, lam_m=r.lam)
+    assert live.ok and np.linalg.norm(live.pos_ecef_m - sols[30].pos_ecef_m) < 0.01
+
+
+def test_gross_error_screen_of_one_epoch_equals_the_batch_one():
+    """_gross_errors' two paths (one epoch in Python, many with numpy's nanmedian) flag the same values, with
+    and without clock groups, on random residuals with gaps and values thousands of km off."""
+    from onboard.rtk.pntpos import _gross_errors
+
+    rng = np.random.default_rng(4)
+    flagged = 0
+    for trial in range(100):
+        e, n = 20, 40
+        pr = rng.normal(2.2e7, 3e5, (e, n))
+        pr[rng.random((e, n)) < 0.4] = np.nan
+        pr[rng.random((e, n)) < 0.05] += rng.choice([5e6, -3e6, 2e6])
+        spos = np.zeros((e, n, 3))
+        spos[..., 0] = 1.0
+        group = rng.integers(0, 3, n).astype(np.int8) if trial % 2 else None
+        args = (np.zeros((e, n)), np.zeros((e, 3)), np.isfinite(pr))
+        batch = _gross_errors(pr, spos, args[0], args[1], args[2], group)
+        single = np.vstack([_gross_errors(pr[k:k + 1], spos[k:k + 1], args[0][k:k + 1], args[1][k:k + 1],
+                                          args[2][k:k + 1], group) for k in range(e)])
+        assert np.array_equal(batch, single)
+        flagged += int(batch.sum())
+    assert flagged > 100
