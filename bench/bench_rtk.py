@@ -17,11 +17,12 @@ horizontal/vertical RMS against the reference, fixed epochs checked against it a
 (3D, and horizontally) and > 5 cm (3D); on the walk, whose reference (the M8P's own RTK fixes) covers few
 epochs, also the fixed epochs > 10 cm (3D) from a pseudo-reference: demo5's combined forward/backward fixed
 solution with the widest set (GPS+GLONASS; demo5's own forward run is part of it, so its count there is not
-independent), and how many of the fixed epochs > 5 cm from the reference lie within 5 cm of that pseudo-reference
-(where two engines' fixes agree and the reference departs from both). Then whole-process CPU (resource RUSAGE_CHILDREN), µs per output epoch, and ours/demo5 CPU
-(total CPU of the same job on the same files), the raw-RTCM3 run of ours and our filter alone in ms per epoch
-(this process, reading excluded) against the Pi budget of 200 ms/epoch at 5 Hz. `--markdown PATH` writes the
-table (and the notes) as markdown, atomically.
+independent), and how many of the fixed epochs > 5 cm from the reference lie within 5 cm of that
+pseudo-reference (where two engines' fixes agree and the reference departs from both). Then whole-process CPU
+(resource RUSAGE_CHILDREN), µs per output epoch, and ours/demo5 CPU (total CPU of the same job on the same
+files), the raw-RTCM3 run of ours and our filter alone in ms per epoch (this process, reading excluded; with
+`--bare` also without its tests beyond relpos()) against the Pi budget of 200 ms/epoch at 5 Hz.
+`--markdown PATH` writes the table (and the notes) as markdown, atomically.
 
 Run: `.venv/bin/python bench/bench_rtk.py [--quick] [--only SUBSTRING ...] [--systems G GR ...] [--engines
 demo5 ours ...] [--repeat N] [--markdown PATH]` (about 2 min, N times that with --repeat; `--quick`: GEONET
